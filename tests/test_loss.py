@@ -1,0 +1,109 @@
+"""SubgoalValueLoss: the SMDP TD(0) target, and SGD = the paper's tabular update."""
+
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDict
+from torchrl.objectives.value import TD0Estimator
+
+from torchrl_subgoal import NeuralPotential, SubgoalValueLoss, TabularPotential
+
+
+def transitions(n: int, num_states: int, seed: int) -> TensorDict:
+    g = torch.Generator().manual_seed(seed)
+    col = (n, 1)
+    terminated = torch.rand(col, generator=g) < 0.3
+    return TensorDict(
+        {
+            "subgoal_index": torch.randint(num_states, col, generator=g),
+            "steps_to_next_obs": torch.randint(1, 30, col, generator=g),
+            "mask": torch.rand(col, generator=g) < 0.7,
+            "next": {
+                "subgoal_index": torch.randint(num_states, col, generator=g),
+                "reward": torch.randn(col, generator=g),
+                "terminated": terminated,
+                "done": terminated | (torch.rand(col, generator=g) < 0.2),
+            },
+        },
+        batch_size=[n],
+    )
+
+
+def test_sgd_step_is_the_papers_update() -> None:
+    """One SGD step (lr α_v) on the loss = V(z) += α_v (r_h + γ_v^k V(z') − V(z)) per learner."""
+    n, num_states, lr, gamma = 50, 4, 0.25, 0.95
+    v = TabularPotential(num_states, batch_shape=(n,))
+    with torch.no_grad():
+        v.table.copy_(torch.randn(n, num_states))
+    data = transitions(n, num_states, seed=0)
+    before = v.table.detach().clone()
+
+    expected = before.clone()
+    for b in range(n):
+        if not data["mask"][b, 0]:
+            continue
+        z, z2 = int(data["subgoal_index"][b, 0]), int(data["next", "subgoal_index"][b, 0])
+        k = int(data["steps_to_next_obs"][b, 0])
+        v_next = 0.0 if data["next", "terminated"][b, 0] else float(before[b, z2])
+        target = float(data["next", "reward"][b, 0]) + gamma**k * v_next
+        expected[b, z] += lr * (target - float(before[b, z]))
+
+    loss = SubgoalValueLoss(v, gamma=gamma)
+    opt = torch.optim.SGD(v.parameters(), lr=lr)
+    loss(data)["loss_value"].backward()
+    opt.step()
+    assert torch.allclose(v.table.detach(), expected, atol=1e-6)
+    assert not torch.equal(expected, before)  # the test did exercise updates
+
+
+def test_target_equals_torchrl_td0_estimator() -> None:
+    """The SMDP target is TorchRL's TD(0) estimate with γ raised to steps_to_next_obs."""
+    n, num_states = 40, 3
+    v = TabularPotential(num_states, batch_shape=(n,))
+    with torch.no_grad():
+        v.table.copy_(torch.randn(n, num_states))
+    data = transitions(n, num_states, seed=1)
+    estimator = TD0Estimator(gamma=0.9, value_network=v.as_value_operator())
+    with torch.no_grad():
+        reference = estimator.value_estimate(data.clone())
+    _, td_error = SubgoalValueLoss(v, gamma=0.9).smdp_loss(
+        [data["subgoal_index"]], [data["next", "subgoal_index"]], data["next", "reward"],
+        data["steps_to_next_obs"], data["next", "terminated"], torch.ones(n, 1, dtype=torch.bool),
+    )
+    value = v(data["subgoal_index"]).detach()
+    assert torch.allclose(td_error + value, reference, atol=1e-6)
+
+
+def test_mask_excludes_non_transitions_and_mean_reduction() -> None:
+    v = TabularPotential(2, batch_shape=(2,))
+    data = transitions(2, 2, seed=2)
+    data["mask"] = torch.tensor([[True], [False]])
+    total = SubgoalValueLoss(v, gamma=0.9)(data)
+    assert total["td_error"][1, 0] == 0.0
+    mean = SubgoalValueLoss(v, gamma=0.9, reduction="mean")(data)
+    assert torch.isclose(mean["loss_value"], total["loss_value"])  # one transition: sum == mean
+
+
+def test_neural_potential_learns_a_constant_target() -> None:
+    torch.manual_seed(0)
+    v = NeuralPotential(torch.nn.Sequential(torch.nn.Linear(2, 16), torch.nn.Tanh(), torch.nn.Linear(16, 1)))
+    loss = SubgoalValueLoss(v, gamma=0.9, reduction="mean")
+    opt = torch.optim.Adam(v.parameters(), lr=1e-2)
+    n = 64
+    data = TensorDict(
+        {
+            "subgoal_anchor": torch.randn(n, 2),
+            "steps_to_next_obs": torch.ones(n, 1, dtype=torch.long),
+            "mask": torch.ones(n, 1, dtype=torch.bool),
+            "next": {"subgoal_anchor": torch.randn(n, 2), "reward": torch.full((n, 1), 2.0),
+                     "terminated": torch.ones(n, 1, dtype=torch.bool), "done": torch.ones(n, 1, dtype=torch.bool)},
+        },
+        batch_size=[n],
+    )
+    start = v(data["subgoal_anchor"]).detach()
+    assert (start - 2.0).abs().max() > 1.0
+    for _ in range(600):
+        opt.zero_grad()
+        loss(data)["loss_value"].backward()
+        opt.step()
+    assert torch.allclose(v(data["subgoal_anchor"]), torch.full((n, 1), 2.0), atol=0.1)

@@ -1,0 +1,54 @@
+"""Potentials: tabular (per learner), neural, naive."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from torch import nn
+
+from torchrl_subgoal import NaivePotential, NeuralPotential, TabularPotential
+
+
+def test_tabular_one_table_per_learner_and_time_dims() -> None:
+    v = TabularPotential(3, batch_shape=(2,))
+    with torch.no_grad():
+        v.table.copy_(torch.tensor([[0.0, 1.0, 2.0], [10.0, 11.0, 12.0]]))
+    assert v(torch.tensor([[2], [0]])).tolist() == [[2.0], [10.0]]
+    # a rollout [B, T, 1] reads each learner's own table at every time step
+    z = torch.tensor([[[0], [1], [2]], [[2], [2], [1]]])
+    assert v(z).squeeze(-1).tolist() == [[0.0, 1.0, 2.0], [12.0, 12.0, 11.0]]
+
+
+def test_tabular_shared_table() -> None:
+    v = TabularPotential(2, init=0.5)
+    assert v(torch.tensor([[0], [1], [1]])).tolist() == [[0.5]] * 3
+
+
+def test_tabular_shape_errors() -> None:
+    v = TabularPotential(3, batch_shape=(2,))
+    with pytest.raises(ValueError, match="singleton"):
+        v(torch.tensor([0, 1]))
+    with pytest.raises(ValueError, match="learner batch shape"):
+        v(torch.tensor([[0], [1], [2]]))
+
+
+def test_neural_reads_the_anchor() -> None:
+    net = nn.Linear(3, 1)
+    v = NeuralPotential(net)
+    anchor = torch.randn(5, 3)
+    assert torch.allclose(v(anchor), net(anchor))
+    assert v.in_keys == ("subgoal_anchor",)
+
+
+def test_naive_is_eta_on_achievement() -> None:
+    v = NaivePotential(10_000.0)
+    assert v(torch.tensor([[True], [False]])).tolist() == [[10_000.0], [0.0]]
+    assert list(v.parameters()) == []
+
+
+def test_value_operator_writes_state_value() -> None:
+    from tensordict import TensorDict
+
+    v = TabularPotential(3, batch_shape=(2,), init=1.0)
+    td = TensorDict({"subgoal_index": torch.tensor([[0], [2]])}, batch_size=[2])
+    assert v.as_value_operator()(td)["state_value"].tolist() == [[1.0], [1.0]]

@@ -1,0 +1,43 @@
+"""Subgoal-based reward shaping (dynamic trajectory aggregation) for TorchRL.
+
+Implements Okudo & Yamada, "Reward Shaping with Dynamic Trajectory
+Aggregation" (IJCNN 2021): a person names a few ordered subgoals, and
+:class:`SubgoalPotentialTransform` turns them into a learned potential-based
+shaping reward for any TorchRL environment.
+"""
+
+from torchrl_subgoal.loss import SubgoalValueLoss
+from torchrl_subgoal.potentials import NaivePotential, NeuralPotential, Potential, TabularPotential
+from torchrl_subgoal.subgoals import (
+    Box,
+    Cell,
+    Circle,
+    State,
+    StateAggregation,
+    SubgoalFileError,
+    SubgoalSeries,
+    load_patterns,
+    save_patterns,
+)
+from torchrl_subgoal.transform import SubgoalPotentialTransform
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Box",
+    "Cell",
+    "Circle",
+    "NaivePotential",
+    "NeuralPotential",
+    "Potential",
+    "State",
+    "StateAggregation",
+    "SubgoalFileError",
+    "SubgoalPotentialTransform",
+    "SubgoalSeries",
+    "SubgoalValueLoss",
+    "TabularPotential",
+    "__version__",
+    "load_patterns",
+    "save_patterns",
+]

@@ -1,0 +1,144 @@
+"""Tabular SARSA with a softmax policy, batched: one Q table per learner."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.utils import NestedKey
+
+__all__ = ["SARSA_PRESETS", "SarsaConfig", "SoftmaxSarsa"]
+
+
+@dataclass(frozen=True)
+class SarsaConfig:
+    """Hyper-parameters of SARSA on four-rooms.
+
+    Attributes:
+        lr: learning rate ``α`` of the Q table.
+        gamma: discount ``γ``.
+        temperature: softmax temperature ``τ`` (``π(a|s) ∝ exp(Q(s,a)/τ)``).
+        value_lr: learning rate ``α_v`` of the subgoal potential.
+    """
+
+    lr: float
+    gamma: float
+    temperature: float
+    value_lr: float
+
+
+#: ``"paper"``: the values stated in the paper's text (α = 0.01, γ = 0.99); the
+#: text gives no temperature or ``α_v``, so those follow the authors' code,
+#: where the potential shares the agent's learning rate and τ = 0.01.
+#: ``"released"``: the authors' released configuration (α = α_v = 0.25,
+#: τ = 0.01, γ = 0.99). See facts.md / the four-rooms docs for the comparison.
+SARSA_PRESETS: dict[str, SarsaConfig] = {
+    "paper": SarsaConfig(lr=0.01, gamma=0.99, temperature=0.01, value_lr=0.01),
+    "released": SarsaConfig(lr=0.25, gamma=0.99, temperature=0.01, value_lr=0.25),
+}
+
+
+class SoftmaxSarsa:
+    """SARSA(0) with a softmax (Boltzmann) policy for a batch of independent learners.
+
+    Learner ``b`` owns ``Q[b]`` of shape ``[num_states, num_actions]``; the env
+    batch (flattened) is the learner batch. Actions are sampled with the
+    Gumbel-max trick from ``Q/τ`` using the agent's own generator, so a seed
+    fixes every learner's behaviour. The update is
+    ``Q(s,a) ← Q(s,a) + α (r + γ Q(s',a') (1 − terminated) − Q(s,a))`` with
+    ``a' ~ π(·|s')``; at truncation it bootstraps from ``Q(s', a')``.
+
+    Args:
+        num_learners: learners (env batch size).
+        num_states: discrete states (observation values).
+        num_actions: actions.
+        config: learning rate, discount, temperature.
+        generator: random source of the policy.
+        observation_key: the discrete observation.
+        abstract_states: if > 1, the table is over ``(s, z)`` pairs, with ``z``
+            read from ``abstract_key`` (the shaping transform's subgoal index).
+            A history-dependent potential ``Φ(z)`` is then a function of the
+            agent's state, which is what potential-based shaping needs to leave
+            the optimal policy unchanged; with ``Q(s)`` alone (the paper's agent)
+            the greedy policy can cycle across a subgoal (see the four-rooms docs).
+        abstract_key: where ``z`` is read.
+
+    Examples:
+        >>> import torch
+        >>> from torchrl_subgoal.agents import SoftmaxSarsa, SARSA_PRESETS
+        >>> from torchrl_subgoal.agents.loop import run_episodes
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> env = FourRoomsEnv(num_envs=8)
+        >>> agent = SoftmaxSarsa(8, env.num_states, 4, SARSA_PRESETS["released"],
+        ...                      generator=torch.Generator().manual_seed(0))
+        >>> records = run_episodes(env, agent, episodes=3)
+        >>> records.steps.shape
+        torch.Size([8, 3])
+    """
+
+    def __init__(
+        self,
+        num_learners: int,
+        num_states: int,
+        num_actions: int,
+        config: SarsaConfig,
+        *,
+        generator: torch.Generator | None = None,
+        observation_key: NestedKey = "observation",
+        abstract_states: int = 1,
+        abstract_key: NestedKey = "subgoal_index",
+    ) -> None:
+        self.config = config
+        self.num_actions = num_actions
+        self.abstract_states = abstract_states
+        self.abstract_key = abstract_key
+        self.num_states = num_states * abstract_states
+        self.q = torch.zeros(num_learners, self.num_states, num_actions)
+        self.generator = generator if generator is not None else torch.Generator().manual_seed(0)
+        self.observation_key = observation_key
+        self._rows = torch.arange(num_learners)
+        self._flat_q = self.q.view(-1)
+
+    def sample(self, state: torch.Tensor) -> torch.Tensor:
+        """Softmax actions for each learner's discrete state ``[N]``."""
+        logits = self.q[self._rows, state] / self.config.temperature
+        # Gumbel-max: argmax(logits + G), G = -log(-log U), U ~ U(0, 1)
+        u = torch.rand(logits.shape, generator=self.generator).clamp_(min=1e-12)
+        return (logits - u.log_().neg_().log_()).argmax(-1)
+
+    def greedy(self, state: torch.Tensor) -> torch.Tensor:
+        """Greedy actions ``argmax_a Q(s, a)`` for each learner."""
+        return self.q[self._rows, state].argmax(-1)
+
+    def state(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """The table row of each learner: ``s``, or ``s · Z + z`` over ``(s, z)`` pairs."""
+        s = tensordict.get(self.observation_key).reshape(-1)
+        if self.abstract_states == 1:
+            return s
+        return s * self.abstract_states + tensordict.get(self.abstract_key).reshape(-1)
+
+    def act(self, tensordict: TensorDictBase) -> TensorDictBase:
+        shape = tensordict.get(self.observation_key).shape
+        tensordict.set("action", self.sample(self.state(tensordict)).view(shape))
+        return tensordict
+
+    def _index(self, state: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return (self._rows * self.num_states + state) * self.num_actions + action
+
+    def step(self, transition: TensorDictBase, next_root: TensorDictBase) -> None:
+        cfg = self.config
+        nxt = transition.get("next")
+        s = self.state(transition)
+        a = transition.get("action").reshape(-1)
+        s2 = self.state(nxt)
+        reward = nxt.get("reward").reshape(-1)
+        terminated = nxt.get("terminated").reshape(-1)
+        a2 = self.sample(s2)
+        q_next = self._flat_q[self._index(s2, a2)].masked_fill(terminated, 0.0)
+        idx = self._index(s, a)
+        td_error = reward + cfg.gamma * q_next - self._flat_q[idx]
+        self._flat_q.index_add_(0, idx, cfg.lr * td_error)
+        done = nxt.get("done").reshape(-1)
+        action = torch.where(done, self.sample(self.state(next_root)), a2)
+        next_root.set("action", action.view(next_root.get(self.observation_key).shape))

@@ -1,0 +1,242 @@
+"""Four-rooms (Sutton, Precup & Singh 1999) as a batched TorchRL env: batch = independent learners."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Bounded, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+from torchrl_subgoal.subgoals import Cell, Predicate, State, StateAggregation, SubgoalSeries
+
+__all__ = ["ACTIONS", "LAYOUT", "FourRoomsEnv", "check_subgoal", "draw_map", "free_cells", "room_aggregation"]
+
+LAYOUT = """\
+wwwwwwwwwwwww
+w     w     w
+w     w     w
+w           w
+w     w     w
+w     w     w
+ww wwww     w
+w     www www
+w     w     w
+w     w     w
+w           w
+w     w     w
+wwwwwwwwwwwww"""
+
+#: action index -> (d_row, d_col): down, right, up, left
+ACTIONS = ((1, 0), (0, 1), (-1, 0), (0, -1))
+START = (1, 1)
+GOAL = (11, 11)
+HALLWAYS = ((3, 6), (6, 2), (7, 9), (10, 6))
+_ROWS = LAYOUT.splitlines()
+SIZE = (len(_ROWS), len(_ROWS[0]))
+
+
+def free_cells() -> list[tuple[int, int]]:
+    """Free cells in row-major order; index = state number ((1,1) is 0, (11,11) is 103)."""
+    return [(r, c) for r in range(SIZE[0]) for c in range(SIZE[1]) if _ROWS[r][c] != "w"]
+
+
+_CELLS = free_cells()
+_STATE = {cell: i for i, cell in enumerate(_CELLS)}
+
+
+def _room(cell: tuple[int, int]) -> int:
+    """Room of a free cell: 0 top-left, 1 top-right, 2 bottom-left, 3 bottom-right.
+
+    Hallways (3,6) and (6,2) belong to the top-left room, (7,9) to the
+    top-right and (10,6) to the bottom-left (the SARSA-RS aggregation).
+    """
+    if cell in ((3, 6), (6, 2)):
+        return 0
+    if cell == (7, 9):
+        return 1
+    if cell == (10, 6):
+        return 2
+    r, c = cell
+    left = c < 6
+    if r <= 6:  # the top rooms span rows 1-6 (row 6 on the left is wall but for a hallway)
+        return 0 if left else 1
+    return 2 if left else 3
+
+
+def room_aggregation() -> StateAggregation:
+    """``g(s)`` = room of state ``s``: the SARSA-RS baseline's aggregation (4 abstract states)."""
+    return StateAggregation(torch.tensor([_room(c) for c in _CELLS]), num_states=4)
+
+
+def check_subgoal(predicate: Predicate) -> str | None:
+    """Why ``predicate`` is not a valid four-rooms subgoal, or ``None``."""
+    if isinstance(predicate, Cell):
+        r, c = predicate.row, predicate.col
+        if not (0 <= r < SIZE[0] and 0 <= c < SIZE[1]):
+            return f"({r}, {c}) is off the {SIZE[0]}x{SIZE[1]} grid"
+        if _ROWS[r][c] == "w":
+            return f"({r}, {c}) is a wall"
+        return None
+    if isinstance(predicate, State):
+        if not 0 <= predicate.state < len(_CELLS):
+            return f"state {predicate.state} is not one of the {len(_CELLS)} free states"
+        return None
+    return f"four-rooms subgoals are cells or states, not {predicate.kind}"
+
+
+class FourRoomsEnv(EnvBase):
+    """The four-rooms grid world, batched: each env of the batch is an independent learner.
+
+    13 x 13 grid with 104 free cells, start (1, 1), goal (11, 11), four
+    deterministic moves (0 down, 1 right, 2 up, 3 left; into a wall = stay),
+    reward +1 on reaching the goal (terminated), truncation after
+    ``max_steps``. The shortest path takes 20 steps.
+
+    Observations: ``"observation"`` the state number (free cells numbered
+    row-major, a ``Categorical(104)``) and ``"cell"`` its ``(row, col)``.
+
+    Args:
+        num_envs: batch size; ``None`` for a single unbatched env.
+        max_steps: episode cap (1,000 in the paper).
+        device: torch device.
+
+    Examples:
+        >>> from torchrl.envs.utils import check_env_specs
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> env = FourRoomsEnv(num_envs=3)
+        >>> check_env_specs(env)
+        >>> env.reset()["cell"][0].tolist()
+        [1, 1]
+    """
+
+    batch_locked = True
+
+    def __init__(self, num_envs: int | None = None, *, max_steps: int = 1000, device: Any = "cpu") -> None:
+        batch = torch.Size([]) if num_envs is None else torch.Size([num_envs])
+        if num_envs is not None and num_envs < 1:
+            raise ValueError(f"num_envs must be positive, got {num_envs}")
+        if max_steps < 1:
+            raise ValueError(f"max_steps must be positive, got {max_steps}")
+        super().__init__(batch_size=batch, device=device)
+        self.max_steps = int(max_steps)
+        n = len(_CELLS)
+        moves = [
+            [_STATE.get((r + dr, c + dc), _STATE[(r, c)]) for dr, dc in ACTIONS] for r, c in _CELLS
+        ]
+        self.transitions = torch.tensor(moves, device=self.device)  # [S, A] next state
+        self.cells = torch.tensor(_CELLS, device=self.device)  # [S, 2]
+        self.start_state = _STATE[START]
+        self.goal_state = _STATE[GOAL]
+        self.num_states = n
+        self.observation_spec = Composite(
+            observation=Categorical(n, shape=batch, dtype=torch.long, device=self.device),
+            cell=Bounded(0, max(SIZE) - 1, shape=(*batch, 2), dtype=torch.long, device=self.device),
+            shape=batch,
+        )
+        self.action_spec = Categorical(len(ACTIONS), shape=batch, dtype=torch.long, device=self.device)
+        self.reward_spec = Unbounded(shape=(*batch, 1), dtype=torch.float32, device=self.device)
+        flag = Categorical(2, shape=(*batch, 1), dtype=torch.bool, device=self.device)
+        self.full_done_spec = Composite(
+            done=flag, terminated=flag.clone(), truncated=flag.clone(), shape=batch, device=self.device
+        )
+        flat = max(1, batch.numel())
+        self._state = torch.full((flat,), self.start_state, dtype=torch.long, device=self.device)
+        self._t = torch.zeros(flat, dtype=torch.long, device=self.device)
+
+    def _observe(self, extra: dict[str, torch.Tensor]) -> TensorDict:
+        shape = self.batch_size
+        s = self._state.clone().reshape(shape)
+        return TensorDict(
+            {"observation": s, "cell": self.cells[s], **extra}, batch_size=shape, device=self.device
+        )
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
+        reset = tensordict.get("_reset", None) if tensordict is not None else None
+        if reset is None:
+            self._state.fill_(self.start_state)
+            self._t.zero_()
+        else:
+            mask = reset.reshape(-1)
+            self._state.masked_fill_(mask, self.start_state)
+            self._t.masked_fill_(mask, 0)
+        false = torch.zeros((*self.batch_size, 1), dtype=torch.bool, device=self.device)
+        return self._observe({"done": false, "terminated": false.clone(), "truncated": false.clone()})
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        action = tensordict.get("action").reshape(-1)
+        self._state = self.transitions[self._state, action]
+        self._t += 1
+        shape = (*self.batch_size, 1)
+        terminated = (self._state == self.goal_state).reshape(shape)
+        truncated = (self._t >= self.max_steps).reshape(shape) & ~terminated
+        return self._observe(
+            {
+                "reward": terminated.to(torch.float32),
+                "done": terminated | truncated,
+                "terminated": terminated,
+                "truncated": truncated,
+            }
+        )
+
+    def _set_seed(self, seed: int | None) -> None:
+        """The dynamics are deterministic: nothing to seed."""
+
+    def shortest_path_length(self) -> int:
+        """Steps of the shortest start-to-goal path (breadth-first search; 20)."""
+        dist = {self.start_state: 0}
+        frontier = [self.start_state]
+        while frontier:
+            nxt = []
+            for s in frontier:
+                for s2 in self.transitions[s].tolist():
+                    if s2 not in dist:
+                        dist[s2] = dist[s] + 1
+                        nxt.append(s2)
+            frontier = nxt
+        return dist[self.goal_state]
+
+
+def state_of(cell: tuple[int, int]) -> int:
+    """State number of a free cell."""
+    return _STATE[cell]
+
+
+def draw_map(ax: Any, patterns: Mapping[str, SubgoalSeries | Sequence[tuple[int, int]]] | None = None) -> None:
+    """Draw the grid (walls, start S, goal G) and each pattern's ordered subgoal cells.
+
+    Cells chosen by several patterns are shaded darker; each subgoal is marked
+    with its position in the series (1, 2, ...), as in the paper's figures of
+    the participants' subgoals.
+    """
+    import matplotlib.colors as mcolors
+    import numpy as np
+    from matplotlib.patches import Rectangle
+
+    walls = np.array([[ch == "w" for ch in row] for row in _ROWS], dtype=float)
+    ax.imshow(walls, cmap=mcolors.ListedColormap(["white", "#404040"]), origin="upper")
+    counts: dict[tuple[int, int, int], int] = {}
+    for series in (patterns or {}).values():
+        cells = (
+            [(p.row, p.col) for p in series.predicates if isinstance(p, Cell)]
+            if isinstance(series, SubgoalSeries)
+            else [tuple(c) for c in series]
+        )
+        for order, (r, c) in enumerate(cells, start=1):
+            counts[(r, c, order)] = counts.get((r, c, order), 0) + 1
+    total = max(1, len(patterns or {}))
+    colours = ["tab:blue", "tab:orange", "tab:green", "tab:purple"]
+    for (r, c, order), count in sorted(counts.items()):
+        colour = colours[(order - 1) % len(colours)]
+        alpha = 0.25 + 0.75 * count / total
+        ax.add_patch(Rectangle((c - 0.5, r - 0.5), 1, 1, color=colour, alpha=alpha))
+        ax.text(c, r, str(order), ha="center", va="center", fontsize=7, color="black")
+    for label, (r, c) in (("S", START), ("G", GOAL)):
+        ax.text(c, r, label, ha="center", va="center", fontsize=9, fontweight="bold")
+    ax.set_xticks(range(SIZE[1]))
+    ax.set_yticks(range(SIZE[0]))
+    ax.tick_params(labelsize=6)
+    ax.set_xlim(-0.5, SIZE[1] - 0.5)
+    ax.set_ylim(SIZE[0] - 0.5, -0.5)

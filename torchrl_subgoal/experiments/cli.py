@@ -1,0 +1,54 @@
+"""Typed recipe settings: one dataclass, one ``--flag`` per field, clear errors for bad values."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from collections.abc import Sequence
+from typing import Any, TypeVar, get_type_hints
+
+__all__ = ["ConfigError", "parse_config", "setting"]
+
+T = TypeVar("T")
+
+
+class ConfigError(ValueError):
+    """A bad setting; the message names the field (``--flag``) and what is allowed."""
+
+
+def setting(default: Any, help: str, *, choices: Sequence[Any] | None = None) -> Any:
+    """A dataclass field with its help text (and allowed values) for the command line."""
+    return dataclasses.field(default=default, metadata={"help": help, "choices": choices})
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def parse_config(cls: type[T], argv: Sequence[str] | None = None, description: str | None = None) -> T:
+    """Build ``cls`` (a dataclass of settings) from command-line flags.
+
+    Every field ``foo_bar`` becomes ``--foo-bar`` (booleans: ``--foo-bar`` /
+    ``--no-foo-bar``). Values are converted with the field's type; fields with
+    ``choices`` only accept those. The dataclass's ``__post_init__`` may raise
+    :class:`ConfigError` for other checks.
+    """
+    hints = get_type_hints(cls)
+    parser = argparse.ArgumentParser(description=description or (cls.__doc__ or "").strip().splitlines()[0])
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+        kind = hints[f.name]
+        help_text = f"{f.metadata.get('help', '')} (default: {f.default})"
+        if kind is bool:
+            parser.add_argument(_flag(f.name), action=argparse.BooleanOptionalAction, default=f.default,
+                                help=help_text)
+        else:
+            parser.add_argument(_flag(f.name), type=kind, default=f.default, help=help_text,
+                                choices=f.metadata.get("choices"), metavar=f.name.upper())
+    args = parser.parse_args(argv)
+    return cls(**vars(args))
+
+
+def check(condition: bool, field_name: str, message: str) -> None:
+    """Raise :class:`ConfigError` for ``--field-name`` unless ``condition`` holds."""
+    if not condition:
+        raise ConfigError(f"{_flag(field_name)}: {message}")

@@ -1,0 +1,662 @@
+"""The results store: one directory per sweep, one Parquet file per finished chunk.
+
+Layout of a results directory::
+
+    results_dir/
+      config.json                      what was run: domain, methods, config, seed,
+                                       chunk layout, package versions
+      .lock                            held (``flock``) by the process running the sweep
+      chunks/<method>/<index>.parquet  one finished chunk, long format, one row per
+                                       (learner, episode)
+
+Every file is written atomically: to a temporary file in the same directory,
+flushed and fsync'ed, then renamed over the final name with :func:`os.replace`.
+A reader therefore sees either a whole file or none; temporary files left by a
+killed process start with ``.`` and end with ``.tmp`` and are removed by
+:meth:`ResultsStore.clean_temp_files`.
+
+Each chunk file carries its identity (method, index, seed, learners) and its row
+count in the Parquet schema metadata, and is written with page checksums. A
+file that cannot be read, whose identity is not the planned chunk's, or whose
+row count is wrong is *corrupt*: :func:`load_results` refuses it by name and a
+re-run of the sweep recomputes it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import platform
+import re
+import shutil
+import uuid
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import Any, BinaryIO, Literal
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+FORMAT_VERSION = 1
+CONFIG_FILE = "config.json"
+CHUNKS_DIR = "chunks"
+LOCK_FILE = ".lock"
+_META_KEY = b"torchrl_subgoal.chunk"
+_METHOD_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+#: Fields of config.json that define an experiment; a mismatch on any is an error.
+IDENTITY_FIELDS = ("domain", "methods", "config", "seed", "chunk_size", "n_episodes", "chunks")
+#: The per-episode metrics an :class:`EpisodeTable` holds, by their column names.
+METRICS = ("steps", "return", "success")
+
+
+class ResultsError(Exception):
+    """Base class of the errors raised about a results directory."""
+
+
+class ConfigMismatchError(ResultsError):
+    """A sweep was started into a directory holding a different experiment."""
+
+
+class DomainMismatchError(ResultsError):
+    """A results directory belongs to another domain than the one asked for."""
+
+
+class UnknownMethodError(ResultsError, KeyError):
+    """A method name is not part of the sweep or results directory."""
+
+    def __str__(self) -> str:  # KeyError would quote the whole message
+        return str(self.args[0]) if self.args else ""
+
+
+class CorruptChunkError(ResultsError):
+    """A chunk file exists but cannot be trusted (unreadable, wrong identity or size)."""
+
+    def __init__(self, path: Path, reason: str) -> None:
+        super().__init__(f"corrupt chunk file {path}: {reason}")
+        self.path = path
+        self.reason = reason
+
+
+class IncompleteResultsError(ResultsError):
+    """Some chunks of the sweep have not been computed yet."""
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """A unit of work: consecutive learners of one method, run by one call of ``run_chunk``.
+
+    Args:
+        method: name of the method all learners of the chunk use.
+        index: position of the chunk among the method's chunks (0-based).
+        learners: ``(pattern, learning)`` pairs, in the order the result rows must follow.
+        seed: a 63-bit seed derived from (sweep seed, method, index); seed every random
+            source of the chunk from it and the results do not depend on the backend or
+            on the order chunks run in.
+
+    Examples:
+        >>> chunk = Chunk("HRS", 0, (("p1", 0), ("p1", 1)), seed=123)
+        >>> chunk.name, chunk.n_learners
+        ('HRS/00000', 2)
+    """
+
+    method: str
+    index: int
+    learners: tuple[tuple[str, int], ...]
+    seed: int
+
+    @property
+    def n_learners(self) -> int:
+        """Number of learners in the chunk."""
+        return len(self.learners)
+
+    @property
+    def name(self) -> str:
+        """``<method>/<index>``, also the chunk file's path below ``chunks/``."""
+        return f"{self.method}/{self.index:05d}"
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict; learners are run-length encoded as ``[pattern, first, stop]``."""
+        runs: list[list[Any]] = []
+        for pattern, learning in self.learners:
+            if runs and runs[-1][0] == pattern and runs[-1][2] == learning:
+                runs[-1][2] = learning + 1
+            else:
+                runs.append([pattern, learning, learning + 1])
+        return {"method": self.method, "index": self.index, "seed": self.seed, "learners": runs}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Chunk:
+        """Inverse of :meth:`to_json`."""
+        learners = tuple(
+            (str(pattern), learning)
+            for pattern, first, stop in data["learners"]
+            for learning in range(int(first), int(stop))
+        )
+        return cls(str(data["method"]), int(data["index"]), learners, int(data["seed"]))
+
+
+@dataclass(frozen=True, init=False, eq=False)
+class EpisodeTable:
+    """Per-episode records of the learners of one chunk (or of a whole method).
+
+    Row ``i`` belongs to the chunk's ``i``-th learner, column ``j`` to its episode
+    ``j + 1``. Arrays are converted on construction (torch CPU tensors are accepted).
+
+    Args:
+        steps: int array ``[n_learners, n_episodes]``, steps taken in each episode.
+        returns: float array of the same shape, undiscounted environment return.
+        success: bool array of the same shape, whether the episode reached the goal.
+
+    Examples:
+        >>> import numpy as np
+        >>> table = EpisodeTable(np.full((2, 3), 7), np.zeros((2, 3)), np.ones((2, 3), bool))
+        >>> table.n_learners, table.n_episodes, table.metric("steps").dtype
+        (2, 3, dtype('float64'))
+    """
+
+    steps: npt.NDArray[np.int64]
+    returns: npt.NDArray[np.float64]
+    success: npt.NDArray[np.bool_]
+
+    def __init__(self, steps: npt.ArrayLike, returns: npt.ArrayLike, success: npt.ArrayLike) -> None:
+        steps_ = np.asarray(steps)
+        if steps_.ndim != 2:
+            raise ValueError(f"steps must be 2-D [n_learners, n_episodes], got shape {steps_.shape}")
+        if not np.issubdtype(steps_.dtype, np.integer) and not np.array_equal(steps_, np.round(steps_)):
+            raise ValueError("steps must hold whole numbers")
+        object.__setattr__(self, "steps", steps_.astype(np.int64))
+        object.__setattr__(self, "returns", np.asarray(returns, dtype=np.float64))
+        object.__setattr__(self, "success", np.asarray(success).astype(bool))
+        for name in ("returns", "success"):
+            shape = getattr(self, name).shape
+            if shape != steps_.shape:
+                raise ValueError(f"{name} has shape {shape}, steps has {steps_.shape}")
+
+    @property
+    def n_learners(self) -> int:
+        """Number of rows (learners)."""
+        return int(self.steps.shape[0])
+
+    @property
+    def n_episodes(self) -> int:
+        """Number of columns (episodes per learner)."""
+        return int(self.steps.shape[1])
+
+    def metric(self, name: str) -> npt.NDArray[np.float64]:
+        """One metric as a float array ``[n_learners, n_episodes]``.
+
+        Args:
+            name: ``"steps"``, ``"return"`` (or ``"returns"``) or ``"success"``.
+        """
+        arrays: dict[str, npt.NDArray[Any]] = {"steps": self.steps, "success": self.success}
+        arrays["return"] = arrays["returns"] = self.returns
+        if name not in arrays:
+            raise ValueError(f"unknown metric {name!r}; choose one of {METRICS}")
+        return arrays[name].astype(np.float64)
+
+    @classmethod
+    def concat(cls, tables: Sequence[EpisodeTable]) -> EpisodeTable:
+        """Stack tables with the same number of episodes along the learner axis."""
+        if not tables:
+            raise ValueError("nothing to concatenate")
+        return cls(
+            np.concatenate([t.steps for t in tables]),
+            np.concatenate([t.returns for t in tables]),
+            np.concatenate([t.success for t in tables]),
+        )
+
+
+@dataclass(frozen=True)
+class ChunkStatus:
+    """State of one planned chunk in the store."""
+
+    state: Literal["done", "missing", "corrupt"]
+    reason: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class MethodResults:
+    """All finished learners of one method, in sweep order.
+
+    Attributes:
+        name: the method's name.
+        patterns: pattern name of each learner, shape ``[n_learners]``.
+        learnings: learning index of each learner within its pattern.
+        table: the episode records, one row per learner.
+    """
+
+    name: str
+    patterns: npt.NDArray[np.str_]
+    learnings: npt.NDArray[np.int64]
+    table: EpisodeTable
+
+
+@dataclass(frozen=True, eq=False)
+class Results:
+    """The contents of a results directory, as loaded by :func:`load_results`.
+
+    Attributes:
+        root: the results directory.
+        domain: domain name recorded by the sweep.
+        config: the sweep's ``config`` mapping (hyper-parameters, patterns, report section).
+        methods: per-method results, in the sweep's method order.
+        missing: names of planned chunks not (yet) in the store, when loaded with
+            ``allow_incomplete=True``.
+        manifest: the whole ``config.json``.
+    """
+
+    root: Path
+    domain: str
+    config: Mapping[str, Any]
+    methods: Mapping[str, MethodResults]
+    missing: tuple[str, ...] = ()
+    manifest: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_frame(self) -> pd.DataFrame:
+        """Long format: one row per (method, pattern, learning, episode).
+
+        Columns: ``method``, ``pattern`` (categoricals), ``learning``, ``episode``
+        (1-based), ``steps``, ``return``, ``success``.
+        """
+        columns = ["method", "pattern", "learning", "episode", "steps", "return", "success"]
+        if not self.methods:
+            return pd.DataFrame(columns=columns)
+        results = list(self.methods.values())
+        sizes = [res.table.steps.size for res in results]
+        episodes = [res.table.n_episodes for res in results]
+        patterns, pattern_codes = np.unique(
+            np.concatenate([res.patterns for res in results]), return_inverse=True
+        )
+        method_codes = np.repeat(np.arange(len(results)), sizes)
+        frame = pd.DataFrame(
+            {
+                "method": pd.Categorical.from_codes(method_codes, categories=pd.Index(list(self.methods))),
+                "pattern": pd.Categorical.from_codes(
+                    np.repeat(pattern_codes, np.repeat(episodes, [r.table.n_learners for r in results])),
+                    categories=pd.Index(patterns.tolist()),
+                ),
+                "learning": np.concatenate(
+                    [np.repeat(r.learnings, r.table.n_episodes) for r in results]
+                ),
+                "episode": np.concatenate(
+                    [np.tile(np.arange(1, e + 1), r.table.n_learners) for r, e in zip(results, episodes, strict=True)]
+                ),
+                "steps": np.concatenate([r.table.steps.ravel() for r in results]),
+                "return": np.concatenate([r.table.returns.ravel() for r in results]),
+                "success": np.concatenate([r.table.success.ravel() for r in results]),
+            },
+            columns=columns,
+        )
+        return frame
+
+
+def check_method_name(name: str) -> str:
+    """Return ``name`` if it can name a directory below ``chunks/``; raise otherwise."""
+    if not _METHOD_NAME.match(name):
+        raise ValueError(
+            f"method name {name!r} must start with a letter or digit and use only "
+            "letters, digits and _ . + -"
+        )
+    return name
+
+
+def collect_versions() -> dict[str, str]:
+    """Versions of Python and of the packages that shape a result, for ``config.json``."""
+    versions = {"python": platform.python_version()}
+    for package in ("torch", "torchrl", "tensordict", "numpy", "torchrl_subgoal"):
+        try:
+            versions[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            versions[package] = "not installed"
+    return versions
+
+
+def to_json_data(value: Any, what: str = "config") -> Any:
+    """``value`` as plain JSON data (tuples become lists); a clear error if it is not JSON."""
+    try:
+        return json.loads(json.dumps(value, allow_nan=False))
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{what} must be JSON-serialisable (no NaN): {exc}") from exc
+
+
+def diff_fields(stored: Any, requested: Any, prefix: str = "") -> list[str]:
+    """Dotted paths where two JSON values differ, e.g. ``['config.lr', 'seed']``."""
+    if isinstance(stored, dict) and isinstance(requested, dict):
+        out: list[str] = []
+        for key in sorted(set(stored) | set(requested), key=str):
+            path = f"{prefix}.{key}" if prefix else str(key)
+            if key not in stored or key not in requested:
+                out.append(path)
+            else:
+                out.extend(diff_fields(stored[key], requested[key], path))
+        return out
+    if isinstance(stored, list) and isinstance(requested, list) and len(stored) == len(requested):
+        out = []
+        for i, (a, b) in enumerate(zip(stored, requested, strict=True)):
+            out.extend(diff_fields(a, b, f"{prefix}[{i}]"))
+        return out
+    return [] if stored == requested else [prefix or "<root>"]
+
+
+def _fsync_dir(path: Path) -> None:
+    with contextlib.suppress(OSError):  # not every filesystem lets a directory be fsync'ed
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+@contextlib.contextmanager
+def _atomic_file(path: Path) -> Iterator[BinaryIO]:
+    """Open a temporary file beside ``path``; on success fsync it and rename it over ``path``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.parent / f".{path.name}.{uuid.uuid4().hex}.tmp"  # open() honours the umask
+    try:
+        with open(tmp, "xb") as handle:
+            yield handle
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+    _fsync_dir(path.parent)
+
+
+class ResultsStore:
+    """Reads and writes one results directory (see the module docstring for the layout).
+
+    Args:
+        root: the results directory; created on first write.
+
+    Examples:
+        >>> import tempfile, numpy as np
+        >>> store = ResultsStore(tempfile.mkdtemp())
+        >>> chunk = Chunk("HRS", 0, (("p1", 0),), seed=1)
+        >>> table = EpisodeTable(np.array([[5, 3]]), np.zeros((1, 2)), np.ones((1, 2), bool))
+        >>> _ = store.write_chunk(chunk, table)
+        >>> store.read_chunk(chunk).steps.tolist()
+        [[5, 3]]
+    """
+
+    def __init__(self, root: str | os.PathLike[str]) -> None:
+        self.root = Path(root)
+
+    @property
+    def config_path(self) -> Path:
+        """``results_dir/config.json``."""
+        return self.root / CONFIG_FILE
+
+    @property
+    def chunks_dir(self) -> Path:
+        """``results_dir/chunks``."""
+        return self.root / CHUNKS_DIR
+
+    def chunk_path(self, chunk: Chunk) -> Path:
+        """Where ``chunk`` is stored."""
+        return self.chunks_dir / check_method_name(chunk.method) / f"{chunk.index:05d}.parquet"
+
+    # -- config.json ---------------------------------------------------------------------
+
+    def read_manifest(self) -> dict[str, Any] | None:
+        """The parsed ``config.json``, or ``None`` when the directory has none."""
+        try:
+            text = self.config_path.read_text()
+        except FileNotFoundError:
+            return None
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ResultsError(f"{self.config_path} is not valid JSON: {exc}") from exc
+        if not isinstance(data, dict) or data.get("format") != FORMAT_VERSION:
+            raise ResultsError(
+                f"{self.config_path} is not a torchrl_subgoal results file of format {FORMAT_VERSION}"
+            )
+        return data
+
+    def write_manifest(self, manifest: Mapping[str, Any]) -> None:
+        """Write ``config.json`` atomically."""
+        text = json.dumps(manifest, indent=1, allow_nan=False) + "\n"
+        with _atomic_file(self.config_path) as handle:
+            handle.write(text.encode())
+
+    # -- chunks --------------------------------------------------------------------------
+
+    def write_chunk(self, chunk: Chunk, table: EpisodeTable) -> Path:
+        """Write one finished chunk atomically; returns its path."""
+        if table.n_learners != chunk.n_learners:
+            raise ValueError(
+                f"chunk {chunk.name} has {chunk.n_learners} learners, its table {table.n_learners} rows"
+            )
+        n, e = table.steps.shape
+        names, codes = np.unique([pattern for pattern, _ in chunk.learners], return_inverse=True)
+        pattern_column = pa.DictionaryArray.from_arrays(
+            pa.array(np.repeat(codes.astype(np.int32), e)), pa.array(names.tolist(), pa.string())
+        )
+        data = pa.table(
+            {
+                "method": pa.DictionaryArray.from_arrays(
+                    pa.array(np.zeros(n * e, dtype=np.int32)), pa.array([chunk.method])
+                ),
+                "pattern": pattern_column,
+                "learning": pa.array(np.repeat([lrn for _, lrn in chunk.learners], e).astype(np.int32)),
+                "episode": pa.array(np.tile(np.arange(1, e + 1, dtype=np.int32), n)),
+                "steps": pa.array(table.steps.ravel()),
+                "return": pa.array(table.returns.ravel()),
+                "success": pa.array(table.success.ravel()),
+            }
+        )
+        identity = {**chunk.to_json(), "rows": n * e, "n_episodes": e}
+        data = data.replace_schema_metadata({_META_KEY: json.dumps(identity).encode()})
+        path = self.chunk_path(chunk)
+        with _atomic_file(path) as handle:
+            pq.write_table(data, handle, compression="zstd", write_page_checksum=True)
+        return path
+
+    def read_chunk(self, chunk: Chunk) -> EpisodeTable:
+        """Read and validate a stored chunk.
+
+        Raises:
+            FileNotFoundError: the chunk has not been written.
+            CorruptChunkError: the file is unreadable, belongs to another chunk, or has the
+                wrong number of rows.
+        """
+        path = self.chunk_path(chunk)
+        if not path.exists():
+            raise FileNotFoundError(path)
+        try:
+            data = pq.read_table(path, page_checksum_verification=True)
+        except (OSError, pa.ArrowException) as exc:
+            raise CorruptChunkError(path, f"unreadable ({exc})") from exc
+        raw = (data.schema.metadata or {}).get(_META_KEY)
+        if raw is None:
+            raise CorruptChunkError(path, "no chunk identity in the Parquet metadata")
+        try:
+            identity = json.loads(raw)
+            stored = Chunk.from_json(identity)
+            rows, n_episodes = int(identity["rows"]), int(identity["n_episodes"])
+        except (ValueError, KeyError, TypeError) as exc:
+            raise CorruptChunkError(path, f"unreadable chunk identity ({exc})") from exc
+        if stored != chunk:
+            diff = diff_fields(stored.to_json(), chunk.to_json())
+            raise CorruptChunkError(path, f"identity differs from the planned chunk in {diff}")
+        if rows != chunk.n_learners * n_episodes or data.num_rows != rows:
+            raise CorruptChunkError(
+                path,
+                f"{data.num_rows} rows, expected {chunk.n_learners} learners x {n_episodes} episodes",
+            )
+        try:
+            steps = data.column("steps").to_numpy().reshape(chunk.n_learners, n_episodes)
+            returns = data.column("return").to_numpy().reshape(chunk.n_learners, n_episodes)
+            success = data.column("success").to_numpy().reshape(chunk.n_learners, n_episodes)
+            episode = data.column("episode").to_numpy().reshape(chunk.n_learners, n_episodes)
+            learning = data.column("learning").to_numpy()[::n_episodes] if n_episodes else []
+        except (KeyError, ValueError, pa.ArrowException) as exc:
+            raise CorruptChunkError(path, f"missing or malformed columns ({exc})") from exc
+        if not (episode == np.arange(1, n_episodes + 1)).all() or list(learning) != [
+            lrn for _, lrn in chunk.learners
+        ]:
+            raise CorruptChunkError(path, "episode or learning columns do not match the identity")
+        return EpisodeTable(steps, returns, success)
+
+    def check_chunk(self, chunk: Chunk) -> ChunkStatus:
+        """Whether ``chunk`` is stored and valid, without raising."""
+        try:
+            self.read_chunk(chunk)
+        except FileNotFoundError:
+            return ChunkStatus("missing")
+        except CorruptChunkError as exc:
+            return ChunkStatus("corrupt", exc.reason)
+        return ChunkStatus("done")
+
+    def quarantine(self, chunk: Chunk) -> Path:
+        """Move a corrupt chunk file aside to ``<index>.parquet.corrupt``; returns the new path."""
+        path = self.chunk_path(chunk)
+        target = path.with_name(path.name + ".corrupt")
+        os.replace(path, target)
+        _fsync_dir(path.parent)
+        return target
+
+    def clean_temp_files(self) -> list[Path]:
+        """Delete temporary files left by an interrupted write; returns what was removed."""
+        removed = []
+        if self.root.exists():
+            for path in [*self.root.glob(".*.tmp"), *self.chunks_dir.glob("*/.*.tmp")]:
+                with contextlib.suppress(FileNotFoundError):
+                    path.unlink()
+                    removed.append(path)
+        return removed
+
+    def clear(self) -> None:
+        """Remove ``config.json`` and ``chunks/`` (and nothing else)."""
+        with contextlib.suppress(FileNotFoundError):
+            self.config_path.unlink()
+        shutil.rmtree(self.chunks_dir, ignore_errors=True)
+
+    @contextlib.contextmanager
+    def lock(self) -> Iterator[None]:
+        """Hold an exclusive lock on the directory; the OS releases it if the process dies."""
+        import fcntl
+
+        self.root.mkdir(parents=True, exist_ok=True)
+        with open(self.root / LOCK_FILE, "w") as handle:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError as exc:
+                raise ResultsError(
+                    f"another process is running a sweep into {self.root}; wait for it or stop it"
+                ) from exc
+            try:
+                yield
+            finally:
+                fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def planned_chunks(manifest: Mapping[str, Any]) -> list[Chunk]:
+    """The chunk layout recorded in a ``config.json``."""
+    return [Chunk.from_json(item) for item in manifest["chunks"]]
+
+
+def open_manifest(results_dir: str | os.PathLike[str], domain: str | None = None) -> dict[str, Any]:
+    """Read ``results_dir/config.json`` and check it belongs to ``domain`` (when given).
+
+    Raises:
+        ResultsError: the directory holds no sweep.
+        DomainMismatchError: it holds a sweep of another domain.
+    """
+    store = ResultsStore(results_dir)
+    manifest = store.read_manifest()
+    if manifest is None:
+        raise ResultsError(f"{store.root} holds no results ({CONFIG_FILE} not found)")
+    if domain is not None and manifest["domain"] != domain:
+        raise DomainMismatchError(
+            f"{store.root} holds results of domain {manifest['domain']!r}, not {domain!r}"
+        )
+    return manifest
+
+
+def load_results(
+    results_dir: str | os.PathLike[str],
+    *,
+    domain: str | None = None,
+    methods: Sequence[str] | None = None,
+    allow_incomplete: bool = False,
+) -> Results:
+    """Load a results directory.
+
+    Args:
+        results_dir: a directory written by :class:`~torchrl_subgoal.experiments.Sweep`.
+        domain: when given, the directory must hold results of this domain.
+        methods: load only these methods (default: all, in sweep order).
+        allow_incomplete: load the chunks that exist instead of raising when some are
+            missing (they are listed in :attr:`Results.missing`). Corrupt chunks always raise.
+
+    Raises:
+        DomainMismatchError, UnknownMethodError, IncompleteResultsError, CorruptChunkError.
+
+    Examples:
+        >>> results = load_results("results/four_rooms")  # doctest: +SKIP
+        >>> results.to_frame().groupby("method")["steps"].mean()  # doctest: +SKIP
+    """
+    manifest = open_manifest(results_dir, domain)
+    store = ResultsStore(results_dir)
+    known = [m["name"] for m in manifest["methods"]]
+    wanted = known if methods is None else list(methods)
+    unknown = [name for name in wanted if name not in known]
+    if unknown:
+        raise UnknownMethodError(
+            f"unknown method(s) {unknown} for {store.root}; it holds {known}"
+        )
+    by_method: dict[str, list[tuple[Chunk, EpisodeTable]]] = {name: [] for name in wanted}
+    missing = []
+    for chunk in planned_chunks(manifest):
+        if chunk.method not in by_method:
+            continue
+        try:
+            by_method[chunk.method].append((chunk, store.read_chunk(chunk)))
+        except FileNotFoundError:
+            missing.append(chunk.name)
+    if missing and not allow_incomplete:
+        raise IncompleteResultsError(
+            f"{store.root}: {len(missing)} chunk(s) not computed yet (e.g. {missing[0]}); "
+            "re-run the sweep to finish it"
+        )
+    loaded = {}
+    for name, parts in by_method.items():
+        if not parts:
+            continue
+        episodes = {table.n_episodes for _, table in parts}
+        if len(episodes) > 1:
+            raise ResultsError(f"{store.root}: method {name} has chunks of {sorted(episodes)} episodes")
+        learners = [learner for chunk, _ in parts for learner in chunk.learners]
+        loaded[name] = MethodResults(
+            name=name,
+            patterns=np.array([p for p, _ in learners], dtype=str),
+            learnings=np.array([lrn for _, lrn in learners], dtype=np.int64),
+            table=EpisodeTable.concat([table for _, table in parts]),
+        )
+    return Results(
+        root=store.root,
+        domain=manifest["domain"],
+        config=manifest["config"],
+        methods=loaded,
+        missing=tuple(missing),
+        manifest=manifest,
+    )
+
+
+def load_frame(results_dir: str | os.PathLike[str], **kwargs: Any) -> pd.DataFrame:
+    """:func:`load_results` as a long-format DataFrame (see :meth:`Results.to_frame`).
+
+    Examples:
+        >>> frame = load_frame("results/pinball", domain="pinball")  # doctest: +SKIP
+    """
+    return load_results(results_dir, **kwargs).to_frame()

@@ -1,0 +1,627 @@
+"""Sweeps: methods x subgoal patterns x learnings, run in chunks that resume.
+
+A :class:`Sweep` enumerates learners ``(method, pattern, learning)``, splits each
+method's learners into :class:`~torchrl_subgoal.experiments.store.Chunk` s of at most
+``chunk_size`` learners, and runs the chunks not yet in the results store through a
+backend:
+
+* ``"local"`` (default): a :class:`concurrent.futures.ProcessPoolExecutor` with the
+  ``spawn`` start method; each worker runs with one torch thread and exits when its
+  parent dies. ``workers=0`` runs the chunks in the calling process (for debugging).
+* ``"ray"``: one Ray task per chunk on an existing cluster (``RAY_ADDRESS`` or a
+  running local cluster), else on a local Ray instance started for the sweep. Tasks
+  *return* their table to the driver, which writes it: the cluster needs no shared
+  filesystem, and the store keeps a single writer.
+
+In both cases the parent process is the only writer: it validates each table and
+writes it atomically as soon as its chunk finishes, so an interrupted sweep loses at
+most the chunks that were running.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import multiprocessing as mp
+import os
+import pickle
+import queue as queue_module
+import threading
+import time
+import warnings
+from collections.abc import Callable, Generator, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from typing import Any, Literal, Protocol
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from torchrl_subgoal.experiments.store import (
+    FORMAT_VERSION,
+    IDENTITY_FIELDS,
+    Chunk,
+    ConfigMismatchError,
+    DomainMismatchError,
+    EpisodeTable,
+    Results,
+    ResultsError,
+    ResultsStore,
+    UnknownMethodError,
+    check_method_name,
+    collect_versions,
+    diff_fields,
+    load_results,
+    to_json_data,
+)
+
+Progress = Callable[[int], None]
+Backend = Literal["local", "ray"]
+
+
+class RunChunk(Protocol):
+    """The user-supplied, picklable (module-level) function that runs one chunk.
+
+    It trains every learner of ``chunk`` (seeding all randomness from ``chunk.seed``)
+    and returns their per-episode records, one row per learner in ``chunk.learners``
+    order. ``progress(k)`` reports ``k`` more learner-episodes finished.
+    """
+
+    def __call__(
+        self, chunk: Chunk, config: Mapping[str, Any], progress: Progress, /
+    ) -> EpisodeTable: ...
+
+
+class ChunkFailedError(RuntimeError):
+    """``run_chunk`` raised (or its worker died); finished chunks are kept for a re-run."""
+
+
+class CorruptChunkWarning(UserWarning):
+    """A stored chunk was corrupt; it is moved aside and recomputed."""
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """One method of a sweep and the learners it gets.
+
+    Args:
+        name: the method's name (letters, digits, ``_ . + -``), e.g. ``"HRS"``.
+        patterns: subgoal pattern names; a method without subgoals uses one pseudo-pattern
+            such as ``"none"``.
+        learnings_per_pattern: independent learnings per pattern.
+
+    Examples:
+        >>> spec = MethodSpec("HRS", ["p1", "p2"], learnings_per_pattern=2)
+        >>> spec.learners()
+        [('p1', 0), ('p1', 1), ('p2', 0), ('p2', 1)]
+    """
+
+    name: str
+    patterns: Sequence[str]
+    learnings_per_pattern: int
+
+    def __post_init__(self) -> None:
+        check_method_name(self.name)
+        object.__setattr__(self, "patterns", tuple(str(p) for p in self.patterns))
+        if not self.patterns:
+            raise ValueError(f"method {self.name} has no patterns")
+        if len(set(self.patterns)) != len(self.patterns):
+            raise ValueError(f"method {self.name} lists a pattern twice: {list(self.patterns)}")
+        if self.learnings_per_pattern < 1:
+            raise ValueError(f"method {self.name}: learnings_per_pattern must be >= 1")
+
+    def learners(self) -> list[tuple[str, int]]:
+        """``(pattern, learning)`` pairs, pattern-major."""
+        return [(p, i) for p in self.patterns for i in range(self.learnings_per_pattern)]
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict, as stored in ``config.json``."""
+        return {
+            "name": self.name,
+            "patterns": list(self.patterns),
+            "learnings_per_pattern": self.learnings_per_pattern,
+        }
+
+
+def select_methods(available: Sequence[MethodSpec], names: Sequence[str] | None) -> list[MethodSpec]:
+    """Pick methods by name, in the order given (all of them when ``names`` is None).
+
+    Raises:
+        UnknownMethodError: a name is not among ``available``; the message lists them.
+
+    Examples:
+        >>> specs = [MethodSpec("HRS", ["p1"], 1), MethodSpec("SARSA", ["none"], 1)]
+        >>> [m.name for m in select_methods(specs, ["SARSA"])]
+        ['SARSA']
+    """
+    by_name = {m.name: m for m in available}
+    if names is None:
+        return list(available)
+    unknown = [n for n in names if n not in by_name]
+    if unknown:
+        raise UnknownMethodError(f"unknown method(s) {unknown}; choose from {list(by_name)}")
+    return [by_name[n] for n in names]
+
+
+def chunk_seed(seed: int, method: str, index: int) -> int:
+    """A 63-bit seed for chunk ``index`` of ``method``, independent of everything else.
+
+    Derived with :class:`numpy.random.SeedSequence` from the sweep seed, a stable hash of
+    the method name, and the chunk index.
+    """
+    method_key = int.from_bytes(hashlib.sha256(method.encode()).digest()[:8], "little")
+    sequence = np.random.SeedSequence(entropy=seed, spawn_key=(method_key, index))
+    return int(sequence.generate_state(1, np.uint64)[0] >> np.uint64(1))
+
+
+def plan_chunks(methods: Sequence[MethodSpec], seed: int, chunk_size: int) -> list[Chunk]:
+    """Split each method's learners into chunks of at most ``chunk_size``.
+
+    Examples:
+        >>> chunks = plan_chunks([MethodSpec("HRS", ["a", "b"], 3)], seed=0, chunk_size=4)
+        >>> [c.learners for c in chunks]
+        [(('a', 0), ('a', 1), ('a', 2), ('b', 0)), (('b', 1), ('b', 2))]
+    """
+    if chunk_size < 1:
+        raise ValueError("chunk_size must be >= 1")
+    chunks = []
+    for method in methods:
+        learners = method.learners()
+        for index, start in enumerate(range(0, len(learners), chunk_size)):
+            part = tuple(learners[start : start + chunk_size])
+            chunks.append(Chunk(method.name, index, part, chunk_seed(seed, method.name, index)))
+    return chunks
+
+
+# -- progress -------------------------------------------------------------------------------
+
+
+class _ThrottledProgress:
+    """The ``progress`` callable handed to ``run_chunk``: batches counts before sending."""
+
+    def __init__(self, chunk_name: str, sink: Callable[[tuple[str, int]], None] | None) -> None:
+        self.chunk_name = chunk_name
+        self.sink = sink
+        self.pending = 0
+        self.last = time.monotonic()
+
+    def __call__(self, k: int) -> None:
+        self.pending += int(k)
+        if time.monotonic() - self.last > 0.25:
+            self.flush()
+
+    def flush(self) -> None:
+        if self.sink is not None and self.pending:
+            self.sink((self.chunk_name, self.pending))
+        self.pending = 0
+        self.last = time.monotonic()
+
+
+class _ProgressBar:
+    """A tqdm bar over learner-episodes, fed by chunk progress messages."""
+
+    def __init__(self, chunks: Sequence[Chunk], n_episodes: int | None, enabled: bool) -> None:
+        self.n_episodes = n_episodes
+        self.learners = {c.name: c.n_learners for c in chunks}
+        self.reported: dict[str, int] = dict.fromkeys(self.learners, 0)
+        total = sum(self.learners.values()) * n_episodes if n_episodes else None
+        self.bar = tqdm(total=total, unit="ep", desc="learner-episodes", disable=not enabled)
+
+    def _cap(self, name: str) -> int | None:
+        return self.learners[name] * self.n_episodes if self.n_episodes else None
+
+    def add(self, name: str, k: int) -> None:
+        if name not in self.reported:  # a late message for a chunk already counted
+            return
+        cap = self._cap(name)
+        if cap is not None:
+            k = max(0, min(k, cap - self.reported[name]))
+        self.reported[name] += k
+        self.bar.update(k)
+
+    def done(self, chunk: Chunk, n_episodes: int) -> None:
+        if self.n_episodes is None:
+            self.n_episodes = n_episodes
+            self.bar.total = sum(self.learners.values()) * n_episodes
+        self.add(chunk.name, chunk.n_learners * n_episodes)
+        self.reported.pop(chunk.name, None)
+        self.bar.refresh()
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+# -- workers ---------------------------------------------------------------------------------
+
+_WORKER_SINK: Callable[[tuple[str, int]], None] | None = None
+
+
+def _limit_threads() -> None:
+    import torch
+
+    torch.set_num_threads(1)
+
+
+def _exit_when_orphaned(parent_pid: int) -> None:
+    while os.getppid() == parent_pid:
+        time.sleep(0.5)
+    os._exit(1)  # the sweep died (e.g. kill -9): do not keep computing for nobody
+
+
+def _init_local_worker(progress_queue: Any, parent_pid: int) -> None:
+    global _WORKER_SINK
+    _WORKER_SINK = progress_queue.put
+    threading.Thread(target=_exit_when_orphaned, args=(parent_pid,), daemon=True).start()
+    _limit_threads()
+
+
+def _execute_chunk(run_chunk: RunChunk, chunk: Chunk, config: Mapping[str, Any]) -> EpisodeTable:
+    progress = _ThrottledProgress(chunk.name, _WORKER_SINK)
+    table = run_chunk(chunk, config, progress)
+    progress.flush()
+    return table
+
+
+def _execute_chunk_ray(
+    run_chunk: RunChunk, chunk: Chunk, config: Mapping[str, Any], progress_queue: Any
+) -> EpisodeTable:
+    _limit_threads()
+    progress = _ThrottledProgress(chunk.name, progress_queue.put_nowait)
+    table = run_chunk(chunk, config, progress)
+    progress.flush()
+    return table
+
+
+def _failure(chunk: Chunk, exc: BaseException) -> ChunkFailedError:
+    return ChunkFailedError(
+        f"chunk {chunk.name} failed: {type(exc).__name__}: {exc}. Finished chunks are saved; "
+        "fix the cause and re-run the same command to resume."
+    )
+
+
+# -- backends: each yields (chunk, table) as chunks finish ----------------------------------
+
+Finished = Generator[tuple[Chunk, EpisodeTable], None, None]
+
+
+def _run_inline(
+    chunks: Sequence[Chunk], run_chunk: RunChunk, config: Mapping[str, Any], bar: _ProgressBar
+) -> Finished:
+    for chunk in chunks:
+        progress = _ThrottledProgress(chunk.name, lambda msg: bar.add(*msg))
+        try:
+            table = run_chunk(chunk, config, progress)
+        except Exception as exc:
+            raise _failure(chunk, exc) from exc
+        progress.flush()
+        yield chunk, table
+
+
+def _drain_local(progress_queue: Any, bar: _ProgressBar) -> None:
+    while True:
+        try:
+            name, k = progress_queue.get_nowait()
+        except queue_module.Empty:
+            return
+        bar.add(name, k)
+
+
+def _run_local(
+    chunks: Sequence[Chunk],
+    run_chunk: RunChunk,
+    config: Mapping[str, Any],
+    bar: _ProgressBar,
+    workers: int,
+) -> Finished:
+    context = mp.get_context("spawn")
+    progress_queue = context.Queue()
+    executor = ProcessPoolExecutor(
+        max_workers=min(workers, len(chunks)),
+        mp_context=context,
+        initializer=_init_local_worker,
+        initargs=(progress_queue, os.getpid()),
+    )
+    finished_cleanly = False
+    try:
+        futures: dict[Future[EpisodeTable], Chunk] = {
+            executor.submit(_execute_chunk, run_chunk, chunk, config): chunk for chunk in chunks
+        }
+        pending: set[Future[EpisodeTable]] = set(futures)
+        error: ChunkFailedError | None = None
+        while pending:
+            done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+            _drain_local(progress_queue, bar)
+            for future in done:
+                try:
+                    table = future.result()
+                except CancelledError:
+                    continue
+                except Exception as exc:
+                    if error is None:  # keep the running chunks, start no new ones
+                        error = _failure(futures[future], exc)
+                        error.__cause__ = exc
+                        for other in pending:
+                            other.cancel()
+                    continue
+                yield futures[future], table
+        finished_cleanly = True
+        if error is not None:
+            raise error
+    finally:
+        if not finished_cleanly:  # interrupted: stop the workers now
+            processes = list((getattr(executor, "_processes", None) or {}).values())
+            for process in processes:
+                process.terminate()
+            for process in processes:
+                process.join(timeout=5)
+        executor.shutdown(wait=finished_cleanly, cancel_futures=True)
+        progress_queue.close()
+
+
+def _connect_ray(workers: int) -> tuple[Any, bool]:
+    """Import Ray and connect; returns (ray module, whether we started the instance)."""
+    try:
+        import ray
+    except ImportError as exc:
+        raise ImportError(
+            "backend='ray' needs Ray: pip install 'torchrl_subgoal[ray]'"
+        ) from exc
+    if ray.is_initialized():
+        return ray, False
+    try:
+        # RAY_ADDRESS when set, else a cluster already running on this machine.
+        ray.init(address="auto")
+    except ConnectionError:
+        if os.environ.get("RAY_ADDRESS"):
+            raise
+        ray.init(address="local", num_cpus=max(workers, 1), include_dashboard=False)
+        return ray, True
+    return ray, False
+
+
+def _run_ray(
+    chunks: Sequence[Chunk],
+    run_chunk: RunChunk,
+    config: Mapping[str, Any],
+    bar: _ProgressBar,
+    workers: int,
+) -> Finished:
+    ray, started = _connect_ray(workers)
+    pending: list[Any] = []
+    progress_queue = None
+    try:
+        from ray.util.queue import Queue
+
+        progress_queue = Queue(actor_options={"num_cpus": 0})  # never waits for a free CPU
+        task = ray.remote(num_cpus=1)(_execute_chunk_ray)
+        config_ref = ray.put(dict(config))
+        refs = {task.remote(run_chunk, chunk, config_ref, progress_queue): chunk for chunk in chunks}
+        pending = list(refs)
+        error: ChunkFailedError | None = None
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1, timeout=0.2)
+            size = progress_queue.qsize()
+            messages = progress_queue.get_nowait_batch(size) if size else []
+            for name, k in messages:
+                bar.add(name, k)
+            for ref in done:
+                try:
+                    table = ray.get(ref)
+                except ray.exceptions.TaskCancelledError:
+                    continue
+                except ray.exceptions.RayError as exc:
+                    if error is None:
+                        # a task's own exception, without Ray's wrapping traceback text
+                        error = _failure(refs[ref], getattr(exc, "cause", None) or exc)
+                        error.__cause__ = exc
+                        for other in pending:
+                            ray.cancel(other)
+                    continue
+                yield refs[ref], table
+        if error is not None:
+            raise error
+    finally:
+        for other in pending:
+            ray.cancel(other, force=True)
+        if progress_queue is not None:
+            progress_queue.shutdown()
+        if started:
+            ray.shutdown()
+
+
+# -- the sweep -------------------------------------------------------------------------------
+
+
+class Sweep:
+    """A resumable experiment: methods x patterns x learnings, stored chunk by chunk.
+
+    Args:
+        domain: domain name recorded with the results (``"four_rooms"``, ``"pinball"``,
+            ``"fetch"``); a directory of another domain is refused.
+        results_dir: where ``config.json`` and ``chunks/`` live.
+        methods: the methods and their learners.
+        run_chunk: module-level function ``(chunk, config, progress) -> EpisodeTable``.
+        config: JSON-serialisable settings handed to ``run_chunk``: hyper-parameters,
+            ``"patterns"`` (pattern name -> list of subgoal dicts) and a ``"report"``
+            section (see :class:`~torchrl_subgoal.experiments.report.ReportSpec`).
+        seed: sweep seed; chunk seeds derive from it, the method name and the chunk index.
+        chunk_size: at most this many learners per chunk (a chunk never mixes methods).
+        n_episodes: episodes per learner, when known: every table is checked against it
+            and the progress bar gets a total from the start.
+        overwrite: discard results of a different experiment in ``results_dir``
+            instead of raising :class:`ConfigMismatchError`.
+
+    Re-running the same sweep resumes: finished chunks are kept, temporary files of an
+    interrupted write are removed, corrupt chunks are reported
+    (:class:`CorruptChunkWarning`), moved aside and recomputed.
+
+    Examples:
+        >>> sweep = Sweep(  # doctest: +SKIP
+        ...     "four_rooms", "results/four_rooms",
+        ...     [MethodSpec("HRS", ["p1", "p2"], 100), MethodSpec("SARSA", ["none"], 1000)],
+        ...     run_chunk=my_module.run_chunk, config={"lr": 0.01, "report": {...}},
+        ...     seed=0, chunk_size=100, n_episodes=1000,
+        ... )
+        >>> results = sweep.run(backend="local", workers=2)  # doctest: +SKIP
+        >>> frame = results.to_frame()  # doctest: +SKIP
+    """
+
+    def __init__(
+        self,
+        domain: str,
+        results_dir: str | os.PathLike[str],
+        methods: Sequence[MethodSpec],
+        run_chunk: RunChunk,
+        config: Mapping[str, Any],
+        seed: int = 0,
+        chunk_size: int = 100,
+        *,
+        n_episodes: int | None = None,
+        overwrite: bool = False,
+    ) -> None:
+        names = [m.name for m in methods]
+        if not methods or len(set(names)) != len(names):
+            raise ValueError(f"methods must be non-empty with distinct names, got {names}")
+        if n_episodes is not None and n_episodes < 1:
+            raise ValueError("n_episodes must be >= 1")
+        self.domain = domain
+        self.store = ResultsStore(results_dir)
+        self.methods = list(methods)
+        self.run_chunk = run_chunk
+        self.config: dict[str, Any] = to_json_data(dict(config))
+        self.seed = int(seed)
+        self.chunk_size = int(chunk_size)
+        self.n_episodes = n_episodes
+        self.overwrite = overwrite
+        self.chunks = plan_chunks(self.methods, self.seed, self.chunk_size)
+
+    def manifest(self) -> dict[str, Any]:
+        """The ``config.json`` this sweep writes."""
+        return {
+            "format": FORMAT_VERSION,
+            "domain": self.domain,
+            "methods": [m.to_json() for m in self.methods],
+            "config": self.config,
+            "seed": self.seed,
+            "chunk_size": self.chunk_size,
+            "n_episodes": self.n_episodes,
+            "chunks": [c.to_json() for c in self.chunks],
+            "versions": collect_versions(),
+        }
+
+    def _open_store(self) -> None:
+        """Write config.json, or check the existing one matches this sweep."""
+        requested = self.manifest()
+        stored = self.store.read_manifest()
+        root = self.store.root
+        if stored is not None and not self.overwrite:
+            if stored["domain"] != self.domain:
+                raise DomainMismatchError(
+                    f"{root} holds results of domain {stored['domain']!r}, not {self.domain!r}; "
+                    "choose another results dir (or pass overwrite to discard them)"
+                )
+            differing = [
+                path
+                for key in IDENTITY_FIELDS
+                for path in diff_fields(stored.get(key), requested[key], key)
+            ]
+            if differing:
+                shown = ", ".join(differing[:12]) + (" ..." if len(differing) > 12 else "")
+                raise ConfigMismatchError(
+                    f"{root} holds a different experiment; differing fields: {shown}. "
+                    "Use another results dir, or pass overwrite to discard the stored results."
+                )
+            versions = diff_fields(stored.get("versions"), requested["versions"], "versions")
+            if versions:
+                warnings.warn(
+                    f"resuming {root} with other package versions ({', '.join(versions)}) "
+                    "than the ones that started it",
+                    stacklevel=3,
+                )
+            return
+        if stored is None and not self.overwrite and any(self.store.chunks_dir.glob("*/*.parquet")):
+            raise ResultsError(
+                f"{root} has chunk files but no config.json; pass overwrite to start afresh"
+            )
+        self.store.clear()
+        self.store.write_manifest(requested)
+
+    def pending(self) -> list[Chunk]:
+        """Chunks not (validly) stored yet; corrupt ones are reported and moved aside."""
+        todo = []
+        for chunk in self.chunks:
+            status = self.store.check_chunk(chunk)
+            if status.state == "corrupt":
+                moved = self.store.quarantine(chunk)
+                warnings.warn(
+                    f"corrupt chunk file {self.store.chunk_path(chunk)} ({status.reason}); "
+                    f"moved to {moved.name} and recomputing",
+                    CorruptChunkWarning,
+                    stacklevel=2,
+                )
+            if status.state != "done":
+                todo.append(chunk)
+        return todo
+
+    def _check_table(self, chunk: Chunk, table: Any) -> EpisodeTable:
+        if not isinstance(table, EpisodeTable):
+            raise TypeError(f"run_chunk returned {type(table).__name__} for {chunk.name}, not EpisodeTable")
+        if table.n_learners != chunk.n_learners:
+            raise ValueError(
+                f"run_chunk returned {table.n_learners} rows for {chunk.name}, "
+                f"which has {chunk.n_learners} learners"
+            )
+        if self.n_episodes is not None and table.n_episodes != self.n_episodes:
+            raise ValueError(
+                f"run_chunk returned {table.n_episodes} episodes for {chunk.name}, "
+                f"the sweep has n_episodes={self.n_episodes}"
+            )
+        return table
+
+    def run(self, backend: Backend = "local", workers: int = 2, progress: bool = True) -> Results:
+        """Run every chunk not yet stored, writing each as it finishes; return all results.
+
+        Args:
+            backend: ``"local"`` (process pool, spawn) or ``"ray"``.
+            workers: local worker processes (``0`` = run in this process); for a local Ray
+                instance started by the sweep, its number of CPUs.
+            progress: show a tqdm bar over learner-episodes.
+
+        Raises:
+            ConfigMismatchError, DomainMismatchError: ``results_dir`` holds another experiment.
+            ChunkFailedError: ``run_chunk`` raised; finished chunks are kept. Locally, chunks
+                already running still finish and are written; on Ray the remaining tasks are
+                cancelled.
+        """
+        if backend not in ("local", "ray"):
+            raise ValueError(f"unknown backend {backend!r}; choose 'local' or 'ray'")
+        if workers < 0:
+            raise ValueError("workers must be >= 0")
+        if backend == "local" and workers > 0:  # Ray pickles functions by value itself
+            try:
+                pickle.dumps(self.run_chunk)
+            except Exception as exc:
+                raise TypeError(
+                    "run_chunk must be picklable: define it at module level in an importable module"
+                ) from exc
+        with self.store.lock():
+            self._open_store()
+            self.store.clean_temp_files()
+            todo = self.pending()
+            if todo:
+                bar = _ProgressBar(todo, self.n_episodes, progress)
+                finished: Finished
+                if backend == "ray":
+                    finished = _run_ray(todo, self.run_chunk, self.config, bar, workers)
+                elif workers == 0:
+                    finished = _run_inline(todo, self.run_chunk, self.config, bar)
+                else:
+                    finished = _run_local(todo, self.run_chunk, self.config, bar, workers)
+                try:
+                    for chunk, table in finished:
+                        table = self._check_table(chunk, table)
+                        self.store.write_chunk(chunk, table)
+                        bar.done(chunk, table.n_episodes)
+                finally:
+                    finished.close()  # on an error here: stops the backend's workers
+                    bar.close()
+        return load_results(self.store.root, domain=self.domain)

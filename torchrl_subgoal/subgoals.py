@@ -1,0 +1,774 @@
+"""Subgoal series: ordered subgoals, their achievement predicates and the file format.
+
+A *subgoal series* is what a person who knows the task writes down: a few
+subgoals and the order in which they should be achieved. The order is total
+(a chain, ``sg_0 ≺ sg_1 ≺ …``) or partial (a DAG). Each subgoal has an
+*achievement predicate* over the environment's observation.
+
+Predicates (all evaluated on one observation vector, batched):
+
+* :class:`State` — a discrete observation equals a given state index;
+* :class:`Cell` — chosen observation entries equal a grid cell ``(row, col)``;
+* :class:`Circle` — chosen entries lie within ``radius`` of ``centre``;
+* :class:`Box` — chosen entries lie within ``centre ± margin``.
+
+Every predicate compiles to one region ``lo ≤ o ≤ hi`` and
+``Σ w (o − c)² ≤ r²`` so that a batch of learners, each following its own
+pattern, is tested in one vectorised expression (:class:`SubgoalTables`).
+
+The file format (YAML, or JSON which is valid YAML) is documented in
+``docs/subgoal_files.md``; :meth:`SubgoalSeries.from_file` loads it and every
+error names the file, the pattern and the field.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import yaml
+
+from torchrl_subgoal import _kernels
+
+__all__ = [
+    "Box",
+    "Cell",
+    "Circle",
+    "Predicate",
+    "State",
+    "StateAggregation",
+    "SubgoalFileError",
+    "SubgoalSeries",
+    "SubgoalTables",
+    "load_patterns",
+    "save_patterns",
+]
+
+FORMAT = "torchrl_subgoal/v1"
+
+
+class SubgoalFileError(ValueError):
+    """A subgoal file or pattern is malformed; the message names file, pattern and field."""
+
+
+def _where(source: str | None, pattern: str | None, field_: str) -> str:
+    parts = [source or "<subgoals>"]
+    if pattern is not None:
+        parts.append(f"pattern {pattern!r}")
+    if field_:
+        parts.append(field_)
+    return ": ".join(parts)
+
+
+# --------------------------------------------------------------------------- predicates
+
+
+@dataclass(frozen=True)
+class Region:
+    """A predicate compiled over an observation of ``size`` entries (see module doc)."""
+
+    lo: torch.Tensor
+    hi: torch.Tensor
+    centre: torch.Tensor
+    weight: torch.Tensor
+    radius2: float
+
+
+class Predicate:
+    """Base class of achievement predicates."""
+
+    kind: str = ""
+
+    def dims(self) -> tuple[int, ...]:
+        """Observation entries the predicate reads."""
+        raise NotImplementedError
+
+    def region(self, size: int, one_hot: bool = False) -> Region:
+        """Compile to a :class:`Region` over an observation with ``size`` entries."""
+        raise NotImplementedError
+
+    def to_dict(self) -> dict[str, Any]:
+        """The predicate as it appears in a subgoal file."""
+        raise NotImplementedError
+
+    def _open_region(self, size: int) -> tuple[torch.Tensor, torch.Tensor]:
+        lo = torch.full((size,), -math.inf)
+        hi = torch.full((size,), math.inf)
+        return lo, hi
+
+
+@dataclass(frozen=True)
+class State(Predicate):
+    """A discrete observation equals ``state``.
+
+    Works on a scalar categorical observation (``o == state``) and on a one-hot
+    observation (``o[state] == 1``).
+    """
+
+    state: int
+    kind = "state"
+
+    def dims(self) -> tuple[int, ...]:
+        return (0,)
+
+    def region(self, size: int, one_hot: bool = False) -> Region:
+        lo, hi = self._open_region(size)
+        if one_hot:
+            if not 0 <= self.state < size:
+                raise IndexError(f"state {self.state} outside a one-hot observation of size {size}")
+            lo[self.state] = hi[self.state] = 1.0
+        else:
+            lo[0] = hi[0] = float(self.state)
+        return Region(lo, hi, torch.zeros(size), torch.zeros(size), math.inf)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"state": self.state}
+
+
+@dataclass(frozen=True)
+class Cell(Predicate):
+    """Observation entries ``dims`` (default the first two) equal ``(row, col)``."""
+
+    row: int
+    col: int
+    cell_dims: tuple[int, int] = (0, 1)
+    kind = "cell"
+
+    def dims(self) -> tuple[int, ...]:
+        return self.cell_dims
+
+    def region(self, size: int, one_hot: bool = False) -> Region:
+        lo, hi = self._open_region(size)
+        for d, v in zip(self.cell_dims, (self.row, self.col), strict=True):
+            lo[d] = hi[d] = float(v)
+        return Region(lo, hi, torch.zeros(size), torch.zeros(size), math.inf)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"cell": [self.row, self.col]}
+        if self.cell_dims != (0, 1):
+            out["dims"] = list(self.cell_dims)
+        return out
+
+
+@dataclass(frozen=True)
+class Circle(Predicate):
+    """Observation entries ``dims`` lie within ``radius`` of ``centre`` (boundary included)."""
+
+    centre: tuple[float, ...]
+    radius: float
+    circle_dims: tuple[int, ...] | None = None
+    kind = "circle"
+
+    def dims(self) -> tuple[int, ...]:
+        return self.circle_dims if self.circle_dims is not None else tuple(range(len(self.centre)))
+
+    def region(self, size: int, one_hot: bool = False) -> Region:
+        lo, hi = self._open_region(size)
+        centre = torch.zeros(size)
+        weight = torch.zeros(size)
+        for d, c in zip(self.dims(), self.centre, strict=True):
+            centre[d] = c
+            weight[d] = 1.0
+        return Region(lo, hi, centre, weight, self.radius**2)
+
+    def to_dict(self) -> dict[str, Any]:
+        body: dict[str, Any] = {"centre": list(self.centre), "radius": self.radius}
+        if self.circle_dims is not None:
+            body["dims"] = list(self.circle_dims)
+        return {"circle": body}
+
+
+@dataclass(frozen=True)
+class Box(Predicate):
+    """Observation entries ``dims`` lie within ``centre ± margin`` (per component)."""
+
+    centre: tuple[float, ...]
+    margin: tuple[float, ...]
+    box_dims: tuple[int, ...]
+    kind = "box"
+
+    def dims(self) -> tuple[int, ...]:
+        return self.box_dims
+
+    def region(self, size: int, one_hot: bool = False) -> Region:
+        lo, hi = self._open_region(size)
+        for d, c, m in zip(self.box_dims, self.centre, self.margin, strict=True):
+            lo[d] = c - m
+            hi[d] = c + m
+        return Region(lo, hi, torch.zeros(size), torch.zeros(size), math.inf)
+
+    def to_dict(self) -> dict[str, Any]:
+        margin: float | list[float] = (
+            self.margin[0] if len(set(self.margin)) == 1 else list(self.margin)
+        )
+        return {"box": {"centre": list(self.centre), "margin": margin, "dims": list(self.box_dims)}}
+
+
+# --------------------------------------------------------------------------- parsing
+
+
+def _number(value: Any, where: str, *, integer: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise SubgoalFileError(f"{where}: expected a number, got {value!r}")
+    if integer and not isinstance(value, int):
+        raise SubgoalFileError(f"{where}: expected an integer, got {value!r}")
+    if math.isnan(value) or math.isinf(value):
+        raise SubgoalFileError(f"{where}: expected a finite number, got {value!r}")
+    return value
+
+
+def _numbers(value: Any, where: str, *, integer: bool = False) -> list[Any]:
+    if not isinstance(value, list | tuple) or not value:
+        raise SubgoalFileError(f"{where}: expected a non-empty list of numbers, got {value!r}")
+    return [_number(v, f"{where}[{i}]", integer=integer) for i, v in enumerate(value)]
+
+
+def _dims(value: Any, where: str, n: int) -> tuple[int, ...]:
+    dims = tuple(int(d) for d in _numbers(value, where, integer=True))
+    if len(dims) != n:
+        raise SubgoalFileError(f"{where}: has {len(dims)} entries but the centre has {n}")
+    if min(dims) < 0 or len(set(dims)) != len(dims):
+        raise SubgoalFileError(f"{where}: entries must be distinct non-negative indices, got {list(dims)}")
+    return dims
+
+
+def _check_keys(body: Mapping[str, Any], allowed: set[str], where: str) -> None:
+    unknown = set(body) - allowed
+    if unknown:
+        raise SubgoalFileError(f"{where}: unknown field(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+
+
+def parse_predicate(spec: Any, where: str) -> Predicate:
+    """Build a predicate from its file form; ``where`` prefixes error messages."""
+    if not isinstance(spec, Mapping):
+        raise SubgoalFileError(f"{where}: expected a mapping such as {{cell: [4, 9]}}, got {spec!r}")
+    kinds = [k for k in ("state", "cell", "circle", "box") if k in spec]
+    if len(kinds) != 1:
+        raise SubgoalFileError(
+            f"{where}: give exactly one predicate among state, cell, circle, box; got fields {sorted(spec)}"
+        )
+    kind = kinds[0]
+    if kind == "state":
+        _check_keys(spec, {"state"}, where)
+        return State(int(_number(spec["state"], f"{where}.state", integer=True)))
+    if kind == "cell":
+        _check_keys(spec, {"cell", "dims"}, where)
+        rc = _numbers(spec["cell"], f"{where}.cell", integer=True)
+        if len(rc) != 2:
+            raise SubgoalFileError(f"{where}.cell: expected [row, col], got {spec['cell']!r}")
+        dims = _dims(spec.get("dims", [0, 1]), f"{where}.dims", 2)
+        return Cell(int(rc[0]), int(rc[1]), (dims[0], dims[1]))
+    body = spec[kind]
+    if len(spec) != 1:
+        raise SubgoalFileError(f"{where}: unknown field(s) {sorted(set(spec) - {kind})}")
+    if not isinstance(body, Mapping):
+        raise SubgoalFileError(f"{where}.{kind}: expected a mapping, got {body!r}")
+    body = dict(body)
+    if "center" in body and "centre" not in body:
+        body["centre"] = body.pop("center")
+    if "centre" not in body:
+        raise SubgoalFileError(f"{where}.{kind}.centre: missing")
+    centre = tuple(float(c) for c in _numbers(body["centre"], f"{where}.{kind}.centre"))
+    if kind == "circle":
+        _check_keys(body, {"centre", "radius", "dims"}, f"{where}.circle")
+        if "radius" not in body:
+            raise SubgoalFileError(f"{where}.circle.radius: missing")
+        radius = float(_number(body["radius"], f"{where}.circle.radius"))
+        if radius <= 0:
+            raise SubgoalFileError(f"{where}.circle.radius: must be positive, got {radius}")
+        cdims = _dims(body["dims"], f"{where}.circle.dims", len(centre)) if "dims" in body else None
+        return Circle(centre, radius, cdims)
+    _check_keys(body, {"centre", "margin", "dims", "slice"}, f"{where}.box")
+    if "dims" in body and "slice" in body:
+        raise SubgoalFileError(f"{where}.box: give 'dims' or 'slice', not both")
+    if "slice" in body:
+        bounds = _numbers(body["slice"], f"{where}.box.slice", integer=True)
+        if len(bounds) != 2 or bounds[0] < 0 or bounds[1] - bounds[0] != len(centre):
+            raise SubgoalFileError(
+                f"{where}.box.slice: expected [start, stop) covering {len(centre)} entries, got {bounds}"
+            )
+        bdims = tuple(range(int(bounds[0]), int(bounds[1])))
+    else:
+        bdims = _dims(body.get("dims", list(range(len(centre)))), f"{where}.box.dims", len(centre))
+    if "margin" not in body:
+        raise SubgoalFileError(f"{where}.box.margin: missing")
+    raw = body["margin"]
+    margins = (
+        [float(_number(raw, f"{where}.box.margin"))] * len(centre)
+        if not isinstance(raw, list | tuple)
+        else [float(m) for m in _numbers(raw, f"{where}.box.margin")]
+    )
+    if len(margins) != len(centre):
+        raise SubgoalFileError(f"{where}.box.margin: has {len(margins)} entries but the centre has {len(centre)}")
+    if min(margins) < 0:
+        raise SubgoalFileError(f"{where}.box.margin: must be non-negative, got {margins}")
+    return Box(centre, tuple(margins), bdims)
+
+
+# --------------------------------------------------------------------------- series
+
+
+@dataclass(frozen=True)
+class SubgoalSeries:
+    """An ordered set of subgoals: a chain (total order) or a DAG (partial order).
+
+    The abstract state ``z`` of an episode is the node reached: ``0`` at reset
+    (no subgoal yet), ``i + 1`` once subgoal ``i`` was achieved. From ``z``
+    the achievable subgoals are the *immediate successors* of ``z`` in the
+    order (the sources of the DAG from ``z = 0``); each subgoal is achieved
+    once and out-of-order visits do nothing. A chain of ``n`` subgoals thus
+    has ``n + 1`` abstract states.
+
+    Args:
+        predicates: one achievement predicate per subgoal.
+        order: pairs ``(i, j)`` meaning subgoal ``i`` comes before ``j``.
+            ``None`` means the chain ``0 ≺ 1 ≺ … ≺ n-1``. Transitive pairs are
+            allowed; only the covering relation decides what comes next.
+        names: optional names of the subgoals (as in the file).
+        name: the pattern's name (e.g. ``"participant_1"``).
+        source: the file it came from, for error messages.
+
+    Examples:
+        >>> from torchrl_subgoal import SubgoalSeries
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> series = SubgoalSeries([Cell(3, 6), Cell(7, 9)], name="hallways")
+        >>> series.num_abstract_states
+        3
+        >>> series.successors(0), series.successors(1), series.successors(2)
+        ((0,), (1,), ())
+    """
+
+    predicates: tuple[Predicate, ...]
+    order: tuple[tuple[int, int], ...] | None = None
+    names: tuple[str, ...] | None = None
+    name: str = "pattern"
+    source: str | None = field(default=None, compare=False)
+
+    def __init__(
+        self,
+        predicates: Sequence[Predicate],
+        order: Iterable[tuple[int, int]] | None = None,
+        names: Sequence[str] | None = None,
+        name: str = "pattern",
+        source: str | None = None,
+    ) -> None:
+        preds = tuple(predicates)
+        n = len(preds)
+        where = _where(source, name, "")
+        if n == 0:
+            raise SubgoalFileError(f"{where}: a pattern needs at least one subgoal")
+        if names is not None and len(names) != n:
+            raise SubgoalFileError(f"{where}: {len(names)} names for {n} subgoals")
+        edges = None
+        if order is not None:
+            edges = tuple((int(a), int(b)) for a, b in order)
+            for a, b in edges:
+                if not (0 <= a < n and 0 <= b < n) or a == b:
+                    raise SubgoalFileError(f"{where}: order: invalid pair ({a}, {b}) for {n} subgoals")
+            if edges == tuple((i, i + 1) for i in range(n - 1)):
+                edges = None  # the chain, stated explicitly
+        object.__setattr__(self, "predicates", preds)
+        object.__setattr__(self, "order", edges)
+        object.__setattr__(self, "names", tuple(names) if names is not None else None)
+        object.__setattr__(self, "name", name)
+        object.__setattr__(self, "source", source)
+        object.__setattr__(self, "_succ", self._covering())
+
+    # ---------------------------------------------------------------- structure
+
+    def __len__(self) -> int:
+        return len(self.predicates)
+
+    @property
+    def is_chain(self) -> bool:
+        """Whether the order is total (a chain)."""
+        return self.order is None
+
+    @property
+    def num_abstract_states(self) -> int:
+        """``len(self) + 1``: the start plus one state per subgoal (the terminal one is extra)."""
+        return len(self) + 1
+
+    def successors(self, z: int) -> tuple[int, ...]:
+        """Subgoal indices achievable next from abstract state ``z``."""
+        succ: tuple[tuple[int, ...], ...] = self._succ  # type: ignore[attr-defined]
+        return succ[z]
+
+    def _covering(self) -> tuple[tuple[int, ...], ...]:
+        n = len(self)
+        if self.order is None:
+            return tuple((z,) if z < n else () for z in range(n + 1))
+        after: list[set[int]] = [set() for _ in range(n)]
+        for a, b in self.order:
+            after[a].add(b)
+        # reachability (detects cycles) by depth-first search from each node
+        reach: list[set[int]] = []
+        for start in range(n):
+            seen: set[int] = set()
+            stack = list(after[start])
+            while stack:
+                v = stack.pop()
+                if v == start:
+                    names = self.names or tuple(str(i) for i in range(n))
+                    raise SubgoalFileError(
+                        f"{_where(self.source, self.name, 'order')}: the order has a cycle through "
+                        f"subgoal {names[start]!r}"
+                    )
+                if v not in seen:
+                    seen.add(v)
+                    stack.extend(after[v])
+            reach.append(seen)
+        # covering relation: b directly after a when no c with a < c < b
+        cover = [
+            tuple(sorted(b for b in reach[a] if not any(b in reach[c] for c in reach[a])))
+            for a in range(n)
+        ]
+        has_pred = {b for a in range(n) for b in reach[a]}
+        sources = tuple(i for i in range(n) if i not in has_pred)
+        return (sources, *cover)
+
+    # ---------------------------------------------------------------- file I/O
+
+    def to_dict(self) -> dict[str, Any]:
+        """The pattern as it appears in a subgoal file (``patterns: {name: <this>}``)."""
+        if self.order is None and self.names is None:
+            return {"subgoals": [p.to_dict() for p in self.predicates]}
+        names = self.names or tuple(f"sg{i}" for i in range(len(self)))
+        out: dict[str, Any] = {"subgoals": {nm: p.to_dict() for nm, p in zip(names, self.predicates, strict=True)}}
+        edges = self.order if self.order is not None else tuple((i, i + 1) for i in range(len(self) - 1))
+        out["order"] = [[names[a], names[b]] for a, b in edges]
+        return out
+
+    @classmethod
+    def from_dict(cls, body: Any, *, name: str = "pattern", source: str | None = None) -> SubgoalSeries:
+        """Parse one pattern (the value under ``patterns: {name: ...}``)."""
+        where = _where(source, name, "")
+        if isinstance(body, list):
+            body = {"subgoals": body}
+        if not isinstance(body, Mapping):
+            raise SubgoalFileError(f"{where}: expected a mapping with 'subgoals', got {body!r}")
+        _check_keys(body, {"subgoals", "order", "description"}, where)
+        if "subgoals" not in body:
+            raise SubgoalFileError(f"{where}: missing field 'subgoals'")
+        subgoals = body["subgoals"]
+        if isinstance(subgoals, list):
+            if "order" in body:
+                raise SubgoalFileError(
+                    f"{_where(source, name, 'order')}: a list of subgoals is already a total order; "
+                    "name the subgoals (a mapping) to give a partial order"
+                )
+            preds = [parse_predicate(s, _where(source, name, f"subgoals[{i}]")) for i, s in enumerate(subgoals)]
+            return cls(preds, name=name, source=source)
+        if not isinstance(subgoals, Mapping):
+            raise SubgoalFileError(f"{_where(source, name, 'subgoals')}: expected a list or a mapping")
+        names = [str(k) for k in subgoals]
+        preds = [parse_predicate(subgoals[k], _where(source, name, f"subgoals.{k}")) for k in subgoals]
+        if "order" not in body:
+            raise SubgoalFileError(
+                f"{_where(source, name, 'order')}: missing; named subgoals need an 'order' "
+                "(a list of [before, after] pairs, [] for no constraint)"
+            )
+        index = {nm: i for i, nm in enumerate(names)}
+        order = []
+        raw_order = body["order"]
+        if not isinstance(raw_order, list):
+            raise SubgoalFileError(f"{_where(source, name, 'order')}: expected a list of [before, after] pairs")
+        for i, pair in enumerate(raw_order):
+            w = _where(source, name, f"order[{i}]")
+            if not isinstance(pair, list | tuple) or len(pair) != 2:
+                raise SubgoalFileError(f"{w}: expected [before, after], got {pair!r}")
+            for p in pair:
+                if str(p) not in index:
+                    raise SubgoalFileError(f"{w}: unknown subgoal {p!r}; known: {names}")
+            order.append((index[str(pair[0])], index[str(pair[1])]))
+        return cls(preds, order=order, names=names, name=name, source=source)
+
+    @classmethod
+    def from_file(
+        cls, path: str | Path, pattern: str | None = None, *, domain: str | None = None
+    ) -> SubgoalSeries:
+        """Load one named pattern from a subgoal file.
+
+        Args:
+            path: a YAML or JSON subgoal file (see ``docs/subgoal_files.md``).
+            pattern: the pattern's name; may be omitted when the file has one.
+            domain: check subgoals against this domain's map (defaults to the
+                file's ``domain`` field); see :func:`load_patterns`.
+        """
+        patterns = load_patterns(path, domain=domain)
+        if pattern is None:
+            if len(patterns) != 1:
+                raise SubgoalFileError(
+                    f"{path}: holds {len(patterns)} patterns {sorted(patterns)}; pass pattern=<name>"
+                )
+            return next(iter(patterns.values()))
+        if pattern not in patterns:
+            raise SubgoalFileError(f"{path}: no pattern {pattern!r}; available: {sorted(patterns)}")
+        return patterns[pattern]
+
+    @classmethod
+    def random(
+        cls,
+        candidates: Sequence[Predicate],
+        num_subgoals: int,
+        generator: torch.Generator,
+        *,
+        name: str = "random",
+    ) -> SubgoalSeries:
+        """A chain of ``num_subgoals`` distinct predicates drawn from ``candidates``.
+
+        This is the random-subgoal baseline (RRS): for a grid, the candidates
+        are the free cells; for a continuous map, circles at free positions.
+        """
+        if num_subgoals > len(candidates):
+            raise ValueError(f"cannot draw {num_subgoals} subgoals from {len(candidates)} candidates")
+        picks = torch.randperm(len(candidates), generator=generator)[:num_subgoals].tolist()
+        return cls([candidates[i] for i in picks], name=name)
+
+
+DomainCheck = Callable[[Predicate], "str | None"]
+
+
+def _domain_check(domain: str) -> DomainCheck:
+    """The map check of a known domain (imported lazily to keep envs optional)."""
+    if domain == "four_rooms":
+        from torchrl_subgoal.envs.four_rooms import check_subgoal
+
+        return check_subgoal
+    if domain == "pinball":
+        from torchrl_subgoal.envs.pinball import check_subgoal as check_pinball
+
+        return check_pinball
+    raise SubgoalFileError(f"unknown domain {domain!r}; known: four_rooms, pinball")
+
+
+def load_patterns(path: str | Path, *, domain: str | None = None) -> dict[str, SubgoalSeries]:
+    """Load every named pattern of a subgoal file.
+
+    The file holds ``patterns: {name: {subgoals: [...], order: [...]}}`` and
+    optionally ``domain: four_rooms`` (or ``pinball``), which checks every
+    subgoal against that domain's map (a cell in a wall or off the grid, a
+    circle off the table).
+
+    Raises:
+        SubgoalFileError: naming the file, the pattern and the field.
+    """
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise SubgoalFileError(f"{source}: cannot read: {exc}") from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise SubgoalFileError(f"{source}: not valid YAML/JSON: {exc}") from exc
+    if not isinstance(data, Mapping):
+        raise SubgoalFileError(f"{source}: expected a mapping with a 'patterns' field")
+    _check_keys(data, {"format", "domain", "observation_key", "description", "patterns"}, source)
+    if "format" in data and data["format"] != FORMAT:
+        raise SubgoalFileError(f"{source}: format: expected {FORMAT!r}, got {data['format']!r}")
+    raw = data.get("patterns")
+    if not isinstance(raw, Mapping) or not raw:
+        raise SubgoalFileError(f"{source}: patterns: expected a non-empty mapping of name -> pattern")
+    domain = domain if domain is not None else data.get("domain")
+    try:
+        check = _domain_check(str(domain)) if domain is not None else None
+    except SubgoalFileError as exc:
+        raise SubgoalFileError(f"{source}: domain: {exc}") from None
+    patterns: dict[str, SubgoalSeries] = {}
+    for name, body in raw.items():
+        series = SubgoalSeries.from_dict(body, name=str(name), source=source)
+        if check is not None:
+            labels = series.names or tuple(f"subgoals[{i}]" for i in range(len(series)))
+            for label, pred in zip(labels, series.predicates, strict=True):
+                problem = check(pred)
+                if problem:
+                    field_ = label if label.startswith("subgoals[") else f"subgoals.{label}"
+                    raise SubgoalFileError(f"{_where(source, str(name), f'{field_}.{pred.kind}')}: {problem}")
+        patterns[str(name)] = series
+    return patterns
+
+
+def save_patterns(
+    path: str | Path, patterns: Mapping[str, SubgoalSeries], *, domain: str | None = None
+) -> None:
+    """Write patterns to a subgoal file that :func:`load_patterns` reads back."""
+    data: dict[str, Any] = {"format": FORMAT}
+    if domain is not None:
+        data["domain"] = domain
+    data["patterns"] = {name: s.to_dict() for name, s in patterns.items()}
+    Path(path).write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+# --------------------------------------------------------------------------- batched evaluation
+
+
+class SubgoalTables:
+    """Subgoal series of a batch of learners, compiled for one vectorised test.
+
+    Each learner ``b`` follows pattern ``pattern_index[b]``. The tables hold,
+    per learner, every subgoal's region (padded to the longest pattern) and
+    which subgoals are achievable from each abstract state.
+
+    Args:
+        patterns: the distinct patterns.
+        pattern_index: the pattern of each learner, shape ``batch_shape``.
+        observation_size: entries of the observation the predicates read.
+        one_hot: the observation is one-hot (for :class:`State` predicates).
+        observation_key: for error messages.
+    """
+
+    def __init__(
+        self,
+        patterns: Sequence[SubgoalSeries],
+        pattern_index: torch.Tensor,
+        observation_size: int,
+        *,
+        one_hot: bool = False,
+        observation_key: str = "observation",
+    ) -> None:
+        n_nodes = max(len(p) for p in patterns)
+        P, J, D = len(patterns), n_nodes, observation_size
+        lo = torch.full((P, J, D), math.inf)  # padded nodes are never achieved
+        hi = torch.full((P, J, D), -math.inf)
+        centre = torch.zeros(P, J, D)
+        weight = torch.zeros(P, J, D)
+        radius2 = torch.full((P, J), math.inf)
+        succ = torch.zeros(P, J + 1, J, dtype=torch.bool)
+        for p, series in enumerate(patterns):
+            for j, pred in enumerate(series.predicates):
+                bad = [d for d in pred.dims() if d >= D] if not (one_hot and pred.kind == "state") else []
+                try:
+                    if bad:
+                        raise IndexError(f"reads entry {bad[0]}")
+                    region = pred.region(D, one_hot=one_hot)
+                except IndexError as exc:
+                    label = series.names[j] if series.names else f"subgoals[{j}]"
+                    raise SubgoalFileError(
+                        f"{_where(series.source, series.name, f'{label}.{pred.kind}')}: {exc} but the "
+                        f"observation {observation_key!r} has {D} entries (wrong observation size?)"
+                    ) from None
+                lo[p, j], hi[p, j] = region.lo, region.hi
+                centre[p, j], weight[p, j] = region.centre, region.weight
+                radius2[p, j] = region.radius2
+            for z in range(len(series) + 1):
+                for j in series.successors(z):
+                    succ[p, z, j] = True
+        idx = pattern_index.long()
+        self.batch_shape = idx.shape
+        self.num_states = J + 1
+        self.chain = all(p.is_chain for p in patterns)
+        # per-learner tables, flattened batch first
+        flat = idx.reshape(-1)
+        self.lo, self.hi = lo[flat], hi[flat]
+        self.centre, self.weight = centre[flat], weight[flat]
+        self.radius2 = radius2[flat]
+        self.succ = succ[flat]
+        self.uses_circle = bool(torch.isfinite(radius2).any())
+        self._rows = torch.arange(flat.numel())
+        self._np = {
+            name: getattr(self, name).contiguous().numpy()
+            for name in ("lo", "hi", "centre", "weight", "radius2", "succ")
+        }
+
+    def initial(self, observation: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
+        """Abstract state at reset: 0 for every learner, shape ``[*batch_shape, 1]``."""
+        return torch.zeros((*batch_shape, 1), dtype=torch.long)
+
+    def inside(self, observation: torch.Tensor) -> torch.Tensor:
+        """Which subgoal regions contain the observation, ``[B, J]`` (flattened batch)."""
+        obs = observation.reshape(self._rows.numel(), 1, -1).to(self.lo.dtype)
+        hit = ((obs >= self.lo) & (obs <= self.hi)).all(-1)
+        if self.uses_circle:
+            d2 = (self.weight * (obs - self.centre).square()).sum(-1)
+            hit = hit & (d2 <= self.radius2)
+        return hit
+
+    def advance(self, z: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
+        """Next abstract state after observing ``observation`` in abstract state ``z``.
+
+        On the CPU this is one fused kernel; elsewhere :meth:`advance_eager`.
+        """
+        if z.device.type != "cpu":
+            return self.advance_eager(z, observation)
+        n = self._rows.numel()
+        zf = z.numpy().reshape(n, 1)
+        obs = observation.numpy().reshape(n, -1)
+        out = np.empty((n, 1), dtype=np.int64)
+        _kernels.advance_regions(
+            zf, obs, self._np["lo"], self._np["hi"], self._np["centre"],
+            self._np["weight"], self._np["radius2"], self._np["succ"], out,
+        )
+        result = torch.from_numpy(out)
+        return result if result.shape == z.shape else result.view(z.shape)
+
+    def advance_eager(self, z: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
+        """:meth:`advance` with torch operations only (any device; the reference)."""
+        zf = z.reshape(-1)
+        if self.chain:
+            # only subgoal z can be achieved next: test that one region
+            j = zf.clamp(max=self.num_states - 2)
+            obs = observation.reshape(zf.numel(), -1).to(self.lo.dtype)
+            lo, hi = self.lo[self._rows, j], self.hi[self._rows, j]
+            hit = ((obs >= lo) & (obs <= hi)).all(-1)
+            if self.uses_circle:
+                d2 = (self.weight[self._rows, j] * (obs - self.centre[self._rows, j]).square()).sum(-1)
+                hit = hit & (d2 <= self.radius2[self._rows, j])
+            hit = hit & self.succ[self._rows, zf, j]
+            return (zf + hit.long()).view_as(z)
+        cand = self.succ[self._rows, zf] & self.inside(observation)
+        first = cand.long().argmax(-1)  # lowest-index achievable subgoal
+        return torch.where(cand.any(-1), first + 1, zf).view_as(z)
+
+
+class StateAggregation:
+    """A hand-given aggregation ``z = g(s)`` (the SARSA-RS baseline).
+
+    Args:
+        mapping: either a lookup tensor indexed by a discrete observation, or a
+            function from an observation batch ``[*B, D]`` to integer states ``[*B]``.
+        num_states: number of abstract states.
+
+    Examples:
+        >>> import torch
+        >>> from torchrl_subgoal import StateAggregation
+        >>> rooms = StateAggregation(torch.tensor([0, 0, 1, 1]), num_states=2)
+        >>> rooms.advance(torch.zeros(3, 1, dtype=torch.long), torch.tensor([0, 2, 3]))
+        tensor([[0],
+                [1],
+                [1]])
+    """
+
+    chain = False
+
+    def __init__(
+        self,
+        mapping: torch.Tensor | Callable[[torch.Tensor], torch.Tensor],
+        num_states: int,
+    ) -> None:
+        self.mapping = mapping
+        self.num_states = int(num_states)
+        if isinstance(mapping, torch.Tensor):
+            if mapping.dtype != torch.long or mapping.ndim != 1:
+                raise ValueError("a lookup aggregation must be a 1-D long tensor indexed by state")
+            if int(mapping.min()) < 0 or int(mapping.max()) >= self.num_states:
+                raise ValueError(f"aggregation values must lie in [0, {self.num_states})")
+
+    def _g(self, observation: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
+        if isinstance(self.mapping, torch.Tensor):
+            return self.mapping[observation.long().reshape(batch_shape)]
+        return self.mapping(observation).long().reshape(batch_shape)
+
+    def initial(self, observation: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
+        """Abstract state of the reset observation, ``[*batch_shape, 1]``."""
+        return self._g(observation, batch_shape).unsqueeze(-1)
+
+    def advance(self, z: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
+        """``g`` of the new observation (the previous ``z`` does not matter)."""
+        return self._g(observation, z.shape[:-1]).unsqueeze(-1)
