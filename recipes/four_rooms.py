@@ -57,7 +57,12 @@ class Config:
     subgoals: str = setting(PARTICIPANTS, "subgoal file of the human patterns (HRS, NRS)")
     random_patterns: int = setting(10, "random subgoal patterns for RRS (paper: 10)")
     eta: float = setting(1.0, "NRS potential η (paper: 1)")
+    agent_state: str = setting("s", "what SARSA's table is over for subgoal methods: s (the paper) or s,z "
+                               "(z = subgoal index; makes Φ(z) a potential over the agent's state)",
+                               choices=["s", "s,z"])
     zero_terminal_potential: bool = setting(True, "Φ = 0 at the goal (exact policy invariance)")
+    engine: str = setting("fused", "fused: one compiled loop; torchrl: step_and_maybe_reset (identical results)",
+                          choices=["fused", "torchrl"])
     seed: int = setting(0, "sweep seed (random patterns, chunk seeds)")
     results: str = setting("results/four_rooms", "results directory (re-run to resume)")
     backend: str = setting("local", "where chunks run", choices=["local", "ray"])
@@ -116,9 +121,11 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
         zero_terminal_potential=config["zero_terminal_potential"],
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
-    agent = SoftmaxSarsa(chunk.n_learners, env.num_states, 4, sarsa,
-                         generator=torch.Generator().manual_seed(chunk.seed))
-    records = run_episodes(learning_env, agent, config["episodes"], progress=progress)
+    subgoal_aware = config["agent_state"] == "s,z" and method.shaping in ("subgoals", "naive")
+    abstract_states = max(len(p) for p in patterns) + 1 if subgoal_aware else 1
+    agent = SoftmaxSarsa(chunk.n_learners, env.num_states, 4, sarsa, seed=chunk.seed,
+                         abstract_states=abstract_states)
+    records = run_episodes(learning_env, agent, config["episodes"], progress=progress, engine=config["engine"])
     return EpisodeTable(records.steps, records.returns, records.success)
 
 
@@ -132,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     settings = dataclasses.asdict(cfg)
     config = {
-        **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential")},
+        **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential", "engine", "agent_state")},
         "sarsa": dataclasses.asdict(SARSA_PRESETS[cfg.preset]),
         "subgoal_file": cfg.subgoals,
         "patterns": {n: s.to_dict() for kind in ("human", "random") for n, s in patterns[kind].items()},

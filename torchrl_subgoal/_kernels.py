@@ -94,3 +94,197 @@ def shape_step(
         if zero_terminal and terminated[b, 0]:
             phi_next = 0.0
         reward_out[b, 0] = reward[b, 0] + gamma * phi_next - phi
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _softmax_choice(q_row, inv_temperature, u, scratch):  # type: ignore[no-untyped-def]
+    """Index drawn from softmax(q_row / τ) by inverse CDF with the uniform ``u``."""
+    n_actions = q_row.shape[0]
+    top = q_row[0]
+    for i in range(1, n_actions):
+        top = max(top, q_row[i])
+    total = 0.0
+    for i in range(n_actions):
+        scratch[i] = np.exp((q_row[i] - top) * inv_temperature)
+        total += scratch[i]
+    threshold = u * total
+    acc = 0.0
+    for i in range(n_actions - 1):
+        acc += scratch[i]
+        if acc > threshold:
+            return i
+    return n_actions - 1
+
+
+@numba.njit(cache=True, nogil=True)
+def softmax_sample(q, state, inv_temperature, u, action_out):  # type: ignore[no-untyped-def]
+    """``action_out[b] ~ softmax(q[b, state[b]] / τ)``."""
+    scratch = np.empty(q.shape[2])
+    for b in range(q.shape[0]):
+        action_out[b] = _softmax_choice(q[b, state[b]], inv_temperature, u[b], scratch)
+
+
+@numba.njit(cache=True, nogil=True)
+def sarsa_step(  # type: ignore[no-untyped-def]
+    q, s, a, reward, s_next, terminated, done, s_root, u, lr, gamma, inv_temperature, action_out
+):
+    """One SARSA(0) step per learner: draw ``a' ~ π(·|s')``, update ``Q(s, a)``, then
+    the next action — ``a'``, or a fresh draw at the reset state where the episode ended.
+
+    ``u`` holds two uniforms per learner (``[2n]``): for ``a'`` and for the reset draw.
+    """
+    n = q.shape[0]
+    scratch = np.empty(q.shape[2])
+    for b in range(n):
+        a2 = _softmax_choice(q[b, s_next[b]], inv_temperature, u[b], scratch)
+        target = reward[b]
+        if not terminated[b]:
+            target += gamma * q[b, s_next[b], a2]
+        q[b, s[b], a[b]] += lr * (target - q[b, s[b], a[b]])
+        if done[b]:
+            a2 = _softmax_choice(q[b, s_root[b]], inv_temperature, u[n + b], scratch)
+        action_out[b] = a2
+
+
+@numba.njit(cache=True, nogil=True)
+def grid_step(  # type: ignore[no-untyped-def]
+    state, t, action, transitions, cells, goal, max_steps, reward, terminated, truncated, cell_out
+):
+    """Deterministic grid moves for a batch: next state, step count, reward and flags."""
+    for b in range(state.shape[0]):
+        s = transitions[state[b], action[b]]
+        state[b] = s
+        t[b] += 1
+        term = s == goal
+        terminated[b] = term
+        truncated[b] = (not term) and t[b] >= max_steps
+        reward[b] = 1.0 if term else 0.0
+        cell_out[b, 0] = cells[s, 0]
+        cell_out[b, 1] = cells[s, 1]
+
+
+@numba.njit(cache=True, nogil=True)
+def record_episodes(  # type: ignore[no-untyped-def]
+    done, terminated, reward, t, ret, episode, steps_out, returns_out, success_out
+):
+    """Advance per-learner step and return counters; file finished episodes.
+
+    Returns how many episodes were filed (those past ``steps_out.shape[1]`` are not).
+    """
+    filed = 0
+    max_episodes = steps_out.shape[1]
+    for b in range(done.shape[0]):
+        t[b] += 1
+        ret[b] += reward[b]
+        if done[b]:
+            e = episode[b]
+            if e < max_episodes:
+                steps_out[b, e] = t[b]
+                returns_out[b, e] = ret[b]
+                success_out[b, e] = terminated[b]
+                filed += 1
+            episode[b] = e + 1
+            t[b] = 0
+            ret[b] = 0.0
+    return filed
+
+
+@numba.njit(cache=True, nogil=True)
+def grid_reset(state, t, reset, start, cells, cell_out):  # type: ignore[no-untyped-def]
+    """Put the learners flagged in ``reset`` back at ``start``; write every learner's cell."""
+    for b in range(state.shape[0]):
+        if reset[b]:
+            state[b] = start
+            t[b] = 0
+        cell_out[b, 0] = cells[state[b], 0]
+        cell_out[b, 1] = cells[state[b], 1]
+
+
+NO_SHAPING, SUBGOAL_SHAPING, LOOKUP_SHAPING = 0, 1, 2
+
+
+@numba.njit(cache=True, nogil=True)
+def sarsa_grid_run(  # type: ignore[no-untyped-def]
+    # the grid env (its state arrays are updated in place)
+    state, t_env, transitions, cells, start, goal, max_steps,
+    # the shaping transform: which abstraction, its tables, its per-learner state and the potential
+    shaping, observe_cell, lo, hi, centre, weight, radius2, succ, lookup, initial_z,
+    z, achieved, r_h, k, table, shared, eta, gamma_shaping, value_gamma, value_lr, zero_terminal,
+    # the SARSA learners
+    q, abstract_states, action, lr, gamma, inv_temperature, uniforms,
+    # episode records
+    t_rec, ret, episode, steps_out, returns_out, success_out,
+):
+    """Run steps of grid world + shaping + SARSA until every learner has its episodes.
+
+    The same kernels, in the same order and with the same random numbers, as one
+    iteration of :func:`torchrl_subgoal.agents.run_episodes` with a
+    ``TransformedEnv(FourRoomsEnv, SubgoalPotentialTransform)`` and a
+    :class:`~torchrl_subgoal.agents.SoftmaxSarsa`: env step, transform step,
+    reset of finished learners, SARSA step, records. At most
+    ``uniforms.shape[0]`` steps; returns ``(steps taken, episodes filed)``.
+    """
+    n = state.shape[0]
+    reward = np.empty((n, 1), np.float32)
+    terminated = np.empty((n, 1), np.bool_)
+    truncated = np.empty((n, 1), np.bool_)
+    done = np.empty((n, 1), np.bool_)
+    cell = np.empty((n, 2), np.int64)
+    z_next = np.empty((n, 1), np.int64)
+    rh_out = np.empty((n, 1), np.float32)
+    k_out = np.empty((n, 1), np.int64)
+    shaped = np.empty((n, 1), np.float32)
+    no_f = np.empty((0, 1), np.float32)
+    no_i = np.empty((0, 1), np.int64)
+    no_b = np.empty((0, 1), np.bool_)
+    rows = np.empty(n, np.int64)
+    rows_next = np.empty(n, np.int64)
+    rows_root = np.empty(n, np.int64)
+    next_action = np.empty(n, np.int64)
+    max_episodes = steps_out.shape[1]
+    filed_total = 0
+    for step in range(uniforms.shape[0]):
+        for b in range(n):
+            rows[b] = state[b] * abstract_states + (z[b, 0] if abstract_states > 1 else 0)
+        grid_step(state, t_env, action, transitions, cells, goal, max_steps,
+                  reward[:, 0], terminated[:, 0], truncated[:, 0], cell)
+        for b in range(n):
+            done[b, 0] = terminated[b, 0] or truncated[b, 0]
+        if shaping == NO_SHAPING:
+            shaped[:, 0] = reward[:, 0]
+        else:
+            if shaping == SUBGOAL_SHAPING:
+                if observe_cell:
+                    advance_regions(z, cell, lo, hi, centre, weight, radius2, succ, z_next)
+                else:
+                    advance_regions(z, state.reshape((n, 1)), lo, hi, centre, weight, radius2, succ, z_next)
+            else:
+                for b in range(n):
+                    z_next[b, 0] = lookup[state[b]]
+            shape_step(z, z_next, achieved, r_h, k, reward, done, terminated, table, shared, eta,
+                       gamma_shaping, value_gamma, value_lr, zero_terminal, rh_out, k_out, shaped,
+                       no_f, no_i, no_b)
+        for b in range(n):
+            zn = z_next[b, 0] if shaping != NO_SHAPING else 0
+            rows_next[b] = state[b] * abstract_states + (zn if abstract_states > 1 else 0)
+            if done[b, 0]:  # the env and the transform reset this learner
+                state[b] = start
+                t_env[b] = 0
+                z[b, 0] = initial_z
+                achieved[b, 0] = False
+                r_h[b, 0] = 0.0
+                k[b, 0] = 0
+            elif shaping != NO_SHAPING:
+                achieved[b, 0] = zn != z[b, 0]
+                z[b, 0] = zn
+                r_h[b, 0] = rh_out[b, 0]
+                k[b, 0] = k_out[b, 0]
+            rows_root[b] = state[b] * abstract_states + (z[b, 0] if abstract_states > 1 else 0)
+        sarsa_step(q, rows, action, shaped[:, 0], rows_next, terminated[:, 0], done[:, 0], rows_root,
+                   uniforms[step], lr, gamma, inv_temperature, next_action)
+        filed_total += record_episodes(done[:, 0], terminated[:, 0], reward[:, 0], t_rec, ret, episode,
+                                       steps_out, returns_out, success_out)
+        action[:] = next_action
+        if episode.min() >= max_episodes:
+            return step + 1, filed_total
+    return uniforms.shape[0], filed_total

@@ -44,8 +44,9 @@ class SubgoalPotentialTransform(Transform):
     * ``"subgoal_anchor"`` — the observation at which ``z`` was entered (only
       when the potential reads it, e.g. :class:`~torchrl_subgoal.NeuralPotential`).
 
-    Every step it adds ``F`` to the reward (the environment's reward stays
-    under ``"env_reward"``), and when a subgoal is achieved or the episode ends
+    Every step it adds ``F`` to the reward; the environment's reward stays
+    under ``"env_reward"``, declared as a second reward entry (so use
+    ``env.reward_keys``; ``env.reward_key`` refers to one key only), and when a subgoal is achieved or the episode ends
     it writes one SMDP transition ``(z, r_h, k, z', terminated)`` under
     ``("next", "smdp")`` in the layout :class:`~torchrl_subgoal.SubgoalValueLoss`
     and TorchRL's TD(0) estimator read (``mask`` tells which entries are
@@ -161,6 +162,7 @@ class SubgoalPotentialTransform(Transform):
         self.zero_terminal_potential = zero_terminal_potential
         extra = tuple(k for k in (ACHIEVED, ANCHOR) if k in potential.in_keys)
         self._state_keys: tuple[str, ...] = (INDEX, RETURN, STEPS, *extra)
+        self._parameters_list = list(potential.parameters())
         self.value_loss: SubgoalValueLoss | None = None
         self.value_optimizer: torch.optim.Optimizer | None = None
         if value_lr is not None:
@@ -177,7 +179,7 @@ class SubgoalPotentialTransform(Transform):
 
         Freeze it the usual torch way, ``transform.potential.requires_grad_(False)``.
         """
-        return self.value_loss is not None and any(p.requires_grad for p in self.potential.parameters())
+        return self.value_loss is not None and any(p.requires_grad for p in self._parameters_list)
 
     @property
     def num_abstract_states(self) -> int:
@@ -287,13 +289,21 @@ class SubgoalPotentialTransform(Transform):
         states = self._state_specs(batch_shape, self._anchor_size(observation_spec))
         for key, spec in states.items():
             observation_spec[key] = spec
-        reward_spec = self.parent.full_reward_spec[self.reward_key] if self.parent is not None else None
-        observation_spec[self.env_reward_key] = (
-            reward_spec.clone() if reward_spec is not None else Unbounded(shape=(*batch_shape, 1))
-        )
         if self.transitions_key is not None:
             observation_spec[self.transitions_key] = self._transition_spec(states, batch_shape)
         return observation_spec
+
+    def transform_reward_spec(self, reward_spec: TensorSpec) -> TensorSpec:
+        # The unshaped reward is a second reward entry (as RNDTransform's intrinsic
+        # reward): it lives in "next" only, so it costs nothing in step_mdp and resets.
+        assert isinstance(reward_spec, Composite)
+        if self.reward_key not in reward_spec.keys(True, True):
+            raise KeyError(
+                f"{type(self).__name__}: reward_key {self.reward_key!r} is not a reward of the env; "
+                f"available: {sorted(map(str, reward_spec.keys(True, True)))}"
+            )
+        reward_spec[self.env_reward_key] = reward_spec[self.reward_key].clone()
+        return reward_spec
 
     def _transition_spec(self, states: dict[str, TensorSpec], batch_shape: torch.Size) -> Composite:
         shape = (*batch_shape, 1)
@@ -348,9 +358,9 @@ class SubgoalPotentialTransform(Transform):
         # Values for every env; TorchRL keeps the old ones where "_reset" is False.
         batch_shape = tensordict_reset.batch_size
         state = self._initial_state(tensordict_reset.get(self.observation_key), batch_shape)
-        zero = torch.zeros((*batch_shape, 1))
-        outputs: dict[str, Any] = {**state, self.env_reward_key: zero}
+        outputs: dict[str, Any] = dict(state)
         if self.transitions_key is not None:
+            zero = torch.zeros((*batch_shape, 1))
             false = torch.zeros((*batch_shape, 1), dtype=torch.bool)
             inputs = {k: state[k] for k in self.potential.in_keys}
             outputs[self.transitions_key] = _transition(

@@ -44,7 +44,7 @@ def test_update_rule_by_hand() -> None:
 
 def test_softmax_follows_the_temperature() -> None:
     cfg = SarsaConfig(lr=0.1, gamma=0.9, temperature=0.5, value_lr=0.0)
-    agent = SoftmaxSarsa(20_000, 1, 3, cfg, generator=torch.Generator().manual_seed(0))
+    agent = SoftmaxSarsa(20_000, 1, 3, cfg, seed=0)
     agent.q[:, 0] = torch.tensor([0.0, 0.5, 1.0])
     freq = torch.bincount(agent.sample(torch.zeros(20_000, dtype=torch.long)), minlength=3) / 20_000
     expected = torch.softmax(torch.tensor([0.0, 0.5, 1.0]) / 0.5, 0)
@@ -55,7 +55,7 @@ def test_same_seed_same_results() -> None:
     def run(seed: int) -> torch.Tensor:
         env = FourRoomsEnv(6)
         agent = SoftmaxSarsa(6, env.num_states, 4, SARSA_PRESETS["released"],
-                             generator=torch.Generator().manual_seed(seed))
+                             seed=seed)
         return run_episodes(env, agent, 4).steps
 
     assert torch.equal(run(1), run(1))
@@ -101,7 +101,7 @@ def test_learned_potential_does_not_change_the_optimum(method: str) -> None:
     z_states = 3 if method == "HRS" else 1
 
     def learner(seed: int) -> SoftmaxSarsa:
-        return SoftmaxSarsa(n, 104, 4, cfg, generator=torch.Generator().manual_seed(seed), abstract_states=z_states)
+        return SoftmaxSarsa(n, 104, 4, cfg, seed=seed, abstract_states=z_states)
 
     run_episodes(env, learner(0), 300)  # learns the potential
     shaping.potential.requires_grad_(False)

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Literal, Protocol
 
+import numpy as np
 import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.envs import EnvBase
+
+from torchrl_subgoal import _kernels
 
 __all__ = ["EpisodeRecords", "OnlineAgent", "run_episodes"]
 
@@ -51,6 +54,7 @@ def run_episodes(
     *,
     return_key: NestedKey | None = None,
     progress: Callable[[int], None] | None = None,
+    engine: Literal["torchrl", "fused"] = "torchrl",
 ) -> EpisodeRecords:
     """Run every learner of a batched env for ``episodes`` episodes, learning online.
 
@@ -67,45 +71,51 @@ def run_episodes(
             :class:`~torchrl_subgoal.SubgoalPotentialTransform`) when the env
             has it, else ``"reward"``.
         progress: called with the number of learner-episodes just finished.
+        engine: ``"torchrl"`` steps the env with ``step_and_maybe_reset``;
+            ``"fused"`` runs the same objects in one compiled loop with
+            identical results, much faster (four-rooms with SARSA only; see
+            :mod:`torchrl_subgoal.agents.fused`).
 
     Returns:
         steps, (unshaped) return and success (terminated) of every episode.
     """
+    if engine == "fused":
+        from torchrl_subgoal.agents.fused import run_episodes_fused
+
+        if return_key is not None:
+            raise ValueError("the fused engine records the unshaped reward; return_key is not supported")
+        return run_episodes_fused(env, agent, episodes, progress=progress)  # type: ignore[arg-type]
+    if engine != "torchrl":
+        raise ValueError(f"engine must be 'torchrl' or 'fused', got {engine!r}")
     if return_key is None:
-        return_key = "env_reward" if "env_reward" in list(env.observation_spec.keys()) else "reward"
+        return_key = "env_reward" if "env_reward" in env.reward_keys else "reward"
     n = max(1, env.batch_size.numel())
-    steps = torch.zeros(n * episodes, dtype=torch.long)
-    returns = torch.zeros(n * episodes)
-    success = torch.zeros(n * episodes, dtype=torch.bool)
-    t = torch.zeros(n, dtype=torch.long)
-    ret = torch.zeros(n)
-    done_episodes = torch.zeros(n, dtype=torch.long)
+    steps = torch.zeros(n, episodes, dtype=torch.long)
+    returns = torch.zeros(n, episodes)
+    success = torch.zeros(n, episodes, dtype=torch.bool)
+    t = np.zeros(n, dtype=np.int64)
+    ret = np.zeros(n)
+    done_episodes = np.zeros(n, dtype=np.int64)
+    outputs = (steps.numpy(), returns.numpy(), success.numpy())
     env_steps = 0
     td = agent.act(env.reset())
     while True:
         td, root = env.step_and_maybe_reset(td)
         agent.step(td, root)
         nxt = td.get("next")
-        t += 1
-        ret += nxt.get(return_key).reshape(n)
         env_steps += 1
-        done = nxt.get("done").reshape(n)
-        if done.any():
-            rows = done.nonzero().squeeze(-1)
-            ep = done_episodes[rows]
-            keep = ep < episodes
-            rows_kept, ep = rows[keep], ep[keep]
-            flat = rows_kept * episodes + ep
-            steps[flat] = t[rows_kept]
-            returns[flat] = ret[rows_kept]
-            success[flat] = nxt.get("terminated").reshape(n)[rows_kept]
-            done_episodes[rows] += 1
-            t.masked_fill_(done, 0)
-            ret.masked_fill_(done, 0.0)
-            if progress is not None and len(rows_kept):
-                progress(len(rows_kept))
-            if bool((done_episodes >= episodes).all()):
+        filed = _kernels.record_episodes(
+            _flat(nxt.get("done")), _flat(nxt.get("terminated")), _flat(nxt.get(return_key)),
+            t, ret, done_episodes, *outputs,
+        )
+        if filed:
+            if progress is not None:
+                progress(filed)
+            if done_episodes.min() >= episodes:
                 break
         td = root
-    shape = (n, episodes)
-    return EpisodeRecords(steps.view(shape), returns.view(shape), success.view(shape), env_steps)
+    return EpisodeRecords(steps, returns, success, env_steps)
+
+
+def _flat(t: torch.Tensor) -> np.ndarray:
+    return t.numpy().reshape(-1)

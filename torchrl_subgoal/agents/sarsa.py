@@ -4,9 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
+
+from torchrl_subgoal import _kernels
 
 __all__ = ["SARSA_PRESETS", "SarsaConfig", "SoftmaxSarsa"]
 
@@ -43,9 +46,10 @@ class SoftmaxSarsa:
     """SARSA(0) with a softmax (Boltzmann) policy for a batch of independent learners.
 
     Learner ``b`` owns ``Q[b]`` of shape ``[num_states, num_actions]``; the env
-    batch (flattened) is the learner batch. Actions are sampled with the
-    Gumbel-max trick from ``Q/τ`` using the agent's own generator, so a seed
-    fixes every learner's behaviour. The update is
+    batch (flattened) is the learner batch. Actions are drawn from
+    ``softmax(Q/τ)`` with uniforms from the agent's own numpy generator, so a seed
+    fixes every learner's behaviour (one fused kernel per step draws, updates and
+    draws again). The update is
     ``Q(s,a) ← Q(s,a) + α (r + γ Q(s',a') (1 − terminated) − Q(s,a))`` with
     ``a' ~ π(·|s')``; at truncation it bootstraps from ``Q(s', a')``.
 
@@ -54,7 +58,9 @@ class SoftmaxSarsa:
         num_states: discrete states (observation values).
         num_actions: actions.
         config: learning rate, discount, temperature.
-        generator: random source of the policy.
+        seed: seed (or numpy generator) of the policy's random draws; its
+            draws are sequential, so blocks of them (the fused engine) match
+            draws made one step at a time.
         observation_key: the discrete observation.
         abstract_states: if > 1, the table is over ``(s, z)`` pairs, with ``z``
             read from ``abstract_key`` (the shaping transform's subgoal index).
@@ -70,8 +76,7 @@ class SoftmaxSarsa:
         >>> from torchrl_subgoal.agents.loop import run_episodes
         >>> from torchrl_subgoal.envs import FourRoomsEnv
         >>> env = FourRoomsEnv(num_envs=8)
-        >>> agent = SoftmaxSarsa(8, env.num_states, 4, SARSA_PRESETS["released"],
-        ...                      generator=torch.Generator().manual_seed(0))
+        >>> agent = SoftmaxSarsa(8, env.num_states, 4, SARSA_PRESETS["released"], seed=0)
         >>> records = run_episodes(env, agent, episodes=3)
         >>> records.steps.shape
         torch.Size([8, 3])
@@ -84,7 +89,7 @@ class SoftmaxSarsa:
         num_actions: int,
         config: SarsaConfig,
         *,
-        generator: torch.Generator | None = None,
+        seed: int | np.random.Generator = 0,
         observation_key: NestedKey = "observation",
         abstract_states: int = 1,
         abstract_key: NestedKey = "subgoal_index",
@@ -95,17 +100,18 @@ class SoftmaxSarsa:
         self.abstract_key = abstract_key
         self.num_states = num_states * abstract_states
         self.q = torch.zeros(num_learners, self.num_states, num_actions)
-        self.generator = generator if generator is not None else torch.Generator().manual_seed(0)
+        self.rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         self.observation_key = observation_key
         self._rows = torch.arange(num_learners)
-        self._flat_q = self.q.view(-1)
+        self._q = self.q.numpy()  # the kernels update the table in place through this view
 
     def sample(self, state: torch.Tensor) -> torch.Tensor:
-        """Softmax actions for each learner's discrete state ``[N]``."""
-        logits = self.q[self._rows, state] / self.config.temperature
-        # Gumbel-max: argmax(logits + G), G = -log(-log U), U ~ U(0, 1)
-        u = torch.rand(logits.shape, generator=self.generator).clamp_(min=1e-12)
-        return (logits - u.log_().neg_().log_()).argmax(-1)
+        """Softmax actions for each learner's table row ``[N]`` (see :meth:`state`)."""
+        s = state.numpy().reshape(-1)
+        u = self.rng.random(s.shape[0])
+        action = torch.empty_like(state)
+        _kernels.softmax_sample(self._q, s, 1.0 / self.config.temperature, u, action.numpy().reshape(-1))
+        return action
 
     def greedy(self, state: torch.Tensor) -> torch.Tensor:
         """Greedy actions ``argmax_a Q(s, a)`` for each learner."""
@@ -113,32 +119,31 @@ class SoftmaxSarsa:
 
     def state(self, tensordict: TensorDictBase) -> torch.Tensor:
         """The table row of each learner: ``s``, or ``s · Z + z`` over ``(s, z)`` pairs."""
-        s = tensordict.get(self.observation_key).reshape(-1)
+        s = tensordict.get(self.observation_key)
         if self.abstract_states == 1:
             return s
-        return s * self.abstract_states + tensordict.get(self.abstract_key).reshape(-1)
+        return s.reshape(-1) * self.abstract_states + tensordict.get(self.abstract_key).reshape(-1)
 
     def act(self, tensordict: TensorDictBase) -> TensorDictBase:
         shape = tensordict.get(self.observation_key).shape
-        tensordict.set("action", self.sample(self.state(tensordict)).view(shape))
+        tensordict.set("action", self.sample(self.state(tensordict)).reshape(shape))
         return tensordict
-
-    def _index(self, state: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        return (self._rows * self.num_states + state) * self.num_actions + action
 
     def step(self, transition: TensorDictBase, next_root: TensorDictBase) -> None:
         cfg = self.config
         nxt = transition.get("next")
-        s = self.state(transition)
-        a = transition.get("action").reshape(-1)
-        s2 = self.state(nxt)
-        reward = nxt.get("reward").reshape(-1)
-        terminated = nxt.get("terminated").reshape(-1)
-        a2 = self.sample(s2)
-        q_next = self._flat_q[self._index(s2, a2)].masked_fill(terminated, 0.0)
-        idx = self._index(s, a)
-        td_error = reward + cfg.gamma * q_next - self._flat_q[idx]
-        self._flat_q.index_add_(0, idx, cfg.lr * td_error)
-        done = nxt.get("done").reshape(-1)
-        action = torch.where(done, self.sample(self.state(next_root)), a2)
-        next_root.set("action", action.view(next_root.get(self.observation_key).shape))
+        n = self.q.shape[0]
+        u = self.rng.random(2 * n)
+        action = torch.empty(n, dtype=torch.long)
+        _kernels.sarsa_step(
+            self._q, _flat(self.state(transition)), _flat(transition.get("action")),
+            _flat(nxt.get("reward")), _flat(self.state(nxt)), _flat(nxt.get("terminated")),
+            _flat(nxt.get("done")), _flat(self.state(next_root)), u, cfg.lr, cfg.gamma,
+            1.0 / cfg.temperature, action.numpy(),
+        )
+        next_root.set("action", action.view(transition.get("action").shape))
+
+
+def _flat(t: torch.Tensor) -> np.ndarray:
+    """A CPU tensor as a 1-D numpy array (a view when contiguous)."""
+    return t.numpy().reshape(-1)

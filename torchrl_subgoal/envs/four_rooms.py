@@ -10,6 +10,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
+from torchrl_subgoal import _kernels
 from torchrl_subgoal.subgoals import Cell, Predicate, State, StateAggregation, SubgoalSeries
 
 __all__ = ["ACTIONS", "LAYOUT", "FourRoomsEnv", "check_subgoal", "draw_map", "free_cells", "room_aggregation"]
@@ -145,40 +146,68 @@ class FourRoomsEnv(EnvBase):
         flat = max(1, batch.numel())
         self._state = torch.full((flat,), self.start_state, dtype=torch.long, device=self.device)
         self._t = torch.zeros(flat, dtype=torch.long, device=self.device)
-
-    def _observe(self, extra: dict[str, torch.Tensor]) -> TensorDict:
-        shape = self.batch_size
-        s = self._state.clone().reshape(shape)
-        return TensorDict(
-            {"observation": s, "cell": self.cells[s], **extra}, batch_size=shape, device=self.device
-        )
+        if self.device.type == "cpu":
+            self._transitions_np = self.transitions.numpy()
+            self._cells_np = self.cells.numpy()
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
         reset = tensordict.get("_reset", None) if tensordict is not None else None
-        if reset is None:
-            self._state.fill_(self.start_state)
-            self._t.zero_()
+        shape = self.batch_size
+        n = self._state.numel()
+        mask = torch.ones(n, dtype=torch.bool) if reset is None else reset.reshape(-1)
+        cell = torch.empty((*shape, 2), dtype=torch.long, device=self.device)
+        if self.device.type == "cpu":
+            _kernels.grid_reset(self._state.numpy(), self._t.numpy(), mask.numpy(), self.start_state,
+                                self._cells_np, cell.numpy().reshape(n, 2))
         else:
-            mask = reset.reshape(-1)
             self._state.masked_fill_(mask, self.start_state)
             self._t.masked_fill_(mask, 0)
-        false = torch.zeros((*self.batch_size, 1), dtype=torch.bool, device=self.device)
-        return self._observe({"done": false, "terminated": false.clone(), "truncated": false.clone()})
+            cell.copy_(self.cells[self._state].view_as(cell))
+        false = torch.zeros((*shape, 1), dtype=torch.bool, device=self.device)
+        return TensorDict(
+            {
+                "observation": self._state.clone().view(shape),
+                "cell": cell,
+                "done": false,
+                "terminated": false.clone(),
+                "truncated": false.clone(),
+            },
+            batch_size=shape,
+            device=self.device,
+        )
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        shape = self.batch_size
+        n = self._state.numel()
         action = tensordict.get("action").reshape(-1)
-        self._state = self.transitions[self._state, action]
-        self._t += 1
-        shape = (*self.batch_size, 1)
-        terminated = (self._state == self.goal_state).reshape(shape)
-        truncated = (self._t >= self.max_steps).reshape(shape) & ~terminated
-        return self._observe(
+        reward = torch.empty((*shape, 1), dtype=torch.float32)
+        terminated = torch.empty((*shape, 1), dtype=torch.bool)
+        truncated = torch.empty((*shape, 1), dtype=torch.bool)
+        cell = torch.empty((*shape, 2), dtype=torch.long)
+        if self.device.type == "cpu":
+            _kernels.grid_step(
+                self._state.numpy(), self._t.numpy(), action.numpy(), self._transitions_np, self._cells_np,
+                self.goal_state, self.max_steps, reward.numpy().reshape(n), terminated.numpy().reshape(n),
+                truncated.numpy().reshape(n), cell.numpy().reshape(n, 2),
+            )
+        else:
+            self._state = self.transitions[self._state, action]
+            self._t += 1
+            terminated.copy_((self._state == self.goal_state).view_as(terminated))
+            truncated.copy_((self._t >= self.max_steps).view_as(truncated) & ~terminated)
+            reward.copy_(terminated.to(reward.dtype))
+            cell.copy_(self.cells[self._state].view_as(cell))
+        return TensorDict(
             {
-                "reward": terminated.to(torch.float32),
+                "observation": self._state.clone().view(shape),
+                "cell": cell,
+                "reward": reward,
                 "done": terminated | truncated,
                 "terminated": terminated,
                 "truncated": truncated,
-            }
+            },
+            batch_size=shape,
+            device=self.device,
         )
 
     def _set_seed(self, seed: int | None) -> None:

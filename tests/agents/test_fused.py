@@ -1,0 +1,59 @@
+"""The fused engine gives exactly the TorchRL loop's results."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from torchrl.envs import TransformedEnv
+
+from torchrl_subgoal import Cell, SubgoalSeries
+from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
+from torchrl_subgoal.envs import FourRoomsEnv
+from torchrl_subgoal.envs.four_rooms import room_aggregation
+from torchrl_subgoal.methods import paper_methods, shaping_transform
+
+PATTERNS = [SubgoalSeries([Cell(4, 9), Cell(11, 9)]), SubgoalSeries([Cell(1, 11), Cell(11, 1), Cell(10, 6)])]
+
+
+def setup(method: str, n: int, abstract_states: int, max_steps: int) -> tuple[object, SoftmaxSarsa]:
+    cfg = SARSA_PRESETS["released"]
+    env = FourRoomsEnv(n, max_steps=max_steps)
+    shaping = shaping_transform(
+        paper_methods("SARSA")[method], env.batch_size, gamma=cfg.gamma, value_lr=cfg.value_lr,
+        patterns=PATTERNS, pattern_index=torch.arange(n) % 2, aggregation=room_aggregation(),
+        eta=1.0, observation_key="cell",
+    )
+    learning_env = TransformedEnv(env, shaping) if shaping is not None else env
+    return learning_env, SoftmaxSarsa(n, 104, 4, cfg, seed=7, abstract_states=abstract_states)
+
+
+@pytest.mark.parametrize(
+    ("method", "abstract_states"),
+    [("SARSA", 1), ("HRS", 1), ("HRS", 4), ("NRS", 1), ("SARSA-RS", 1)],
+)
+def test_fused_equals_torchrl(method: str, abstract_states: int) -> None:
+    results = {}
+    for engine in ("torchrl", "fused"):
+        env, agent = setup(method, n=12, abstract_states=abstract_states, max_steps=150)
+        records = run_episodes(env, agent, 25, engine=engine)
+        potential = env.transform.potential if hasattr(env, "transform") else None
+        table = potential.table.detach().clone() if hasattr(potential, "table") else None
+        results[engine] = (records, agent.q.clone(), table)
+    (a, qa, va), (b, qb, vb) = results["torchrl"], results["fused"]
+    assert torch.equal(a.steps, b.steps) and torch.equal(a.returns, b.returns)
+    assert torch.equal(a.success, b.success) and a.env_steps == b.env_steps
+    assert torch.equal(qa, qb)
+    if va is not None:
+        assert torch.equal(va, vb) and va.abs().sum() > 0
+    assert (a.steps == 150).any() and a.success.any()  # both truncations and goals happened
+
+
+def test_fused_rejects_other_setups() -> None:
+    from torchrl.envs import StepCounter
+
+    env = TransformedEnv(FourRoomsEnv(2), StepCounter())
+    agent = SoftmaxSarsa(2, 104, 4, SARSA_PRESETS["released"])
+    with pytest.raises(TypeError, match="one SubgoalPotentialTransform"):
+        run_episodes(env, agent, 1, engine="fused")
+    with pytest.raises(ValueError, match="engine must be"):
+        run_episodes(FourRoomsEnv(2), agent, 1, engine="jax")  # type: ignore[arg-type]
