@@ -288,3 +288,151 @@ def sarsa_grid_run(  # type: ignore[no-untyped-def]
         if episode.min() >= max_episodes:
             return step + 1, filed_total
     return uniforms.shape[0], filed_total
+
+
+@numba.njit(cache=True, nogil=True)
+def first_region(z, obs, lo, hi, centre, weight, radius2, z_out):  # type: ignore[no-untyped-def]
+    """``z_out[b]``: the first region (shared ``[J, D]`` tables) containing ``obs[b]``, else ``z[b]``."""
+    n_regions, dim = lo.shape
+    for b in range(obs.shape[0]):
+        z_out[b, 0] = z[b, 0]
+        for j in range(n_regions):
+            inside = True
+            for d in range(dim):
+                if obs[b, d] < lo[j, d] or obs[b, d] > hi[j, d]:
+                    inside = False
+                    break
+            if inside and radius2[j] < np.inf:
+                s = 0.0
+                for d in range(dim):
+                    diff = obs[b, d] - centre[j, d]
+                    s += weight[j, d] * diff * diff
+                inside = s <= radius2[j]
+            if inside:
+                z_out[b, 0] = j
+                break
+
+
+@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
+def fourier_features(obs, low, inv_range, order, half, first, second, out):  # type: ignore[no-untyped-def]
+    """``out[f] = cos(π c_f · s̃)`` for every coefficient vector ``c_f ∈ {0..order}^D`` in
+    lexicographic order, ``s̃ = clip((obs - low) / range, 0, 1)``.
+
+    Computed as ``Re(A_a B_b)`` with ``f = a·M + b``: ``A`` are the complex
+    exponentials of the first ``half`` dimensions, ``B`` of the others (one
+    complex product per feature instead of a cosine).
+    """
+    dim = obs.shape[0]
+    k = order + 1
+    n_first = first.shape[0]
+    n_second = second.shape[0]
+    for a in range(n_first):
+        re, im, rem = 1.0, 0.0, a
+        for d in range(half - 1, -1, -1):
+            c = rem % k
+            rem //= k
+            x = min(max((obs[d] - low[d]) * inv_range[d], 0.0), 1.0)
+            angle = np.pi * c * x
+            cr, ci = np.cos(angle), np.sin(angle)
+            re, im = re * cr - im * ci, re * ci + im * cr
+        first[a, 0], first[a, 1] = re, im
+    for b in range(n_second):
+        re, im, rem = 1.0, 0.0, b
+        for d in range(dim - 1, half - 1, -1):
+            c = rem % k
+            rem //= k
+            x = min(max((obs[d] - low[d]) * inv_range[d], 0.0), 1.0)
+            angle = np.pi * c * x
+            cr, ci = np.cos(angle), np.sin(angle)
+            re, im = re * cr - im * ci, re * ci + im * cr
+        second[b, 0], second[b, 1] = re, im
+    for a in range(n_first):
+        for b in range(n_second):
+            out[a * n_second + b] = first[a, 0] * second[b, 0] - first[a, 1] * second[b, 1]
+
+
+@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
+def _policy_sample(theta_b, phi, u, logits):  # type: ignore[no-untyped-def]
+    """Draw from softmax(θ φ) with the uniform ``u``; ``logits`` is filled with π."""
+    n_actions, n_features = theta_b.shape
+    top = -np.inf
+    for a in range(n_actions):
+        s = 0.0
+        for f in range(n_features):
+            s += theta_b[a, f] * phi[f]
+        logits[a] = s
+        top = max(top, s)
+    total = 0.0
+    for a in range(n_actions):
+        logits[a] = np.exp(logits[a] - top)
+        total += logits[a]
+    for a in range(n_actions):
+        logits[a] /= total
+    acc = 0.0
+    for a in range(n_actions - 1):
+        acc += logits[a]
+        if acc > u:
+            return a
+    return n_actions - 1
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True)
+def ac_act(theta, phi, probs, obs, low, inv_range, order, half, u, action_out):  # type: ignore[no-untyped-def]
+    """Features of ``obs`` into ``phi``, the policy into ``probs`` and a first action per learner."""
+    n_first = (order + 1) ** half
+    n_second = (order + 1) ** (obs.shape[1] - half)
+    first = np.empty((n_first, 2))
+    second = np.empty((n_second, 2))
+    for b in range(obs.shape[0]):
+        fourier_features(obs[b], low, inv_range, order, half, first, second, phi[b])
+        action_out[b] = _policy_sample(theta[b], phi[b], u[b], probs[b])
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True)
+def ac_step(  # type: ignore[no-untyped-def]
+    w, theta, phi, probs, action, reward, obs_next, terminated, done, obs_root, active,
+    low, inv_range, order, half, u, actor_lr, critic_lr, gamma, normalize, action_out,
+):
+    """One-step actor-critic for every active learner.
+
+    ``δ = r + γ V(s') (1 − terminated) − V(s)``, ``V = w·φ``; ``w += α_c δ φ(s)``;
+    ``θ += α_a δ (1[a] − π(·|s)) ⊗ φ(s)``; with ``normalize`` both rates are
+    divided by ``‖φ(s)‖``. ``phi`` and ``probs`` hold each learner's ``φ(s)``
+    and ``π(·|s)`` (computed when its action was drawn; ``θ`` has not changed
+    since) and are replaced by those of the next state (``s'``, or the reset
+    state where the episode ended), from which the next action is drawn with ``u``.
+    """
+    n_actions, n_features = theta.shape[1], theta.shape[2]
+    n_first = (order + 1) ** half
+    n_second = (order + 1) ** (obs_next.shape[1] - half)
+    first = np.empty((n_first, 2))
+    second = np.empty((n_second, 2))
+    phi_next = np.empty(n_features)
+    for b in range(w.shape[0]):
+        if not active[b]:
+            continue
+        fourier_features(obs_next[b], low, inv_range, order, half, first, second, phi_next)
+        value = 0.0
+        value_next = 0.0
+        norm2 = 0.0
+        for f in range(n_features):
+            value += w[b, f] * phi[b, f]
+            value_next += w[b, f] * phi_next[f]
+            norm2 += phi[b, f] * phi[b, f]
+        delta = reward[b] - value
+        if not terminated[b]:
+            delta += gamma * value_next
+        scale = 1.0 / np.sqrt(norm2) if normalize else 1.0
+        a_taken = action[b]
+        for a in range(n_actions):
+            g = ((1.0 if a == a_taken else 0.0) - probs[b, a]) * actor_lr * scale * delta
+            for f in range(n_features):
+                theta[b, a, f] += g * phi[b, f]
+        c = critic_lr * scale * delta
+        for f in range(n_features):
+            w[b, f] += c * phi[b, f]
+        if done[b]:
+            fourier_features(obs_root[b], low, inv_range, order, half, first, second, phi_next)
+        for f in range(n_features):
+            phi[b, f] = phi_next[f]
+        action_out[b] = _policy_sample(theta[b], phi[b], u[b], probs[b])

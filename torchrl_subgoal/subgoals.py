@@ -731,9 +731,11 @@ class StateAggregation:
     """A hand-given aggregation ``z = g(s)`` (the SARSA-RS baseline).
 
     Args:
-        mapping: either a lookup tensor indexed by a discrete observation, or a
+        mapping: a lookup tensor indexed by a discrete observation, or a
             function from an observation batch ``[*B, D]`` to integer states ``[*B]``.
         num_states: number of abstract states.
+
+    Use :meth:`from_regions` for regions of a continuous observation.
 
     Examples:
         >>> import torch
@@ -749,26 +751,69 @@ class StateAggregation:
 
     def __init__(
         self,
-        mapping: torch.Tensor | Callable[[torch.Tensor], torch.Tensor],
+        mapping: torch.Tensor | Callable[[torch.Tensor], torch.Tensor] | None,
         num_states: int,
     ) -> None:
         self.mapping = mapping
         self.num_states = int(num_states)
+        self.regions: dict[str, np.ndarray] | None = None
         if isinstance(mapping, torch.Tensor):
             if mapping.dtype != torch.long or mapping.ndim != 1:
                 raise ValueError("a lookup aggregation must be a 1-D long tensor indexed by state")
             if int(mapping.min()) < 0 or int(mapping.max()) >= self.num_states:
                 raise ValueError(f"aggregation values must lie in [0, {self.num_states})")
 
+    @classmethod
+    def from_regions(cls, regions: Sequence[Predicate], observation_size: int) -> StateAggregation:
+        """``z`` = the first of ``regions`` containing the observation (kept when none does).
+
+        Examples:
+            >>> from torchrl_subgoal import Box, StateAggregation
+            >>> thirds = StateAggregation.from_regions(
+            ...     [Box((c,), (1 / 6,), (0,)) for c in (1 / 6, 1 / 2, 5 / 6)], observation_size=4)
+            >>> thirds.advance(torch.zeros(2, 1, dtype=torch.long), torch.tensor([[0.2, 0, 0, 0], [0.9, 0, 0, 0]]))
+            tensor([[0],
+                    [2]])
+        """
+        if not regions:
+            raise ValueError("from_regions needs at least one region")
+        compiled = [p.region(observation_size) for p in regions]
+        agg = cls(None, len(regions))
+        agg.regions = {
+            "lo": torch.stack([r.lo for r in compiled]).numpy(),
+            "hi": torch.stack([r.hi for r in compiled]).numpy(),
+            "centre": torch.stack([r.centre for r in compiled]).numpy(),
+            "weight": torch.stack([r.weight for r in compiled]).numpy(),
+            "radius2": np.array([r.radius2 for r in compiled], dtype=np.float32),
+        }
+        agg.region_predicates = tuple(regions)
+        return agg
+
     def _g(self, observation: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
         if isinstance(self.mapping, torch.Tensor):
             return self.mapping[observation.long().reshape(batch_shape)]
+        assert self.mapping is not None
         return self.mapping(observation).long().reshape(batch_shape)
+
+    def _in_regions(self, z: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
+        assert self.regions is not None
+        n = z.numel()
+        out = np.empty((n, 1), dtype=np.int64)
+        r = self.regions
+        _kernels.first_region(
+            z.numpy().reshape(n, 1), observation.cpu().numpy().reshape(n, -1), r["lo"], r["hi"],
+            r["centre"], r["weight"], r["radius2"], out,
+        )
+        return torch.from_numpy(out).view(z.shape).to(z.device)
 
     def initial(self, observation: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
         """Abstract state of the reset observation, ``[*batch_shape, 1]``."""
+        if self.regions is not None:
+            return self._in_regions(torch.zeros((*batch_shape, 1), dtype=torch.long), observation)
         return self._g(observation, batch_shape).unsqueeze(-1)
 
     def advance(self, z: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
-        """``g`` of the new observation (the previous ``z`` does not matter)."""
+        """``g`` of the new observation (the previous ``z`` matters only outside every region)."""
+        if self.regions is not None:
+            return self._in_regions(z, observation)
         return self._g(observation, z.shape[:-1]).unsqueeze(-1)

@@ -57,3 +57,40 @@ def test_fused_rejects_other_setups() -> None:
         run_episodes(env, agent, 1, engine="fused")
     with pytest.raises(ValueError, match="engine must be"):
         run_episodes(FourRoomsEnv(2), agent, 1, engine="jax")  # type: ignore[arg-type]
+
+
+def pinball_setup(method: str, n: int, max_steps: int) -> tuple[object, object]:
+    from torchrl_subgoal import Box, Circle, StateAggregation
+    from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic
+    from torchrl_subgoal.envs import PinBallEnv
+
+    cfg = AC_PRESETS["released"]
+    env = PinBallEnv(n, seed=3, max_steps=max_steps, step_penalty=-1.0, thrust_penalty=-5.0)
+    patterns = [SubgoalSeries([Circle((0.2, 0.85), 0.04), Circle((0.25, 0.8), 0.04)]),
+                SubgoalSeries([Circle((0.22, 0.9), 0.05)])]
+    thirds = StateAggregation.from_regions([Box((c,), (1 / 6,), (0,)) for c in (1 / 6, 1 / 2, 5 / 6)], 4)
+    shaping = shaping_transform(
+        paper_methods("AC")[method], env.batch_size, gamma=cfg.gamma, value_lr=cfg.value_lr, patterns=patterns,
+        pattern_index=torch.arange(n) % 2, aggregation=thirds, eta=100.0, aggregation_key="observation",
+    )
+    spec = env.observation_spec["observation"]
+    agent = FourierActorCritic(n, spec.low[0], spec.high[0], 5, cfg, seed=5)
+    return (TransformedEnv(env, shaping) if shaping is not None else env), agent
+
+
+@pytest.mark.parametrize("method", ["AC", "HRS", "NRS", "SARSA-RS"])
+def test_pinball_fused_equals_torchrl(method: str) -> None:
+    results = {}
+    for engine in ("torchrl", "fused"):
+        env, agent = pinball_setup(method, n=6, max_steps=120)
+        records = run_episodes(env, agent, 4, engine=engine)
+        results[engine] = (records, agent)
+    (a, agent_a), (b, agent_b) = results["torchrl"], results["fused"]
+    assert torch.equal(a.steps, b.steps) and torch.equal(a.returns, b.returns)
+    assert torch.equal(a.success, b.success) and a.env_steps == b.env_steps
+    last = int(a.steps.sum(1).argmax())  # the learner that finished last was never skipped
+    assert (agent_a.w[last] == agent_b.w[last]).all() and (agent_a.theta[last] == agent_b.theta[last]).all()
+    assert (a.steps == 120).any()
+    if method != "AC":
+        z = env.transform.potential  # shaping happened
+        assert method == "NRS" or z.table.abs().sum() > 0

@@ -11,31 +11,44 @@ the same order with the same random numbers, so its records, Q tables and
 potentials are identical to the TorchRL loop's (``tests/agents/test_fused.py``)
 while a step costs tens of microseconds.
 
-Supported: :class:`~torchrl_subgoal.envs.FourRoomsEnv`, optionally in a
+Supported: :class:`~torchrl_subgoal.envs.FourRoomsEnv` with
+:class:`~torchrl_subgoal.agents.SoftmaxSarsa`, and
+:class:`~torchrl_subgoal.envs.PinBallEnv` with
+:class:`~torchrl_subgoal.agents.FourierActorCritic`, each alone or in a
 ``TransformedEnv`` whose only transform is a
 :class:`~torchrl_subgoal.SubgoalPotentialTransform` with a tabular or naive
-potential (subgoal series or lookup aggregation), and
-:class:`~torchrl_subgoal.agents.SoftmaxSarsa`. Anything else raises a
-``TypeError`` that says so; use the TorchRL engine for it.
+potential (a subgoal series, or a lookup / region aggregation). Anything else
+raises a ``TypeError`` that says so; use the TorchRL engine for it.
+
+Four-rooms: records, Q tables and potentials equal the TorchRL loop's. PinBall:
+learners that have all their episodes stop (the TorchRL loop keeps stepping
+them until the slowest is done, which at 10,000-step episodes dominates the
+cost); their recorded episodes are identical, their final weights are the
+ones at their last recorded episode.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
+import numba
 import numpy as np
 import torch
+from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal import _kernels
+from torchrl_subgoal.agents.actor_critic import FourierActorCritic
 from torchrl_subgoal.agents.loop import EpisodeRecords
 from torchrl_subgoal.agents.sarsa import SoftmaxSarsa
 from torchrl_subgoal.envs.four_rooms import FourRoomsEnv
+from torchrl_subgoal.envs.pinball import PinBallEnv, step_balls
 from torchrl_subgoal.potentials import NaivePotential, TabularPotential
 from torchrl_subgoal.subgoals import StateAggregation, SubgoalTables
 from torchrl_subgoal.transform import SubgoalPotentialTransform
 
-__all__ = ["run_episodes_fused"]
+__all__ = ["run_episodes_fused", "run_four_rooms_fused", "run_pinball_fused"]
 
 
 def _unwrap(env: EnvBase) -> tuple[FourRoomsEnv, SubgoalPotentialTransform | None]:
@@ -51,7 +64,68 @@ def _unwrap(env: EnvBase) -> tuple[FourRoomsEnv, SubgoalPotentialTransform | Non
     )
 
 
+def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase, n: int) -> dict[str, Any]:
+    """The transform's tables, its per-learner state after reset and its potential, as arrays."""
+    empty3 = np.zeros((n, 1, 1), np.float32)
+    state: dict[str, Any] = {
+        "kind": _kernels.NO_SHAPING,
+        "regions": (empty3, empty3, empty3, empty3, np.zeros((n, 1), np.float32), np.zeros((n, 1, 1), np.bool_)),
+        "lookup": np.zeros(1, np.int64),
+        "z": np.zeros((n, 1), np.int64), "achieved": np.zeros((n, 1), np.bool_),
+        "r_h": np.zeros((n, 1), np.float32), "k": np.zeros((n, 1), np.int64),
+        "table": np.zeros((0, 1), np.float32), "shared": False, "eta": 0.0,
+        "gamma": 0.0, "value_gamma": 0.0, "value_lr": 0.0, "zero_terminal": False,
+    }
+    if shaping is None:
+        return state
+    abstraction = shaping._abstraction
+    if isinstance(abstraction, SubgoalTables):
+        t = abstraction._np
+        state["kind"] = _kernels.SUBGOAL_SHAPING
+        state["regions"] = (t["lo"], t["hi"], t["centre"], t["weight"], t["radius2"], t["succ"])
+    elif isinstance(abstraction, StateAggregation) and isinstance(abstraction.mapping, torch.Tensor):
+        state["kind"] = _kernels.LOOKUP_SHAPING
+        state["lookup"] = abstraction.mapping.numpy()
+    elif not (isinstance(abstraction, StateAggregation) and abstraction.regions is not None):
+        raise TypeError("the fused engine needs a subgoal series, a lookup or a region aggregation")
+    potential = shaping.potential
+    if isinstance(potential, TabularPotential):
+        state["table"] = potential.table.detach().numpy().reshape(-1, potential.num_states)
+        state["shared"] = state["table"].shape[0] == 1 and not potential.batch_shape
+    elif isinstance(potential, NaivePotential):
+        state["eta"] = potential.eta
+    else:
+        raise TypeError(f"the fused engine shapes with tabular or naive potentials, not {type(potential).__name__}")
+    for key, name in (("z", "subgoal_index"), ("r_h", "subgoal_return"), ("k", "subgoal_steps")):
+        state[key] = td.get(name).reshape(n, 1).numpy().copy()
+    state["gamma"], state["value_gamma"] = shaping.gamma, shaping.value_gamma
+    state["value_lr"] = shaping._value_lr if shaping.learning else 0.0
+    state["zero_terminal"] = shaping.zero_terminal_potential
+    return state
+
+
 def run_episodes_fused(
+    env: EnvBase,
+    agent: SoftmaxSarsa | FourierActorCritic,
+    episodes: int,
+    *,
+    progress: Callable[[int], None] | None = None,
+) -> EpisodeRecords:
+    """Same as ``run_episodes(env, agent, episodes)`` (see the module doc), compiled."""
+    base = env.base_env if isinstance(env, TransformedEnv) else env
+    if base.device.type != "cpu":
+        raise TypeError("the fused engine runs on the CPU")
+    if isinstance(base, PinBallEnv) and isinstance(agent, FourierActorCritic):
+        return run_pinball_fused(env, agent, episodes, progress=progress)
+    if isinstance(base, FourRoomsEnv) and isinstance(agent, SoftmaxSarsa):
+        return run_four_rooms_fused(env, agent, episodes, progress=progress)
+    raise TypeError(
+        "the fused engine runs FourRoomsEnv with SoftmaxSarsa or PinBallEnv with FourierActorCritic, "
+        f"got {type(base).__name__} with {type(agent).__name__}; use engine='torchrl'"
+    )
+
+
+def run_four_rooms_fused(
     env: EnvBase,
     agent: SoftmaxSarsa,
     episodes: int,
@@ -59,72 +133,18 @@ def run_episodes_fused(
     progress: Callable[[int], None] | None = None,
     block: int = 2048,
 ) -> EpisodeRecords:
-    """Same as ``run_episodes(env, agent, episodes)`` (see the module doc), compiled.
-
-    Args:
-        env: ``FourRoomsEnv`` or ``TransformedEnv(FourRoomsEnv, SubgoalPotentialTransform)``.
-        agent: the SARSA learners; their Q tables are trained in place.
-        episodes: episodes per learner.
-        progress: called with learner-episodes finished, once per block of steps.
-        block: steps per compiled call (random numbers are drawn per block).
-    """
+    """The fused engine for four-rooms with SARSA (see :func:`run_episodes_fused`)."""
     base, shaping = _unwrap(env)
-    if not isinstance(agent, SoftmaxSarsa):
-        raise TypeError(f"the fused engine trains SoftmaxSarsa, got {type(agent).__name__}")
-    if base.device.type != "cpu":
-        raise TypeError("the fused engine runs on the CPU")
     td = agent.act(env.reset())  # the same start as the TorchRL loop, tables compiled
     n = max(1, base.batch_size.numel())
     action = td.get("action").reshape(-1).numpy().copy()
-
-    if shaping is None:
-        kind, observe_cell = _kernels.NO_SHAPING, False
-        tables: dict[str, np.ndarray] = {}
-        lookup, initial_z = np.zeros(1, np.int64), 0
-        z = np.zeros((n, 1), np.int64)
-        achieved = np.zeros((n, 1), np.bool_)
-        r_h = np.zeros((n, 1), np.float32)
-        k = np.zeros((n, 1), np.int64)
-        table, shared, eta = np.zeros((0, 1), np.float32), False, 0.0
-        gamma_shaping = value_gamma = value_lr = 0.0
-        zero_terminal = False
-    else:
-        abstraction = shaping._abstraction
-        observe_cell = shaping.observation_key == "cell"
-        if shaping.observation_key not in ("cell", "observation"):
-            raise TypeError(f"the fused engine reads 'cell' or 'observation', not {shaping.observation_key!r}")
-        if isinstance(abstraction, SubgoalTables):
-            kind, tables = _kernels.SUBGOAL_SHAPING, abstraction._np
-            lookup, initial_z = np.zeros(1, np.int64), 0
-        elif isinstance(abstraction, StateAggregation) and isinstance(abstraction.mapping, torch.Tensor):
-            if observe_cell:
-                raise TypeError("a lookup aggregation reads the state number ('observation')")
-            kind, tables = _kernels.LOOKUP_SHAPING, {}
-            lookup = abstraction.mapping.numpy()
-            initial_z = int(lookup[base.start_state])
-        else:
-            raise TypeError("the fused engine needs a subgoal series or a lookup aggregation")
-        potential = shaping.potential
-        if isinstance(potential, TabularPotential):
-            table = potential.table.detach().numpy().reshape(-1, potential.num_states)
-            shared, eta = table.shape[0] == 1 and not potential.batch_shape, 0.0
-        elif isinstance(potential, NaivePotential):
-            table, shared, eta = np.zeros((0, 1), np.float32), False, potential.eta
-        else:
-            raise TypeError(f"the fused engine shapes with tabular or naive potentials, not {type(potential).__name__}")
-        z = td.get("subgoal_index").reshape(n, 1).numpy().copy()
-        r_h = td.get("subgoal_return").reshape(n, 1).numpy().copy()
-        k = td.get("subgoal_steps").reshape(n, 1).numpy().copy()
-        achieved = np.zeros((n, 1), np.bool_)
-        gamma_shaping, value_gamma = shaping.gamma, shaping.value_gamma
-        value_lr = shaping._value_lr if shaping.learning else 0.0
-        zero_terminal = shaping.zero_terminal_potential
-    empty3 = np.zeros((n, 1, 1), np.float32)
-    lo = tables.get("lo", empty3)
-    regions = (lo, tables.get("hi", empty3), tables.get("centre", empty3), tables.get("weight", empty3),
-               tables.get("radius2", np.zeros((n, 1), np.float32)),
-               tables.get("succ", np.zeros((n, 1, 1), np.bool_)))
-
+    state = _shaping_state(shaping, td, n)
+    observe_cell = shaping is not None and shaping.observation_key == "cell"
+    if shaping is not None and shaping.observation_key not in ("cell", "observation"):
+        raise TypeError(f"the fused engine reads 'cell' or 'observation', not {shaping.observation_key!r}")
+    if state["kind"] == _kernels.LOOKUP_SHAPING and observe_cell:
+        raise TypeError("a lookup aggregation reads the state number ('observation')")
+    initial_z = int(state["lookup"][base.start_state]) if state["kind"] == _kernels.LOOKUP_SHAPING else 0
     steps = torch.zeros(n, episodes, dtype=torch.long)
     returns = torch.zeros(n, episodes)
     success = torch.zeros(n, episodes, dtype=torch.bool)
@@ -136,8 +156,9 @@ def run_episodes_fused(
         taken, filed = _kernels.sarsa_grid_run(
             base._state.numpy(), base._t.numpy(), base._transitions_np, base._cells_np,
             base.start_state, base.goal_state, base.max_steps,
-            kind, observe_cell, *regions, lookup, initial_z,
-            z, achieved, r_h, k, table, shared, eta, gamma_shaping, value_gamma, value_lr, zero_terminal,
+            state["kind"], observe_cell, *state["regions"], state["lookup"], initial_z,
+            state["z"], state["achieved"], state["r_h"], state["k"], state["table"], state["shared"],
+            state["eta"], state["gamma"], state["value_gamma"], state["value_lr"], state["zero_terminal"],
             agent._q, agent.abstract_states, action, cfg.lr, cfg.gamma, 1.0 / cfg.temperature, uniforms,
             t_rec, ret, done_episodes, steps.numpy(), returns.numpy(), success.numpy(),
         )
@@ -145,3 +166,182 @@ def run_episodes_fused(
         if progress is not None and filed:
             progress(filed)
     return EpisodeRecords(steps, returns, success, env_steps)
+
+
+# --------------------------------------------------------------------------- PinBall
+
+
+@numba.njit(cache=True, nogil=True)
+def _pinball_ac_run(  # type: ignore[no-untyped-def]
+    # the env: state arrays updated in place, geometry, dynamics settings
+    position, velocity, env_steps, start_x, start_y, edges, boxes, first_edge, ball_radius,
+    target_x, target_y, target_radius, velocity_limit, max_steps, random_prob, goal_reward,
+    step_penalty, thrust_penalty, env_uniforms,
+    # the shaping transform
+    shaping, lo, hi, centre, weight, radius2, succ, region_lo, region_hi, region_centre, region_weight,
+    region_radius2, z, achieved, r_h, k, table, shared, eta, gamma_shaping, value_gamma, value_lr, zero_terminal,
+    # the actor-critic learners
+    w, theta, phi, probs, action, low, inv_range, order, half, agent_uniforms, actor_lr, critic_lr, gamma, normalize,
+    # records
+    t_rec, ret, episode, steps_out, returns_out, success_out,
+):
+    """PinBall + shaping + actor-critic, the TorchRL loop's kernels in its order (see module doc).
+
+    Learners that have all their episodes are skipped (the random draws stay
+    aligned, so every recorded episode is the TorchRL loop's).
+    """
+    n = position.shape[0]
+    n_actions = 5
+    executed = np.empty(n, np.int64)
+    reached = np.empty(n, np.bool_)
+    reward = np.empty((n, 1), np.float32)
+    terminated = np.empty((n, 1), np.bool_)
+    done = np.empty((n, 1), np.bool_)
+    obs = np.empty((n, 4), np.float32)
+    obs_next = np.empty((n, 4), np.float64)
+    obs_root = np.empty((n, 4), np.float64)
+    z_next = np.empty((n, 1), np.int64)
+    rh_out = np.empty((n, 1), np.float32)
+    k_out = np.empty((n, 1), np.int64)
+    shaped = np.empty((n, 1), np.float32)
+    no_f = np.empty((0, 1), np.float32)
+    no_i = np.empty((0, 1), np.int64)
+    no_b = np.empty((0, 1), np.bool_)
+    active = np.empty(n, np.bool_)
+    next_action = np.empty(n, np.int64)
+    max_episodes = steps_out.shape[1]
+    filed_total = 0
+    for step in range(agent_uniforms.shape[0]):
+        u = env_uniforms[step]
+        for b in range(n):
+            executed[b] = min(int(u[n + b] * n_actions), n_actions - 1) if u[b] < random_prob else action[b]
+        step_balls(position, velocity, executed, reached, edges, boxes, first_edge, ball_radius,
+                   target_x, target_y, target_radius, velocity_limit)
+        for b in range(n):
+            env_steps[b] += 1
+            term = reached[b]
+            terminated[b, 0] = term
+            done[b, 0] = term or env_steps[b] >= max_steps
+            r = goal_reward if term else 0.0
+            if step_penalty != 0.0 or thrust_penalty != 0.0:
+                r += thrust_penalty if executed[b] != n_actions - 1 else step_penalty
+            reward[b, 0] = r
+            obs[b, 0], obs[b, 1] = position[b, 0], position[b, 1]
+            obs[b, 2], obs[b, 3] = velocity[b, 0], velocity[b, 1]
+        if shaping == _kernels.NO_SHAPING:
+            shaped[:, 0] = reward[:, 0]
+        else:
+            if shaping == _kernels.SUBGOAL_SHAPING:
+                _kernels.advance_regions(z, obs, lo, hi, centre, weight, radius2, succ, z_next)
+            else:
+                _kernels.first_region(z, obs, region_lo, region_hi, region_centre, region_weight,
+                                      region_radius2, z_next)
+            _kernels.shape_step(z, z_next, achieved, r_h, k, reward, done, terminated, table, shared, eta,
+                                gamma_shaping, value_gamma, value_lr, zero_terminal, rh_out, k_out, shaped,
+                                no_f, no_i, no_b)
+        for b in range(n):
+            for d in range(4):
+                obs_next[b, d] = obs[b, d]
+            if done[b, 0]:  # the env and the transform reset this ball
+                position[b, 0], position[b, 1] = start_x, start_y
+                velocity[b, 0], velocity[b, 1] = 0.0, 0.0
+                env_steps[b] = 0
+                if shaping != _kernels.NO_SHAPING:
+                    achieved[b, 0] = False
+                    r_h[b, 0] = 0.0
+                    k[b, 0] = 0
+                    z[b, 0] = 0
+            elif shaping != _kernels.NO_SHAPING:
+                achieved[b, 0] = z_next[b, 0] != z[b, 0]
+                z[b, 0] = z_next[b, 0]
+                r_h[b, 0] = rh_out[b, 0]
+                k[b, 0] = k_out[b, 0]
+            obs_root[b, 0] = np.float32(position[b, 0])
+            obs_root[b, 1] = np.float32(position[b, 1])
+            obs_root[b, 2] = np.float32(velocity[b, 0])
+            obs_root[b, 3] = np.float32(velocity[b, 1])
+            active[b] = episode[b] < max_episodes
+        if shaping == _kernels.LOOKUP_SHAPING:  # region aggregation: z of the reset state
+            _kernels.first_region(z, obs_root, region_lo, region_hi, region_centre, region_weight,
+                                  region_radius2, z_next)
+            for b in range(n):
+                if done[b, 0]:
+                    z[b, 0] = z_next[b, 0]
+        _kernels.ac_step(w, theta, phi, probs, action, shaped[:, 0], obs_next, terminated[:, 0], done[:, 0], obs_root,
+                         active, low, inv_range, order, half, agent_uniforms[step], actor_lr, critic_lr, gamma,
+                         normalize, next_action)
+        filed_total += _kernels.record_episodes(done[:, 0], terminated[:, 0], reward[:, 0], t_rec, ret, episode,
+                                                steps_out, returns_out, success_out)
+        for b in range(n):
+            if active[b]:
+                action[b] = next_action[b]
+        if episode.min() >= max_episodes:
+            return step + 1, filed_total
+    return agent_uniforms.shape[0], filed_total
+
+
+def run_pinball_fused(
+    env: EnvBase,
+    agent: FourierActorCritic,
+    episodes: int,
+    *,
+    progress: Callable[[int], None] | None = None,
+    block: int = 1024,
+) -> EpisodeRecords:
+    """The fused engine for :class:`~torchrl_subgoal.envs.PinBallEnv` with a
+    :class:`~torchrl_subgoal.agents.FourierActorCritic` (see :func:`run_episodes_fused`)."""
+    base, shaping = _unwrap_pinball(env)
+    if base.physics.backend != "numba":
+        raise TypeError("the fused engine needs PinBall's numba physics backend")
+    td = agent.act(env.reset())
+    n = base.batch_size.numel()
+    action = td.get("action").reshape(-1).numpy().copy()
+    region = {k: np.zeros((1, 4), np.float32) for k in ("lo", "hi", "centre", "weight")}
+    region["radius2"] = np.zeros(1, np.float32)
+    state = _shaping_state(shaping, td, n)
+    kind = state["kind"]
+    if shaping is not None and isinstance(shaping._abstraction, StateAggregation):
+        if shaping._abstraction.regions is None:
+            raise TypeError("the fused PinBall engine needs a region aggregation (StateAggregation.from_regions)")
+        region = shaping._abstraction.regions
+        kind = _kernels.LOOKUP_SHAPING
+    if state["shared"]:
+        raise TypeError("the fused PinBall engine skips finished learners, so each needs its own potential table")
+    g = base.physics.geometry
+    tx, ty, tr = g.target
+    steps = torch.zeros(n, episodes, dtype=torch.long)
+    returns = torch.zeros(n, episodes)
+    success = torch.zeros(n, episodes, dtype=torch.bool)
+    t_rec, ret, done_episodes = np.zeros(n, np.int64), np.zeros(n), np.zeros(n, np.int64)
+    cfg = agent.config
+    env_steps = 0
+    while done_episodes.min() < episodes:
+        env_uniforms = base._rng.random((block, 2 * n)) if base.random_action_prob > 0 else np.ones((block, 2 * n))
+        agent_uniforms = agent.rng.random((block, n))
+        taken, filed = _pinball_ac_run(
+            base._position.numpy(), base._velocity.numpy(), base._steps.numpy(), base.start[0], base.start[1],
+            g.edges, g.boxes, g.first_edge, g.ball_radius, tx, ty, tr, base.physics.velocity_limit,
+            base.max_steps, base.random_action_prob, base.goal_reward, base.step_penalty, base.thrust_penalty,
+            env_uniforms, kind, *state["regions"], region["lo"], region["hi"], region["centre"], region["weight"],
+            region["radius2"], state["z"], state["achieved"], state["r_h"], state["k"], state["table"],
+            state["shared"], state["eta"], state["gamma"], state["value_gamma"], state["value_lr"],
+            state["zero_terminal"], agent.w, agent.theta, agent.phi, agent.probs, action, agent.low, agent.inv_range,
+            cfg.order, agent.half, agent_uniforms, cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr,
+            t_rec, ret, done_episodes, steps.numpy(), returns.numpy(), success.numpy(),
+        )
+        env_steps += taken
+        if progress is not None and filed:
+            progress(filed)
+    return EpisodeRecords(steps, returns, success, env_steps)
+
+
+def _unwrap_pinball(env: EnvBase) -> tuple[PinBallEnv, SubgoalPotentialTransform | None]:
+    if isinstance(env, PinBallEnv):
+        return env, None
+    if isinstance(env, TransformedEnv) and isinstance(env.base_env, PinBallEnv):
+        if isinstance(env.transform, SubgoalPotentialTransform):
+            return env.base_env, env.transform
+    raise TypeError(
+        "the fused engine runs PinBallEnv, alone or with one SubgoalPotentialTransform; "
+        f"got {env}. Use engine='torchrl' for other envs and transforms."
+    )

@@ -46,6 +46,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+import numba
 import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -377,12 +378,25 @@ def _step_balls(
         reached[i] = done
 
 
-@functools.cache
-def _numba_kernel() -> Callable[..., None]:
-    import numba
+def random_actions(action: np.ndarray, uniforms: np.ndarray, probability: float) -> np.ndarray:
+    """Replace each action by a uniformly random one with ``probability``.
 
-    kernel: Callable[..., None] = numba.njit(cache=True, nogil=True)(_step_balls)
-    return kernel
+    ``uniforms`` holds ``2n`` draws: the first ``n`` decide, the last ``n``
+    pick the action, so blocks of draws give the same actions as draws made
+    one step at a time (what the fused engine relies on).
+    """
+    n = action.shape[0]
+    replace = uniforms[:n] < probability
+    random = np.minimum((uniforms[n:] * len(ACTION_NAMES)).astype(np.int64), len(ACTION_NAMES) - 1)
+    return np.where(replace, random, action)
+
+
+#: the compiled physics kernel (also called from the fused engine's loop)
+step_balls = numba.njit(cache=True, nogil=True)(_step_balls)
+
+
+def _numba_kernel() -> Callable[..., None]:
+    return step_balls  # type: ignore[no-any-return]
 
 
 def _torch_kernel(
@@ -669,8 +683,7 @@ class PinBallEnv(EnvBase):
         self._steps = torch.zeros(n, dtype=torch.int64, device=device)
         self._start = torch.tensor(cfg.start, dtype=torch.float64, device=device)
         self._position[:] = self._start
-        self._generator = torch.Generator(device=device)
-        self._set_seed(seed)
+        self._rng = np.random.default_rng(seed)
 
         # Reflections keep the speed, which the thrust clip bounds by √2·limit.
         speed = math.sqrt(2.0) * self.velocity_limit
@@ -729,10 +742,9 @@ class PinBallEnv(EnvBase):
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = tensordict.get("action")
         if self.random_action_prob > 0.0:
-            n, g = action.shape[0], self._generator
-            replace = torch.rand(n, generator=g, device=self.device) < self.random_action_prob
-            random = torch.randint(len(ACTION_NAMES), (n,), generator=g, device=self.device)
-            action = torch.where(replace, random, action)
+            action = torch.from_numpy(
+                random_actions(action.cpu().numpy(), self._rng.random(2 * action.shape[0]), self.random_action_prob)
+            ).to(self.device)
         terminated = self.physics.step(self._position, self._velocity, action).unsqueeze(1)
         self._steps += 1
         truncated = (self._steps >= self.max_steps).unsqueeze(1) & ~terminated
@@ -753,10 +765,7 @@ class PinBallEnv(EnvBase):
         )
 
     def _set_seed(self, seed: int | None) -> None:
-        if seed is None:
-            self._generator.seed()
-        else:
-            self._generator.manual_seed(int(seed))
+        self._rng = np.random.default_rng(seed)
 
     # -- map helpers -------------------------------------------------------
 

@@ -1,0 +1,159 @@
+"""PinBall: a Fourier-basis actor-critic with subgoal-based reward shaping against the paper's baselines.
+
+Reproduces the PinBall experiment of Okudo & Yamada, "Reward Shaping with
+Dynamic Trajectory Aggregation" (IJCNN 2021), on the "simple" map:
+
+* HRS      — shaping from the ten participants' two-circle subgoal series (ours),
+* RRS      — the same with ten random two-circle series,
+* AC       — no shaping,
+* NRS      — naive subgoal shaping with a fixed potential η (10,000),
+* SARSA-RS — a learned potential over three abstract states (thirds of the table in x).
+
+``learnings`` learnings per pattern (ten patterns; the unshaped methods get
+ten times as many of one pseudo-pattern), each method's learnings batched.
+Results go to ``--results`` chunk by chunk (re-run to resume); the report
+gives times to reach a 10-episode moving average of 3000/2000/1000/500 steps
+beside the paper's table.
+
+    python recipes/pinball.py                   # the paper's scale: 100 learnings per method
+    python recipes/pinball.py --learnings 2     # a quick look
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from importlib.resources import files
+from typing import Any
+
+import torch
+from torchrl.envs import TransformedEnv
+
+from torchrl_subgoal import Box, Circle, StateAggregation, SubgoalSeries, load_patterns
+from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic, run_episodes
+from torchrl_subgoal.envs import PinBallEnv
+from torchrl_subgoal.experiments import Chunk, EpisodeTable, MethodSpec, Sweep, write_report
+from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
+from torchrl_subgoal.methods import paper_methods, random_patterns, shaping_transform
+
+METHODS = paper_methods(baseline="AC")
+PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "pinball_participants.yaml")
+SUBGOAL_RADIUS = 0.04  # the target's radius, as in the paper
+
+
+@dataclass
+class Config:
+    """PinBall reproduction: actor-critic with HRS, RRS, NRS and SARSA-RS."""
+
+    preset: str = setting("released", "actor-critic hyper-parameters: the paper's text or the released "
+                          "configuration", choices=sorted(AC_PRESETS))
+    episodes: int = setting(200, "episodes per learning (paper: 200)")
+    learnings: int = setting(10, "learnings per subgoal pattern (paper: 10)")
+    methods: str = setting(",".join(METHODS), "comma-separated methods to run")
+    subgoals: str = setting(PARTICIPANTS, "subgoal file of the human patterns (HRS, NRS)")
+    random_patterns: int = setting(10, "random subgoal patterns for RRS (paper: 10)")
+    eta: float = setting(10_000.0, "NRS potential η (paper: 10,000)")
+    zero_terminal_potential: bool = setting(True, "Φ = 0 at the goal (exact policy invariance)")
+    map: str = setting("simple", "PinBall configuration: simple, hard or a file")
+    max_steps: int = setting(10_000, "episode cap (paper: 10,000)")
+    engine: str = setting("fused", "fused: one compiled loop; torchrl: step_and_maybe_reset (same episodes)",
+                          choices=["fused", "torchrl"])
+    seed: int = setting(0, "sweep seed (random patterns, chunk seeds)")
+    results: str = setting("results/pinball", "results directory (re-run to resume)")
+    backend: str = setting("local", "where chunks run", choices=["local", "ray"])
+    workers: int = setting(2, "local worker processes (0: in this process)")
+    chunk_size: int = setting(100, "learners per batch")
+    overwrite: bool = setting(False, "discard results of a different experiment in --results")
+
+    def __post_init__(self) -> None:
+        for name in ("episodes", "learnings", "random_patterns", "max_steps", "chunk_size"):
+            check(getattr(self, name) >= 1, name, f"must be >= 1, got {getattr(self, name)}")
+        check(self.eta >= 0, "eta", f"must be >= 0, got {self.eta}")
+        check(self.workers >= 0, "workers", f"must be >= 0, got {self.workers}")
+        unknown = [m for m in self.method_names if m not in METHODS]
+        check(not unknown, "methods", f"unknown {unknown}; choose among {list(METHODS)}")
+
+    @property
+    def method_names(self) -> list[str]:
+        return [m.strip() for m in self.methods.split(",") if m.strip()]
+
+
+def thirds_of_the_table() -> StateAggregation:
+    """SARSA-RS's three abstract states: x in [0, 1/3], [1/3, 2/3], [2/3, 1]."""
+    return StateAggregation.from_regions([Box((c,), (1 / 6,), (0,)) for c in (1 / 6, 1 / 2, 5 / 6)], 4)
+
+
+def build_patterns(cfg: Config) -> dict[str, dict[str, SubgoalSeries]]:
+    """The human patterns (from the file) and the seeded random ones, by kind."""
+    human = load_patterns(cfg.subgoals, domain="pinball")
+    env = PinBallEnv(1, cfg.map)
+    points = env.sample_free_positions(500, torch.Generator().manual_seed(cfg.seed))
+    candidates = [Circle((float(x), float(y)), SUBGOAL_RADIUS) for x, y in points.tolist()]
+    num_subgoals = max(len(p) for p in human.values())
+    rand = random_patterns(candidates, cfg.random_patterns, num_subgoals, seed=cfg.seed)
+    return {"human": human, "random": {p.name: p for p in rand}, "none": {}}
+
+
+def method_specs(cfg: Config, patterns: Mapping[str, Mapping[str, SubgoalSeries]]) -> list[MethodSpec]:
+    """Learners of each method: every pattern ``learnings`` times (unshaped: as many in all)."""
+    specs = []
+    for name in cfg.method_names:
+        kind = METHODS[name].subgoals
+        names = list(patterns[kind]) or ["none"]
+        per_pattern = cfg.learnings if kind != "none" else cfg.learnings * len(patterns["human"])
+        specs.append(MethodSpec(name, names, per_pattern))
+    return specs
+
+
+def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
+    """One batch of learnings of one method: env batch = learners."""
+    ac = AC_PRESETS[config["preset"]]
+    method = METHODS[chunk.method]
+    names = sorted({pattern for pattern, _ in chunk.learners})
+    patterns = [SubgoalSeries.from_dict(config["patterns"][n], name=n) for n in names if n != "none"]
+    pattern_index = torch.tensor([names.index(p) for p, _ in chunk.learners])
+
+    env = PinBallEnv(chunk.n_learners, config["map"], max_steps=config["max_steps"], seed=chunk.seed)
+    shaping = shaping_transform(
+        method, env.batch_size, gamma=ac.gamma, value_lr=ac.value_lr, patterns=patterns,
+        pattern_index=pattern_index, aggregation=thirds_of_the_table(), eta=config["eta"],
+        zero_terminal_potential=config["zero_terminal_potential"],
+    )
+    learning_env = TransformedEnv(env, shaping) if shaping is not None else env
+    spec = env.observation_spec["observation"]
+    agent = FourierActorCritic(chunk.n_learners, spec.low[0], spec.high[0], 5, ac, seed=chunk.seed)
+    records = run_episodes(learning_env, agent, config["episodes"], progress=progress, engine=config["engine"])
+    return EpisodeTable(records.steps, records.returns, records.success)
+
+
+def main(argv: list[str] | None = None) -> int:
+    torch.set_num_threads(1)
+    try:
+        cfg = parse_config(Config, argv, description=__doc__.splitlines()[0] if __doc__ else None)
+        patterns = build_patterns(cfg)
+    except (ConfigError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    settings = dataclasses.asdict(cfg)
+    config = {
+        **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential", "map",
+                                    "max_steps", "engine")},
+        "actor_critic": dataclasses.asdict(AC_PRESETS[cfg.preset]),
+        "subgoal_file": cfg.subgoals,
+        "patterns": {n: s.to_dict() for kind in ("human", "random") for n, s in patterns[kind].items()},
+        "report": {"metric": "steps", "thresholds": [3000, 2000, 1000, 500], "window": 10,
+                   "asymptotic_window": [cfg.episodes - 10, cfg.episodes], "map": {"config": cfg.map}},
+    }
+    sweep = Sweep("pinball", cfg.results, method_specs(cfg, patterns), run_chunk, config,
+                  seed=cfg.seed, chunk_size=cfg.chunk_size, n_episodes=cfg.episodes, overwrite=cfg.overwrite)
+    sweep.run(backend=cfg.backend, workers=cfg.workers)
+    report = write_report(cfg.results)
+    print(report.markdown)
+    print(f"results, report.md, summary.json and plots in {cfg.results}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

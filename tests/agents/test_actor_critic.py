@@ -1,0 +1,66 @@
+"""Fourier-basis actor-critic: features, and one update checked against autograd."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from tensordict import TensorDict
+
+from torchrl_subgoal.agents import AC_PRESETS, ActorCriticConfig, FourierActorCritic, run_episodes
+from torchrl_subgoal.agents.actor_critic import fourier_coefficients
+from torchrl_subgoal.envs import PinBallEnv
+
+LOW, HIGH = [0.0, 0.0, -2.0, -2.0], [1.0, 1.0, 2.0, 2.0]
+
+
+def test_features_are_cosines_of_the_scaled_state() -> None:
+    agent = FourierActorCritic(1, LOW, HIGH, 5, AC_PRESETS["paper"])
+    obs = torch.tensor([[0.3, 0.7, -1.0, 0.5], [1.2, -0.1, 3.0, 0.0]])  # the second is clipped to the cube
+    scaled = ((obs.double() - torch.tensor(LOW).double()) / 4.0 * torch.tensor([4.0, 4.0, 1.0, 1.0])).clamp(0, 1)
+    reference = torch.cos(torch.pi * scaled @ fourier_coefficients(3, 4).T)
+    assert agent.num_features == 256
+    assert torch.allclose(agent.features(obs), reference, atol=1e-12)
+
+
+@pytest.mark.parametrize("normalize", [False, True])
+def test_one_update_matches_autograd(normalize: bool) -> None:
+    n, cfg = 3, ActorCriticConfig(actor_lr=0.05, critic_lr=0.1, gamma=0.9, value_lr=0.0, normalize_lr=normalize)
+    agent = FourierActorCritic(n, LOW, HIGH, 5, cfg, seed=0)
+    g = torch.Generator().manual_seed(0)
+    agent.w[:] = torch.randn(n, 256, generator=g, dtype=torch.float64).numpy() * 0.1
+    agent.theta[:] = torch.randn(n, 5, 256, generator=g, dtype=torch.float64).numpy() * 0.1
+    obs, obs_next = torch.rand(n, 4, generator=g), torch.rand(n, 4, generator=g)
+    agent.act(TensorDict({"observation": obs}, [n]))
+    w0, theta0 = torch.from_numpy(agent.w.copy()), torch.from_numpy(agent.theta.copy()).requires_grad_(True)
+    action = torch.tensor([0, 3, 4])
+    reward = torch.tensor([[1.0], [-2.0], [5.0]])
+    terminated = torch.tensor([[False], [False], [True]])
+    transition = TensorDict(
+        {"observation": obs, "action": action,
+         "next": {"observation": obs_next, "reward": reward, "terminated": terminated, "done": terminated}},
+        [n],
+    )
+    root = TensorDict({"observation": obs_next}, [n])
+    agent.step(transition, root)
+
+    phi, phi_next = agent.features(obs), agent.features(obs_next)
+    value, value_next = (w0 * phi).sum(-1), (w0 * phi_next).sum(-1) * (~terminated.squeeze(-1))
+    delta = reward.squeeze(-1).double() + 0.9 * value_next - value
+    scale = 1 / phi.norm(dim=-1) if normalize else torch.ones(n, dtype=torch.float64)
+    log_pi = torch.log_softmax(torch.einsum("naf,nf->na", theta0, phi), -1)[torch.arange(n), action]
+    log_pi.sum().backward()
+    expected_theta = theta0.detach() + (0.05 * scale * delta)[:, None, None] * theta0.grad
+    expected_w = w0 + (0.1 * scale * delta)[:, None] * phi
+    assert np.allclose(agent.theta, expected_theta.numpy(), atol=1e-10)
+    assert np.allclose(agent.w, expected_w.numpy(), atol=1e-10)
+
+
+def test_same_seed_same_learning() -> None:
+    def run() -> torch.Tensor:
+        env = PinBallEnv(3, seed=2, max_steps=200)
+        spec = env.observation_spec["observation"]
+        agent = FourierActorCritic(3, spec.low[0], spec.high[0], 5, AC_PRESETS["released"], seed=4)
+        return run_episodes(env, agent, 3).steps
+
+    assert torch.equal(run(), run())

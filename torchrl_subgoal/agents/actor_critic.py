@@ -1,0 +1,149 @@
+"""One-step actor-critic over a Fourier basis, batched: one critic and actor per learner."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from tensordict.utils import NestedKey
+
+from torchrl_subgoal import _kernels
+
+__all__ = ["AC_PRESETS", "ActorCriticConfig", "FourierActorCritic", "fourier_coefficients"]
+
+
+@dataclass(frozen=True)
+class ActorCriticConfig:
+    """Hyper-parameters of the PinBall actor-critic.
+
+    Attributes:
+        actor_lr: learning rate of the softmax actor.
+        critic_lr: learning rate of the linear critic.
+        gamma: discount.
+        value_lr: ``α_v`` of the subgoal potential (the shaping methods).
+        normalize_lr: divide both learning rates by ``‖φ(s)‖``.
+        order: order of the Fourier basis (``(order + 1)^D`` features).
+    """
+
+    actor_lr: float
+    critic_lr: float
+    gamma: float
+    value_lr: float
+    normalize_lr: bool = False
+    order: int = 3
+
+
+#: ``"paper"``: the paper's text, α = 0.01 for actor and critic, γ = 0.99; it
+#: gives no α_v, so the released 0.05 is used. ``"released"``: the authors'
+#: released configuration, α = 0.001 divided by ‖φ(s)‖, α_v = 0.05.
+AC_PRESETS: dict[str, ActorCriticConfig] = {
+    "paper": ActorCriticConfig(actor_lr=0.01, critic_lr=0.01, gamma=0.99, value_lr=0.05),
+    "released": ActorCriticConfig(actor_lr=0.001, critic_lr=0.001, gamma=0.99, value_lr=0.05, normalize_lr=True),
+}
+
+
+def fourier_coefficients(order: int, dim: int) -> torch.Tensor:
+    """Every ``c ∈ {0..order}^dim`` in lexicographic order, ``[(order+1)^dim, dim]`` (Konidaris et al. 2011)."""
+    return torch.tensor(list(itertools.product(range(order + 1), repeat=dim)), dtype=torch.float64)
+
+
+class FourierActorCritic:
+    """Linear actor-critic with a Fourier basis for a batch of independent learners.
+
+    Features ``φ_c(s) = cos(π c·s̃)`` for every ``c ∈ {0..order}^D`` on the state
+    scaled to the unit cube with ``low``/``high`` (256 features for PinBall's
+    4-d state at order 3). Critic ``V(s) = w·φ(s)``; actor
+    ``π(a|s) ∝ exp(θ_a·φ(s))``. Each step:
+    ``δ = r + γ V(s') (1 − terminated) − V(s)``, ``w += α_c δ φ(s)``,
+    ``θ += α_a δ ∇ log π(a|s)``. Draws use the agent's numpy generator, one
+    uniform per learner and step. One fused kernel per step.
+
+    Args:
+        num_learners: learners (env batch size).
+        low: lower bounds of the observation entries.
+        high: upper bounds.
+        num_actions: actions.
+        config: learning rates, discount, basis order.
+        seed: seed or numpy generator of the policy's draws.
+        observation_key: the observation.
+
+    Examples:
+        >>> from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic, run_episodes
+        >>> from torchrl_subgoal.envs import PinBallEnv
+        >>> env = PinBallEnv(4, seed=0, max_steps=50)
+        >>> spec = env.observation_spec["observation"]
+        >>> agent = FourierActorCritic(4, spec.low[0], spec.high[0], 5, AC_PRESETS["released"], seed=0)
+        >>> run_episodes(env, agent, 2).steps.shape
+        torch.Size([4, 2])
+    """
+
+    def __init__(
+        self,
+        num_learners: int,
+        low: Sequence[float] | torch.Tensor,
+        high: Sequence[float] | torch.Tensor,
+        num_actions: int,
+        config: ActorCriticConfig,
+        *,
+        seed: int | np.random.Generator = 0,
+        observation_key: NestedKey = "observation",
+    ) -> None:
+        self.config = config
+        self.low = np.asarray(torch.as_tensor(low, dtype=torch.float64))
+        high_ = np.asarray(torch.as_tensor(high, dtype=torch.float64))
+        if self.low.shape != high_.shape or self.low.ndim != 1 or not (high_ > self.low).all():
+            raise ValueError("low and high must be 1-D, the same size, with high > low")
+        self.inv_range = 1.0 / (high_ - self.low)
+        dim = self.low.shape[0]
+        self.half = dim // 2
+        self.num_features = (config.order + 1) ** dim
+        self.num_actions = num_actions
+        self.w = np.zeros((num_learners, self.num_features))
+        self.theta = np.zeros((num_learners, num_actions, self.num_features))
+        self.phi = np.zeros((num_learners, self.num_features))  # φ of each learner's current state
+        self.probs = np.full((num_learners, num_actions), 1.0 / num_actions)  # π(·|s) at that state
+        self.rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        self.observation_key = observation_key
+        self._all = np.ones(num_learners, dtype=np.bool_)
+
+    def features(self, observation: torch.Tensor) -> torch.Tensor:
+        """``φ(s)`` of a batch of observations ``[N, D]`` (the kernel's features, for inspection)."""
+        obs = observation.detach().cpu().numpy().astype(np.float64).reshape(-1, self.low.shape[0])
+        out = np.empty((obs.shape[0], self.num_features))
+        theta = np.zeros((obs.shape[0], 1, self.num_features))
+        _kernels.ac_act(theta, out, np.empty((obs.shape[0], 1)), obs, self.low, self.inv_range, self.config.order, self.half,
+                        np.zeros(obs.shape[0]), np.empty(obs.shape[0], np.int64))
+        return torch.from_numpy(out)
+
+    def value(self, observation: torch.Tensor) -> torch.Tensor:
+        """The critic ``V(s)`` of each learner at its own observation ``[N, D]``."""
+        return (self.features(observation) * torch.from_numpy(self.w)).sum(-1)
+
+    def _obs(self, tensordict: TensorDictBase) -> np.ndarray:
+        return tensordict.get(self.observation_key).numpy().astype(np.float64).reshape(self.w.shape[0], -1)
+
+    def act(self, tensordict: TensorDictBase) -> TensorDictBase:
+        n = self.w.shape[0]
+        action = np.empty(n, np.int64)
+        _kernels.ac_act(self.theta, self.phi, self.probs, self._obs(tensordict), self.low, self.inv_range,
+                        self.config.order, self.half, self.rng.random(n), action)
+        tensordict.set("action", torch.from_numpy(action))
+        return tensordict
+
+    def step(self, transition: TensorDictBase, next_root: TensorDictBase) -> None:
+        cfg = self.config
+        nxt = transition.get("next")
+        n = self.w.shape[0]
+        action = np.empty(n, np.int64)
+        _kernels.ac_step(
+            self.w, self.theta, self.phi, self.probs, transition.get("action").numpy().reshape(n),
+            nxt.get("reward").numpy().reshape(n), self._obs(nxt), nxt.get("terminated").numpy().reshape(n),
+            nxt.get("done").numpy().reshape(n), self._obs(next_root), self._all, self.low, self.inv_range,
+            cfg.order, self.half, self.rng.random(n), cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr,
+            action,
+        )
+        next_root.set("action", torch.from_numpy(action))
