@@ -1,0 +1,108 @@
+"""Batched four-rooms: env-steps per second with and without the shaping transform, and the two engines.
+
+Part 1 steps ``FourRoomsEnv(num_envs=N)`` with uniformly random actions through
+``step_and_maybe_reset`` (resets included) in four set-ups, interleaved and
+repeated (the machine is shared, so ratios are taken within one run):
+
+* ``bare``: the env alone;
+* ``wrapper``: ``TransformedEnv(env, Compose())`` — what TorchRL's transform machinery
+  costs before any transform does anything;
+* ``shaping``: ``TransformedEnv(env, SubgoalPotentialTransform(...))`` as the recipe
+  uses it (ten participants' patterns, tabular potential trained online);
+* ``shaping+transitions``: the same writing the SMDP transitions into the TensorDict.
+
+Part 2 trains SARSA with HRS for a few episodes with ``engine="torchrl"`` and
+``engine="fused"`` (identical results) and prints learner-steps per second.
+
+    python benchmarks/four_rooms_step.py             # N = 1000
+    python benchmarks/four_rooms_step.py --quick
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from importlib.resources import files
+
+import torch
+from torchrl.envs import Compose, EnvBase, TransformedEnv
+
+from torchrl_subgoal import SubgoalPotentialTransform, TabularPotential, load_patterns
+from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
+from torchrl_subgoal.envs import FourRoomsEnv
+
+PATTERNS = list(load_patterns(str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")).values())
+
+
+def shaping(n: int, write: bool) -> SubgoalPotentialTransform:
+    return SubgoalPotentialTransform(
+        PATTERNS, TabularPotential(3, (n,)), gamma=0.99, observation_key="cell",
+        pattern_index=torch.arange(n) % len(PATTERNS), value_lr=0.25, write_transitions=write,
+    )
+
+
+def setups(n: int) -> dict[str, EnvBase]:
+    return {
+        "bare": FourRoomsEnv(n),
+        "wrapper": TransformedEnv(FourRoomsEnv(n), Compose()),
+        "shaping": TransformedEnv(FourRoomsEnv(n), shaping(n, False)),
+        "shaping+transitions": TransformedEnv(FourRoomsEnv(n), shaping(n, True)),
+    }
+
+
+def time_steps(env: EnvBase, actions: torch.Tensor) -> float:
+    """Seconds per batched step over ``actions`` (one row per step)."""
+    td = env.reset()
+    start = time.perf_counter()
+    for row in actions:
+        td["action"] = row
+        _, td = env.step_and_maybe_reset(td)
+    return (time.perf_counter() - start) / len(actions)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--num-envs", type=int, default=1000)
+    parser.add_argument("--steps", type=int, default=1500)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--episodes", type=int, default=30, help="episodes per learner in part 2")
+    parser.add_argument("--quick", action="store_true")
+    args = parser.parse_args()
+    if args.quick:
+        args.steps, args.repeats, args.episodes = 300, 2, 5
+    torch.set_num_threads(1)
+    n = args.num_envs
+    envs = setups(n)
+    actions = torch.randint(0, 4, (args.steps, n), generator=torch.Generator().manual_seed(0))
+    for env in envs.values():  # warm up: kernels compiled, tables built
+        time_steps(env, actions[:50])
+    times: dict[str, list[float]] = {name: [] for name in envs}
+    for _ in range(args.repeats):
+        for name, env in envs.items():
+            times[name].append(time_steps(env, actions))
+    best = {name: min(t) for name, t in times.items()}
+    print(f"Part 1: FourRoomsEnv, N = {n} learners, {args.steps} random-action steps x {args.repeats} repeats")
+    print(f"{'set-up':<22}{'us/step (best)':>16}{'median':>10}{'env-steps/s':>14}")
+    for name, t in times.items():
+        print(f"{name:<22}{best[name] * 1e6:>16.0f}{statistics.median(t) * 1e6:>10.0f}{n / best[name]:>14,.0f}")
+    for name in ("shaping", "shaping+transitions"):
+        print(f"{name}: +{best[name] / best['wrapper'] - 1:.0%} over the wrapper alone, "
+              f"+{best[name] / best['bare'] - 1:.0%} over the bare env")
+
+    print(f"\nPart 2: SARSA + HRS, {args.episodes} episodes per learner, N = {n}")
+    rates = {}
+    for engine in ("torchrl", "fused"):
+        env = TransformedEnv(FourRoomsEnv(n), shaping(n, False))
+        agent = SoftmaxSarsa(n, 104, 4, SARSA_PRESETS["released"], seed=0)
+        start = time.perf_counter()
+        records = run_episodes(env, agent, args.episodes, engine=engine)  # type: ignore[arg-type]
+        seconds = time.perf_counter() - start
+        rates[engine] = records.env_steps * n / seconds
+        print(f"{engine:<8} {seconds:6.1f} s, {records.env_steps} batched steps, "
+              f"{rates[engine]:,.0f} learner-steps/s, mean episode {records.steps.float().mean():.0f} steps")
+    print(f"fused / torchrl: {rates['fused'] / rates['torchrl']:.1f}x")
+
+
+if __name__ == "__main__":
+    main()

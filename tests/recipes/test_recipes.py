@@ -1,0 +1,82 @@
+"""The recipes end to end on tiny settings: results, report, resume, bad settings."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def recipe(name: str) -> ModuleType:
+    spec = importlib.util.spec_from_file_location(f"recipe_{name}", ROOT / "recipes" / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_four_rooms_recipe(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    four_rooms = recipe("four_rooms")
+    args = ["--episodes", "30", "--learnings", "2", "--workers", "0", "--results", str(tmp_path)]
+    assert four_rooms.main(args) == 0
+    out = capsys.readouterr().out
+    assert "| 50 | HRS |" in out and "paper mean (s.d.)" in out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert set(summary["methods"]) == {"HRS", "RRS", "SARSA", "NRS", "SARSA-RS"}
+    assert summary["methods"]["SARSA"]["learners"] == 20  # 10 patterns x 2 learnings, as the shaped methods
+    assert (tmp_path / "learning_curves.png").stat().st_size > 10_000
+    assert (tmp_path / "patterns.png").stat().st_size > 10_000
+    chunks = sorted(tmp_path.glob("chunks/*/*.parquet"))
+    mtimes = [c.stat().st_mtime_ns for c in chunks]
+    assert four_rooms.main(args) == 0  # resumes: nothing recomputed
+    assert [c.stat().st_mtime_ns for c in chunks] == mtimes
+
+
+def test_four_rooms_engines_agree(tmp_path: Path) -> None:
+    four_rooms = recipe("four_rooms")
+    frames = []
+    for engine in ("torchrl", "fused"):
+        out = tmp_path / engine
+        args = ["--episodes", "8", "--learnings", "1", "--workers", "0", "--methods", "HRS,NRS",
+                "--engine", engine, "--results", str(out)]
+        assert four_rooms.main(args) == 0
+        from torchrl_subgoal.experiments import load_frame
+
+        frames.append(load_frame(out))
+    assert frames[0].equals(frames[1])
+
+
+@pytest.mark.parametrize(("flag", "value", "message"), [
+    ("--episodes", "0", "--episodes: must be >= 1"),
+    ("--methods", "HRS,XYZ", "--methods: unknown ['XYZ']"),
+    ("--eta", "-1", "--eta: must be >= 0"),
+])
+def test_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str], flag: str, value: str,
+                                    message: str) -> None:
+    assert recipe("four_rooms").main([flag, value, "--results", str(tmp_path)]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_bad_subgoal_file_names_file_and_field(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("patterns:\n  p: {subgoals: [{cell: [0, 0]}]}\n")
+    assert recipe("four_rooms").main(["--subgoals", str(bad), "--results", str(tmp_path / "r")]) == 2
+    assert f"{bad}: pattern 'p': subgoals[0].cell: (0, 0) is a wall" in capsys.readouterr().err
+
+
+def test_pinball_recipe(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pinball = recipe("pinball")
+    args = ["--episodes", "12", "--learnings", "1", "--max-steps", "300", "--workers", "0",
+            "--results", str(tmp_path)]
+    assert pinball.main(args) == 0
+    out = capsys.readouterr().out
+    assert "| 3000 | HRS |" in out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["window"] == 10 and set(summary["methods"]) == {"HRS", "RRS", "AC", "NRS", "SARSA-RS"}
