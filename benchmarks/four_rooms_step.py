@@ -92,6 +92,9 @@ def main() -> None:
 
     print(f"\nPart 2: SARSA + HRS, {args.episodes} episodes per learner, N = {n}")
     rates = {}
+    for engine in ("torchrl", "fused"):  # warm up: numba compiles (or loads) the kernels once
+        run_episodes(TransformedEnv(FourRoomsEnv(4, max_steps=20), shaping(4, False)),
+                     SoftmaxSarsa(4, 104, 4, SARSA_PRESETS["released"]), 1, engine=engine)  # type: ignore[arg-type]
     for engine in ("torchrl", "fused"):
         env = TransformedEnv(FourRoomsEnv(n), shaping(n, False))
         agent = SoftmaxSarsa(n, 104, 4, SARSA_PRESETS["released"], seed=0)

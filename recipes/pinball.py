@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
         "subgoal_file": cfg.subgoals,
         "patterns": {n: s.to_dict() for kind in ("human", "random") for n, s in patterns[kind].items()},
         "report": {"metric": "steps", "thresholds": [3000, 2000, 1000, 500], "window": 10,
-                   "asymptotic_window": [cfg.episodes - 10, cfg.episodes], "map": {"config": cfg.map}},
+                   "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes], "map": {"config": cfg.map}},
     }
     sweep = Sweep("pinball", cfg.results, method_specs(cfg, patterns), run_chunk, config,
                   seed=cfg.seed, chunk_size=cfg.chunk_size, n_episodes=cfg.episodes, overwrite=cfg.overwrite)

@@ -33,7 +33,7 @@ HALLWAYS = SubgoalSeries([Cell(3, 6), Cell(7, 9)], name="hallways")
 def path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
     """Run a test through the fused CPU kernels and through the eager torch code."""
     if request.param == "eager":
-        monkeypatch.setattr(SubgoalPotentialTransform, "_fusable", lambda self, z: False)
+        monkeypatch.setattr(SubgoalPotentialTransform, "_fused_constants", lambda self: None)
         monkeypatch.setattr("torchrl_subgoal.subgoals.SubgoalTables.advance",
                             lambda self, z, obs: self.advance_eager(z, obs))
     yield request.param
@@ -154,7 +154,7 @@ def test_fused_and_eager_paths_agree(monkeypatch: pytest.MonkeyPatch) -> None:
     def run(eager: bool) -> tuple[TensorDict, torch.Tensor]:
         with monkeypatch.context() as m:
             if eager:
-                m.setattr(SubgoalPotentialTransform, "_fusable", lambda self, z: False)
+                m.setattr(SubgoalPotentialTransform, "_fused_constants", lambda self: None)
             n = 16
             v = TabularPotential(3, batch_shape=(n,))
             with torch.no_grad():

@@ -19,27 +19,32 @@ import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)
-def advance_regions(z, obs, lo, hi, centre, weight, radius2, succ, z_out):
-    """``z_out[b]``: abstract state after observing ``obs[b]`` in ``z[b]`` (see SubgoalTables)."""
-    n, n_nodes, dim = lo.shape
-    for b in range(n):
+def advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_out):
+    """``z_out[b]``: abstract state after observing ``obs[b]`` in ``z[b]`` (see SubgoalTables).
+
+    Learner ``b`` follows pattern ``pattern[b]``; the region tables are per pattern
+    (``[P, J, D]``), which keeps them in cache whatever the number of learners.
+    """
+    n_nodes, dim = lo.shape[1], lo.shape[2]
+    for b in range(z.shape[0]):
+        p = pattern[b]
         zb = z[b, 0]
         z_out[b, 0] = zb
         for j in range(n_nodes):
-            if not succ[b, zb, j]:
+            if not succ[p, zb, j]:
                 continue
             inside = True
             for d in range(dim):
                 o = obs[b, d]
-                if o < lo[b, j, d] or o > hi[b, j, d]:
+                if o < lo[p, j, d] or o > hi[p, j, d]:
                     inside = False
                     break
-            if inside and radius2[b, j] < np.inf:
+            if inside and radius2[p, j] < np.inf:
                 s = 0.0
                 for d in range(dim):
-                    diff = obs[b, d] - centre[b, j, d]
-                    s += weight[b, j, d] * diff * diff
-                inside = s <= radius2[b, j]
+                    diff = obs[b, d] - centre[p, j, d]
+                    s += weight[p, j, d] * diff * diff
+                inside = s <= radius2[p, j]
             if inside:
                 z_out[b, 0] = j + 1
                 break
@@ -66,13 +71,17 @@ def shape_step(
     delta = np.zeros(n)
     for b in range(n):
         kb = k[b, 0]
-        r = r_h[b, 0] + reward[b, 0] * value_gamma**kb
-        kb += 1
         emit = z_next[b, 0] != z[b, 0] or done[b, 0]
+        r = r_h[b, 0]
+        discount = 1.0
+        if reward[b, 0] != 0.0 or emit:  # γ_v^k is needed only then
+            discount = value_gamma**kb
+            r += reward[b, 0] * discount
+        kb += 1
         if emit and lr > 0.0 and not naive:
             row = 0 if shared else b
             v_next = 0.0 if terminated[b, 0] else table[row, z_next[b, 0]]
-            delta[b] = r + value_gamma**kb * v_next - table[row, z[b, 0]]
+            delta[b] = r + discount * value_gamma * v_next - table[row, z[b, 0]]
         rh_out[b, 0] = 0.0 if emit else r
         k_out[b, 0] = 0 if emit else kb
         if emit_out.shape[0] > 0:
@@ -208,7 +217,7 @@ def sarsa_grid_run(  # type: ignore[no-untyped-def]
     # the grid env (its state arrays are updated in place)
     state, t_env, transitions, cells, start, goal, max_steps,
     # the shaping transform: which abstraction, its tables, its per-learner state and the potential
-    shaping, observe_cell, lo, hi, centre, weight, radius2, succ, lookup, initial_z,
+    shaping, observe_cell, pattern, lo, hi, centre, weight, radius2, succ, lookup, initial_z,
     z, achieved, r_h, k, table, shared, eta, gamma_shaping, value_gamma, value_lr, zero_terminal,
     # the SARSA learners
     q, abstract_states, action, lr, gamma, inv_temperature, uniforms,
@@ -255,9 +264,10 @@ def sarsa_grid_run(  # type: ignore[no-untyped-def]
         else:
             if shaping == SUBGOAL_SHAPING:
                 if observe_cell:
-                    advance_regions(z, cell, lo, hi, centre, weight, radius2, succ, z_next)
+                    advance_regions(z, cell, pattern, lo, hi, centre, weight, radius2, succ, z_next)
                 else:
-                    advance_regions(z, state.reshape((n, 1)), lo, hi, centre, weight, radius2, succ, z_next)
+                    advance_regions(z, state.reshape((n, 1)), pattern, lo, hi, centre, weight, radius2, succ,
+                                    z_next)
             else:
                 for b in range(n):
                     z_next[b, 0] = lookup[state[b]]
@@ -436,3 +446,15 @@ def ac_step(  # type: ignore[no-untyped-def]
         for f in range(n_features):
             phi[b, f] = phi_next[f]
         action_out[b] = _policy_sample(theta[b], phi[b], u[b], probs[b])
+
+
+@numba.njit(cache=True, nogil=True)
+def advance_and_shape(  # type: ignore[no-untyped-def]
+    z, obs, pattern, lo, hi, centre, weight, radius2, succ, achieved, r_h, k, reward, done, terminated,
+    table, shared, eta, gamma, value_gamma, value_lr, zero_terminal,
+    z_out, rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out,
+):
+    """:func:`advance_regions` then :func:`shape_step`: one transform step in one call."""
+    advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_out)
+    shape_step(z, z_out, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma,
+               value_gamma, value_lr, zero_terminal, rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out)

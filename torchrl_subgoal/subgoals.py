@@ -672,9 +672,11 @@ class SubgoalTables:
         self.succ = succ[flat]
         self.uses_circle = bool(torch.isfinite(radius2).any())
         self._rows = torch.arange(flat.numel())
+        # the kernels read per-pattern tables and each learner's pattern (small, stays in cache)
         self._np = {
-            name: getattr(self, name).contiguous().numpy()
-            for name in ("lo", "hi", "centre", "weight", "radius2", "succ")
+            "pattern": flat.contiguous().numpy(),
+            "lo": lo.numpy(), "hi": hi.numpy(), "centre": centre.numpy(), "weight": weight.numpy(),
+            "radius2": radius2.numpy(), "succ": succ.numpy(),
         }
 
     def initial(self, observation: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
@@ -701,9 +703,9 @@ class SubgoalTables:
         zf = z.numpy().reshape(n, 1)
         obs = observation.numpy().reshape(n, -1)
         out = np.empty((n, 1), dtype=np.int64)
+        t = self._np
         _kernels.advance_regions(
-            zf, obs, self._np["lo"], self._np["hi"], self._np["centre"],
-            self._np["weight"], self._np["radius2"], self._np["succ"], out,
+            zf, obs, t["pattern"], t["lo"], t["hi"], t["centre"], t["weight"], t["radius2"], t["succ"], out,
         )
         result = torch.from_numpy(out)
         return result if result.shape == z.shape else result.view(z.shape)

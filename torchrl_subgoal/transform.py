@@ -169,7 +169,13 @@ class SubgoalPotentialTransform(Transform):
             self.value_loss = SubgoalValueLoss(potential, gamma=self.value_gamma)
             self.value_optimizer = torch.optim.SGD(potential.parameters(), lr=value_lr)
         self._value_lr = float(value_lr) if value_lr is not None else 0.0
+        self._has_value_lr = value_lr is not None
         self._abstraction: SubgoalTables | StateAggregation | None = None
+        self._fused_potential = self._fused_constants()
+        # plain references for the hot path (module attributes go through nn.Module.__getattr__)
+        self._table: torch.Tensor | None = potential.table if isinstance(potential, TabularPotential) else None
+        self._table_ptr = self._table.data_ptr() if self._table is not None else 0
+        self._in_keys = potential.in_keys
 
     # ------------------------------------------------------------------ set-up
 
@@ -179,7 +185,7 @@ class SubgoalPotentialTransform(Transform):
 
         Freeze it the usual torch way, ``transform.potential.requires_grad_(False)``.
         """
-        return self.value_loss is not None and any(p.requires_grad for p in self._parameters_list)
+        return self._has_value_lr and any(p.requires_grad for p in self._parameters_list)
 
     @property
     def num_abstract_states(self) -> int:
@@ -324,18 +330,6 @@ class SubgoalPotentialTransform(Transform):
             shape=batch_shape,
         )
 
-    def transform_input_spec(self, input_spec: TensorSpec) -> TensorSpec:
-        assert isinstance(input_spec, Composite)
-        state_spec = input_spec["full_state_spec"]
-        if state_spec is None:
-            state_spec = Composite(shape=input_spec.shape, device=input_spec.device)
-        obs_spec = self.parent.full_observation_spec if self.parent is not None else None
-        anchor_size = self._anchor_size(obs_spec) if obs_spec is not None and ANCHOR in self.state_keys else 1
-        for key, spec in self._state_specs(input_spec.shape, anchor_size).items():
-            state_spec[key] = spec
-        input_spec["full_state_spec"] = state_spec
-        return input_spec
-
     # ------------------------------------------------------------------ reset and step
 
     def _flat_obs(self, obs: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
@@ -366,7 +360,7 @@ class SubgoalPotentialTransform(Transform):
             outputs[self.transitions_key] = _transition(
                 batch_shape, inputs, inputs, zero, state[STEPS], false, false, false
             )
-        tensordict_reset.update(outputs)
+        _write(tensordict_reset, outputs)
         return tensordict_reset
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
@@ -383,7 +377,7 @@ class SubgoalPotentialTransform(Transform):
             next_tensordict.get("terminated", done),
             batch_shape,
         )
-        next_tensordict.update(out)
+        _write(next_tensordict, out)
         return next_tensordict
 
     def shape(
@@ -397,58 +391,69 @@ class SubgoalPotentialTransform(Transform):
         batch_shape: torch.Size,
     ) -> dict[str, Any]:
         """One step of aggregation and shaping; returns the entries of the next TensorDict."""
+        if self._fused_potential is not None and obs.device.type == "cpu":
+            return self._shape_fused(abstraction, current, obs, reward, done, terminated, batch_shape)
         z_next = abstraction.advance(current[INDEX], obs)
-        if self._fusable(z_next):
-            return self._shape_fused(current, z_next, reward, done, terminated, batch_shape)
         return self._shape_eager(current, z_next, obs, reward, done, terminated, batch_shape)
 
-    def _fusable(self, z: torch.Tensor) -> bool:
-        """Whether the fused CPU kernel can do this step (tabular or naive potential on the CPU)."""
+    def _fused_constants(self) -> tuple[np.ndarray, bool, float] | None:
+        """The potential as the fused kernel reads it, or ``None`` if it cannot (neural, not CPU)."""
         pot = self.potential
-        return z.device.type == "cpu" and (
-            isinstance(pot, NaivePotential) or (isinstance(pot, TabularPotential) and pot.table.device.type == "cpu")
-        )
+        if isinstance(pot, NaivePotential):
+            return _NO_TABLE, False, pot.eta
+        if isinstance(pot, TabularPotential) and pot.table.device.type == "cpu":
+            table = pot.table.detach().numpy().reshape(-1, pot.num_states)
+            return table, table.shape[0] == 1 and not pot.batch_shape, 0.0
+        return None
 
     def _shape_fused(
         self,
+        abstraction: SubgoalTables | StateAggregation,
         current: dict[str, torch.Tensor],
-        z_next: torch.Tensor,
+        obs: torch.Tensor,
         reward: torch.Tensor,
         done: torch.Tensor,
         terminated: torch.Tensor,
         batch_shape: torch.Size,
     ) -> dict[str, Any]:
+        assert self._fused_potential is not None
+        table, shared, eta = self._fused_potential
+        if self._table is not None and self._table.data_ptr() != self._table_ptr:
+            self._fused_potential = self._fused_constants()  # the table was replaced (e.g. moved)
+            self._table_ptr = self._table.data_ptr()
+            assert self._fused_potential is not None
+            table, shared, eta = self._fused_potential
         z, r_h, k = current[INDEX], current[RETURN], current[STEPS]
-        pot = self.potential
-        if isinstance(pot, TabularPotential):
-            table = pot.table.detach().numpy().reshape(-1, pot.num_states)
-            shared = table.shape[0] == 1 and not pot.batch_shape
-            eta = 0.0
-        else:
-            assert isinstance(pot, NaivePotential)
-            table, shared, eta = _NO_TABLE, False, pot.eta
         key = self.transitions_key
-        rh_out, k_out, shaped = _empty_like(r_h), _empty_like(k), _empty_like(reward)
+        z_next, rh_out, k_out, shaped = _empty_like(z), _empty_like(r_h), _empty_like(k), _empty_like(reward)
         extra: tuple[np.ndarray, ...]
         if key is not None:  # the kernel also fills the SMDP transition's r_h, k and mask
             rh_acc, k_acc, emit = _empty_like(r_h), _empty_like(k), _empty_like(done)
             extra = (rh_acc[1], k_acc[1], emit[1])
         else:
             extra = _NO_TRANSITION
-        _kernels.shape_step(
-            _col(z), _col(z_next), _col(current.get(ACHIEVED, z)), _col(r_h), _col(k), _col(reward),
-            _col(done), _col(terminated), table, shared, eta, self.gamma, self.value_gamma,
-            self._value_lr if self.learning else 0.0, self.zero_terminal_potential, rh_out[1], k_out[1], shaped[1], *extra,
-        )
+        lr = self._value_lr if self.learning else 0.0
+        shaping = (_col(current.get(ACHIEVED, z)), _col(r_h), _col(k), _col(reward), _col(done), _col(terminated),
+                   table, shared, eta, self.gamma, self.value_gamma, lr, self.zero_terminal_potential)
+        if isinstance(abstraction, SubgoalTables):
+            t = abstraction._np
+            _kernels.advance_and_shape(
+                _col(z), obs.numpy().reshape(z_next[1].shape[0], -1), t["pattern"], t["lo"], t["hi"], t["centre"],
+                t["weight"],
+                t["radius2"], t["succ"], *shaping, z_next[1], rh_out[1], k_out[1], shaped[1], *extra,
+            )
+        else:
+            z_next = (abstraction.advance(z, obs), np.empty(0))
+            _kernels.shape_step(_col(z), _col(z_next[0]), *shaping, rh_out[1], k_out[1], shaped[1], *extra)
         out: dict[str, Any] = {
-            INDEX: z_next, RETURN: rh_out[0], STEPS: k_out[0],
+            INDEX: z_next[0], RETURN: rh_out[0], STEPS: k_out[0],
             self.env_reward_key: reward, self.reward_key: shaped[0],
         }
-        if ACHIEVED in self.state_keys:
-            out[ACHIEVED] = z_next != z
+        if ACHIEVED in self._state_keys:
+            out[ACHIEVED] = z_next[0] != z
         if key is not None:
-            inputs = {name: current[name] for name in pot.in_keys}
-            next_inputs = {name: out[name] for name in pot.in_keys}
+            inputs = {name: current[name] for name in self._in_keys}
+            next_inputs = {name: out[name] for name in self._in_keys}
             out[key] = _transition(batch_shape, inputs, next_inputs, rh_acc[0], k_acc[0], emit[0], done, terminated)
         return out
 
@@ -572,6 +577,21 @@ def _empty_like(t: torch.Tensor) -> tuple[torch.Tensor, np.ndarray]:
 
 
 _NUMPY_DTYPES = {torch.float32: np.float32, torch.float64: np.float64, torch.int64: np.int64, torch.bool: np.bool_}
+
+
+def _write(tensordict: TensorDictBase, entries: dict[str, Any]) -> None:
+    """``tensordict.update(entries)`` for entries this transform built itself.
+
+    Every tensor here was made by the transform with the batch's shape on the
+    CPU (or comes from the same TensorDict), so TensorDict's per-key validation
+    is redundant; at 10^3 learners it costs more than the shaping arithmetic.
+    Plain TensorDicts skip it (``_set_str`` of tensordict 0.14); others update.
+    """
+    if type(tensordict) is TensorDict and not tensordict.is_locked:
+        for key, value in entries.items():
+            tensordict._set_str(key, value, inplace=False, validated=True)
+    else:
+        tensordict.update(entries)
 
 
 def _transition(

@@ -69,7 +69,8 @@ def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase
     empty3 = np.zeros((n, 1, 1), np.float32)
     state: dict[str, Any] = {
         "kind": _kernels.NO_SHAPING,
-        "regions": (empty3, empty3, empty3, empty3, np.zeros((n, 1), np.float32), np.zeros((n, 1, 1), np.bool_)),
+        "regions": (np.zeros(n, np.int64), empty3, empty3, empty3, empty3, np.zeros((n, 1), np.float32),
+                    np.zeros((n, 1, 1), np.bool_)),
         "lookup": np.zeros(1, np.int64),
         "z": np.zeros((n, 1), np.int64), "achieved": np.zeros((n, 1), np.bool_),
         "r_h": np.zeros((n, 1), np.float32), "k": np.zeros((n, 1), np.int64),
@@ -82,7 +83,7 @@ def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase
     if isinstance(abstraction, SubgoalTables):
         t = abstraction._np
         state["kind"] = _kernels.SUBGOAL_SHAPING
-        state["regions"] = (t["lo"], t["hi"], t["centre"], t["weight"], t["radius2"], t["succ"])
+        state["regions"] = (t["pattern"], t["lo"], t["hi"], t["centre"], t["weight"], t["radius2"], t["succ"])
     elif isinstance(abstraction, StateAggregation) and isinstance(abstraction.mapping, torch.Tensor):
         state["kind"] = _kernels.LOOKUP_SHAPING
         state["lookup"] = abstraction.mapping.numpy()
@@ -178,7 +179,7 @@ def _pinball_ac_run(  # type: ignore[no-untyped-def]
     target_x, target_y, target_radius, velocity_limit, max_steps, random_prob, goal_reward,
     step_penalty, thrust_penalty, env_uniforms,
     # the shaping transform
-    shaping, lo, hi, centre, weight, radius2, succ, region_lo, region_hi, region_centre, region_weight,
+    shaping, pattern, lo, hi, centre, weight, radius2, succ, region_lo, region_hi, region_centre, region_weight,
     region_radius2, z, achieved, r_h, k, table, shared, eta, gamma_shaping, value_gamma, value_lr, zero_terminal,
     # the actor-critic learners
     w, theta, phi, probs, action, low, inv_range, order, half, agent_uniforms, actor_lr, critic_lr, gamma, normalize,
@@ -232,7 +233,7 @@ def _pinball_ac_run(  # type: ignore[no-untyped-def]
             shaped[:, 0] = reward[:, 0]
         else:
             if shaping == _kernels.SUBGOAL_SHAPING:
-                _kernels.advance_regions(z, obs, lo, hi, centre, weight, radius2, succ, z_next)
+                _kernels.advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_next)
             else:
                 _kernels.first_region(z, obs, region_lo, region_hi, region_centre, region_weight,
                                       region_radius2, z_next)
