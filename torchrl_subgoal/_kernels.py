@@ -106,7 +106,7 @@ def shape_step(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _softmax_choice(q_row, inv_temperature, u, scratch):  # type: ignore[no-untyped-def]
+def _softmax_choice(q_row, inv_temperature, u, scratch):
     """Index drawn from softmax(q_row / τ) by inverse CDF with the uniform ``u``."""
     n_actions = q_row.shape[0]
     top = q_row[0]
@@ -126,7 +126,7 @@ def _softmax_choice(q_row, inv_temperature, u, scratch):  # type: ignore[no-unty
 
 
 @numba.njit(cache=True, nogil=True)
-def softmax_sample(q, state, inv_temperature, u, action_out):  # type: ignore[no-untyped-def]
+def softmax_sample(q, state, inv_temperature, u, action_out):
     """``action_out[b] ~ softmax(q[b, state[b]] / τ)``."""
     scratch = np.empty(q.shape[2])
     for b in range(q.shape[0]):
@@ -134,7 +134,7 @@ def softmax_sample(q, state, inv_temperature, u, action_out):  # type: ignore[no
 
 
 @numba.njit(cache=True, nogil=True)
-def sarsa_step(  # type: ignore[no-untyped-def]
+def sarsa_step(
     q, s, a, reward, s_next, terminated, done, s_root, u, lr, gamma, inv_temperature, action_out
 ):
     """One SARSA(0) step per learner: draw ``a' ~ π(·|s')``, update ``Q(s, a)``, then
@@ -156,7 +156,7 @@ def sarsa_step(  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, nogil=True)
-def grid_step(  # type: ignore[no-untyped-def]
+def grid_step(
     state, t, action, transitions, cells, goal, max_steps, reward, terminated, truncated, cell_out
 ):
     """Deterministic grid moves for a batch: next state, step count, reward and flags."""
@@ -173,7 +173,7 @@ def grid_step(  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, nogil=True)
-def record_episodes(  # type: ignore[no-untyped-def]
+def record_episodes(
     done, terminated, reward, t, ret, episode, steps_out, returns_out, success_out
 ):
     """Advance per-learner step and return counters; file finished episodes.
@@ -199,7 +199,7 @@ def record_episodes(  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, nogil=True)
-def grid_reset(state, t, reset, start, cells, cell_out):  # type: ignore[no-untyped-def]
+def grid_reset(state, t, reset, start, cells, cell_out):
     """Put the learners flagged in ``reset`` back at ``start``; write every learner's cell."""
     for b in range(state.shape[0]):
         if reset[b]:
@@ -213,7 +213,7 @@ NO_SHAPING, SUBGOAL_SHAPING, LOOKUP_SHAPING = 0, 1, 2
 
 
 @numba.njit(cache=True, nogil=True)
-def sarsa_grid_run(  # type: ignore[no-untyped-def]
+def sarsa_grid_run(
     # the grid env (its state arrays are updated in place)
     state, t_env, transitions, cells, start, goal, max_steps,
     # the shaping transform: which abstraction, its tables, its per-learner state and the potential
@@ -301,7 +301,7 @@ def sarsa_grid_run(  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, nogil=True)
-def first_region(z, obs, lo, hi, centre, weight, radius2, z_out):  # type: ignore[no-untyped-def]
+def first_region(z, obs, lo, hi, centre, weight, radius2, z_out):
     """``z_out[b]``: the first region (shared ``[J, D]`` tables) containing ``obs[b]``, else ``z[b]``."""
     n_regions, dim = lo.shape
     for b in range(obs.shape[0]):
@@ -324,7 +324,7 @@ def first_region(z, obs, lo, hi, centre, weight, radius2, z_out):  # type: ignor
 
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
-def fourier_features(obs, low, inv_range, order, half, first, second, out):  # type: ignore[no-untyped-def]
+def fourier_features(obs, low, inv_range, order, half, first, second, out):
     """``out[f] = cos(π c_f · s̃)`` for every coefficient vector ``c_f ∈ {0..order}^D`` in
     lexicographic order, ``s̃ = clip((obs - low) / range, 0, 1)``.
 
@@ -362,7 +362,7 @@ def fourier_features(obs, low, inv_range, order, half, first, second, out):  # t
 
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
-def _policy_sample(theta_b, phi, u, logits):  # type: ignore[no-untyped-def]
+def _policy_sample(theta_b, phi, u, logits):
     """Draw from softmax(θ φ) with the uniform ``u``; ``logits`` is filled with π."""
     n_actions, n_features = theta_b.shape
     top = -np.inf
@@ -387,7 +387,7 @@ def _policy_sample(theta_b, phi, u, logits):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
-def ac_act(theta, phi, probs, obs, low, inv_range, order, half, u, action_out):  # type: ignore[no-untyped-def]
+def ac_act(theta, phi, probs, obs, low, inv_range, order, half, u, action_out):
     """Features of ``obs`` into ``phi``, the policy into ``probs`` and a first action per learner."""
     n_first = (order + 1) ** half
     n_second = (order + 1) ** (obs.shape[1] - half)
@@ -399,7 +399,7 @@ def ac_act(theta, phi, probs, obs, low, inv_range, order, half, u, action_out): 
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
-def ac_step(  # type: ignore[no-untyped-def]
+def ac_step(
     w, theta, phi, probs, action, reward, obs_next, terminated, done, obs_root, active,
     low, inv_range, order, half, u, actor_lr, critic_lr, gamma, normalize, action_out,
 ):
@@ -449,7 +449,7 @@ def ac_step(  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, nogil=True)
-def advance_and_shape(  # type: ignore[no-untyped-def]
+def advance_and_shape(
     z, obs, pattern, lo, hi, centre, weight, radius2, succ, achieved, r_h, k, reward, done, terminated,
     table, shared, eta, gamma, value_gamma, value_lr, zero_terminal,
     z_out, rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out,

@@ -759,6 +759,7 @@ class StateAggregation:
         self.mapping = mapping
         self.num_states = int(num_states)
         self.regions: dict[str, np.ndarray] | None = None
+        self.region_predicates: tuple[Predicate, ...] = ()
         if isinstance(mapping, torch.Tensor):
             if mapping.dtype != torch.long or mapping.ndim != 1:
                 raise ValueError("a lookup aggregation must be a 1-D long tensor indexed by state")

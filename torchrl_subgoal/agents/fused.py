@@ -173,7 +173,7 @@ def run_four_rooms_fused(
 
 
 @numba.njit(cache=True, nogil=True)
-def _pinball_ac_run(  # type: ignore[no-untyped-def]
+def _pinball_ac_run(
     # the env: state arrays updated in place, geometry, dynamics settings
     position, velocity, env_steps, start_x, start_y, edges, boxes, first_edge, ball_radius,
     target_x, target_y, target_radius, velocity_limit, max_steps, random_prob, goal_reward,
@@ -297,7 +297,7 @@ def run_pinball_fused(
     td = agent.act(env.reset())
     n = base.batch_size.numel()
     action = td.get("action").reshape(-1).numpy().copy()
-    region = {k: np.zeros((1, 4), np.float32) for k in ("lo", "hi", "centre", "weight")}
+    region: dict[str, np.ndarray] = {k: np.zeros((1, 4), np.float32) for k in ("lo", "hi", "centre", "weight")}
     region["radius2"] = np.zeros(1, np.float32)
     state = _shaping_state(shaping, td, n)
     kind = state["kind"]
@@ -339,9 +339,12 @@ def run_pinball_fused(
 def _unwrap_pinball(env: EnvBase) -> tuple[PinBallEnv, SubgoalPotentialTransform | None]:
     if isinstance(env, PinBallEnv):
         return env, None
-    if isinstance(env, TransformedEnv) and isinstance(env.base_env, PinBallEnv):
-        if isinstance(env.transform, SubgoalPotentialTransform):
-            return env.base_env, env.transform
+    if (
+        isinstance(env, TransformedEnv)
+        and isinstance(env.base_env, PinBallEnv)
+        and isinstance(env.transform, SubgoalPotentialTransform)
+    ):
+        return env.base_env, env.transform
     raise TypeError(
         "the fused engine runs PinBallEnv, alone or with one SubgoalPotentialTransform; "
         f"got {env}. Use engine='torchrl' for other envs and transforms."

@@ -396,7 +396,7 @@ step_balls = numba.njit(cache=True, nogil=True)(_step_balls)
 
 
 def _numba_kernel() -> Callable[..., None]:
-    return step_balls  # type: ignore[no-any-return]
+    return step_balls
 
 
 def _torch_kernel(

@@ -347,14 +347,33 @@ def _run_local(
         if error is not None:
             raise error
     finally:
-        if not finished_cleanly:  # interrupted: stop the workers now
-            processes = list((getattr(executor, "_processes", None) or {}).values())
-            for process in processes:
+        if finished_cleanly:
+            executor.shutdown(wait=True)
+        else:  # interrupted: no new workers may start, then stop the running ones now
+            processes = dict(getattr(executor, "_processes", None) or {})
+            executor.shutdown(wait=False, cancel_futures=True)
+            processes.update(getattr(executor, "_processes", None) or {})
+            for process in processes.values():
                 process.terminate()
-            for process in processes:
-                process.join(timeout=5)
-        executor.shutdown(wait=finished_cleanly, cancel_futures=True)
+            for process in processes.values():
+                _wait_for_exit(process)
         progress_queue.close()
+
+
+def _wait_for_exit(process: Any, grace: float = 2.0) -> None:
+    """Wait until a terminated worker has exited and been reaped; SIGKILL it after ``grace`` s.
+
+    ``join`` can return as soon as the child closes its end of the sentinel pipe,
+    before the process is gone, so poll ``is_alive`` (which reaps it).
+    """
+    deadline, killed = time.monotonic() + grace, False
+    while process.is_alive():
+        if time.monotonic() > deadline:
+            if killed:
+                return  # the OS will reap it; nothing more a parent can do
+            process.kill()  # e.g. still importing torch, not acting on SIGTERM yet
+            deadline, killed = time.monotonic() + 10 * grace, True
+        time.sleep(0.01)
 
 
 def _connect_ray(workers: int) -> tuple[Any, bool]:
