@@ -80,3 +80,22 @@ def test_pinball_recipe(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert "| 3000 | HRS |" in out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["window"] == 10 and set(summary["methods"]) == {"HRS", "RRS", "AC", "NRS", "SARSA-RS"}
+
+
+def test_four_rooms_on_ray_equals_local(tmp_path: Path) -> None:
+    """The command line with --backend ray (a local Ray instance) gives the local backend's results."""
+    import subprocess
+
+    from torchrl_subgoal.experiments import load_frame
+
+    frames = []
+    for backend in ("local", "ray"):
+        out = tmp_path / backend
+        cmd = [sys.executable, str(ROOT / "recipes" / "four_rooms.py"), "--episodes", "15", "--learnings", "1",
+               "--methods", "HRS,SARSA", "--chunk-size", "5", "--backend", backend, "--workers", "2",
+               "--results", str(out)]
+        env = {k: v for k, v in __import__("os").environ.items() if k != "RAY_ADDRESS"}
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+        assert done.returncode == 0, done.stderr[-2000:]
+        frames.append(load_frame(out))
+    assert len(frames[0]) == 20 * 15 and frames[0].equals(frames[1])
