@@ -24,6 +24,7 @@ import argparse
 import statistics
 import time
 from importlib.resources import files
+from typing import Literal
 
 import torch
 from torchrl.envs import Compose, EnvBase, TransformedEnv
@@ -92,14 +93,15 @@ def main() -> None:
 
     print(f"\nPart 2: SARSA + HRS, {args.episodes} episodes per learner, N = {n}")
     rates = {}
-    for engine in ("torchrl", "fused"):  # warm up: numba compiles (or loads) the kernels once
+    engines: tuple[Literal["torchrl", "fused"], ...] = ("torchrl", "fused")
+    for engine in engines:  # warm up: numba compiles (or loads) the kernels once
         run_episodes(TransformedEnv(FourRoomsEnv(4, max_steps=20), shaping(4, False)),
-                     SoftmaxSarsa(4, 104, 4, SARSA_PRESETS["released"]), 1, engine=engine)  # type: ignore[arg-type]
-    for engine in ("torchrl", "fused"):
+                     SoftmaxSarsa(4, 104, 4, SARSA_PRESETS["released"]), 1, engine=engine)
+    for engine in engines:
         env = TransformedEnv(FourRoomsEnv(n), shaping(n, False))
         agent = SoftmaxSarsa(n, 104, 4, SARSA_PRESETS["released"], seed=0)
         start = time.perf_counter()
-        records = run_episodes(env, agent, args.episodes, engine=engine)  # type: ignore[arg-type]
+        records = run_episodes(env, agent, args.episodes, engine=engine)
         seconds = time.perf_counter() - start
         rates[engine] = records.env_steps * n / seconds
         print(f"{engine:<8} {seconds:6.1f} s, {records.env_steps} batched steps, "

@@ -26,7 +26,7 @@ import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib.resources import files
-from typing import Any
+from typing import Any, Literal
 
 import torch
 from torchrl.envs import TransformedEnv
@@ -62,7 +62,7 @@ class Config:
                           choices=["fused", "torchrl"])
     seed: int = setting(0, "sweep seed (random patterns, chunk seeds)")
     results: str = setting("results/pinball", "results directory (re-run to resume)")
-    backend: str = setting("local", "where chunks run", choices=["local", "ray"])
+    backend: Literal["local", "ray"] = setting("local", "where chunks run")
     workers: int = setting(2, "local worker processes (0: in this process)")
     chunk_size: int = setting(100, "learners per batch")
     overwrite: bool = setting(False, "discard results of a different experiment in --results")

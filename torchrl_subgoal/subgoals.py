@@ -749,8 +749,6 @@ class StateAggregation:
                 [1]])
     """
 
-    chain = False
-
     def __init__(
         self,
         mapping: torch.Tensor | Callable[[torch.Tensor], torch.Tensor] | None,
@@ -759,7 +757,6 @@ class StateAggregation:
         self.mapping = mapping
         self.num_states = int(num_states)
         self.regions: dict[str, np.ndarray] | None = None
-        self.region_predicates: tuple[Predicate, ...] = ()
         if isinstance(mapping, torch.Tensor):
             if mapping.dtype != torch.long or mapping.ndim != 1:
                 raise ValueError("a lookup aggregation must be a 1-D long tensor indexed by state")
@@ -789,7 +786,6 @@ class StateAggregation:
             "weight": torch.stack([r.weight for r in compiled]).numpy(),
             "radius2": np.array([r.radius2 for r in compiled], dtype=np.float32),
         }
-        agg.region_predicates = tuple(regions)
         return agg
 
     def _g(self, observation: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:

@@ -38,7 +38,8 @@ class SubgoalPotentialTransform(Transform):
 
     * ``"subgoal_index"`` ``z`` — the node of the subgoal series reached
       (``0`` at reset; advanced when the next subgoal's predicate holds);
-    * ``"subgoal_achieved"`` — ``z`` was entered on this step;
+    * ``"subgoal_achieved"`` — ``z`` was entered on this step (only when the
+      potential reads it, e.g. :class:`~torchrl_subgoal.NaivePotential`);
     * ``"subgoal_return"`` ``r_h ← r_h + γ_v^k r`` and ``"subgoal_steps"``
       ``k ← k + 1`` since ``z`` was entered;
     * ``"subgoal_anchor"`` — the observation at which ``z`` was entered (only
@@ -46,8 +47,8 @@ class SubgoalPotentialTransform(Transform):
 
     Every step it adds ``F`` to the reward; the environment's reward stays
     under ``"env_reward"``, declared as a second reward entry (so use
-    ``env.reward_keys``; ``env.reward_key`` refers to one key only), and when a subgoal is achieved or the episode ends
-    it writes one SMDP transition ``(z, r_h, k, z', terminated)`` under
+    ``env.reward_keys``: ``env.reward_key`` expects a single one). When a
+    subgoal is achieved or the episode ends it writes one SMDP transition ``(z, r_h, k, z', terminated)`` under
     ``("next", "smdp")`` in the layout :class:`~torchrl_subgoal.SubgoalValueLoss`
     and TorchRL's TD(0) estimator read (``mask`` tells which entries are
     real). At truncation the transition bootstraps from ``V(z')``.
@@ -109,8 +110,10 @@ class SubgoalPotentialTransform(Transform):
         >>> env = TransformedEnv(base, SubgoalPotentialTransform(
         ...     series, potential, gamma=0.99, observation_key="cell", value_lr=0.25))
         >>> data = env.rollout(5)
-        >>> data["next", "subgoal_index"].shape, data["next", "smdp", "mask"].shape
-        (torch.Size([4, 5, 1]), torch.Size([4, 5, 1]))
+        >>> data["next", "subgoal_index"].shape
+        torch.Size([4, 5, 1])
+        >>> data["next", "subgoal_steps"][0, :, 0].tolist()  # k: steps since z was entered
+        [1, 2, 3, 4, 5]
     """
 
     def __init__(

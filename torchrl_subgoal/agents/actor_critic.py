@@ -119,10 +119,6 @@ class FourierActorCritic:
                         np.zeros(obs.shape[0]), np.empty(obs.shape[0], np.int64))
         return torch.from_numpy(out)
 
-    def value(self, observation: torch.Tensor) -> torch.Tensor:
-        """The critic ``V(s)`` of each learner at its own observation ``[N, D]``."""
-        return (self.features(observation) * torch.from_numpy(self.w)).sum(-1)
-
     def _obs(self, tensordict: TensorDictBase) -> np.ndarray:
         return tensordict.get(self.observation_key).numpy().astype(np.float64).reshape(self.w.shape[0], -1)
 

@@ -42,10 +42,6 @@ class EpisodeRecords:
     success: torch.Tensor
     env_steps: int = 0
 
-    @property
-    def num_learners(self) -> int:
-        return int(self.steps.shape[0])
-
 
 def run_episodes(
     env: EnvBase,

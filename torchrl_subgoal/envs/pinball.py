@@ -601,7 +601,7 @@ class PinBallEnv(EnvBase):
     in ``0..4`` = ``+x, +y, -x, -y, none`` (:data:`ACTION_NAMES`); reward
     ``[N, 1]``; ``done``/``terminated``/``truncated`` ``[N, 1]``. With
     probability ``random_action_prob`` the executed action is drawn uniformly
-    from the five instead (drawn from the env's own generator, so a seed fixes
+    from the five instead (drawn from the env's own numpy generator, so a seed fixes
     the trajectory). ``terminated`` is set when the ball enters the target
     (reward ``goal_reward``), ``truncated`` after ``max_steps`` steps. The
     per-step reward also adds ``thrust_penalty`` when the executed action is a

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 from collections.abc import Sequence
-from typing import Any, TypeVar, get_type_hints
+from typing import Any, Literal, TypeVar, get_args, get_origin, get_type_hints
 
 __all__ = ["ConfigError", "parse_config", "setting"]
 
@@ -41,6 +41,10 @@ def parse_config(cls: type[T], argv: Sequence[str] | None = None, description: s
         if kind is bool:
             parser.add_argument(_flag(f.name), action=argparse.BooleanOptionalAction, default=f.default,
                                 help=help_text)
+        elif get_origin(kind) is Literal:
+            options = get_args(kind)
+            parser.add_argument(_flag(f.name), type=type(options[0]), default=f.default, help=help_text,
+                                choices=options, metavar=f.name.upper())
         else:
             parser.add_argument(_flag(f.name), type=kind, default=f.default, help=help_text,
                                 choices=f.metadata.get("choices"), metavar=f.name.upper())
