@@ -9,7 +9,11 @@ repeated (the machine is shared, so ratios are taken within one run):
   costs before any transform does anything;
 * ``shaping``: ``TransformedEnv(env, SubgoalPotentialTransform(...))`` as the recipe
   uses it (ten participants' patterns, tabular potential trained online);
-* ``shaping+transitions``: the same writing the SMDP transitions into the TensorDict.
+* ``shaping+transitions``: the same writing the SMDP transitions into the TensorDict;
+* ``keys-only``: a transform that does no work but writes the same entries
+  (``subgoal_*`` zeros, ``env_reward``, ``reward``) — the floor that TorchRL's
+  per-key bookkeeping (``step_mdp``, partial-reset merging) sets for any transform
+  that keeps its state in the TensorDict.
 
 Part 2 trains SARSA with HRS for a few episodes with ``engine="torchrl"`` and
 ``engine="fused"`` (identical results) and prints learner-steps per second.
@@ -27,11 +31,15 @@ from importlib.resources import files
 from typing import Literal
 
 import torch
-from torchrl.envs import Compose, EnvBase, TransformedEnv
+from tensordict import TensorDictBase
+from torchrl.data import Composite, TensorSpec, Unbounded
+from torchrl.envs import Compose, EnvBase, Transform, TransformedEnv
 
 from torchrl_subgoal import SubgoalPotentialTransform, TabularPotential, load_patterns
 from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
+from torchrl_subgoal.potentials import INDEX
+from torchrl_subgoal.transform import _write
 
 PATTERNS = list(load_patterns(str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")).values())
 
@@ -43,12 +51,45 @@ def shaping(n: int, write: bool) -> SubgoalPotentialTransform:
     )
 
 
+class KeysOnly(Transform):
+    """Writes the entries the shaping transform writes, without computing anything."""
+
+    KEYS = ("subgoal_index", "subgoal_return", "subgoal_steps")
+
+    def transform_observation_spec(self, observation_spec: TensorSpec) -> TensorSpec:
+        assert isinstance(observation_spec, Composite)
+        for key, dtype in zip(self.KEYS, (torch.long, torch.float32, torch.long), strict=True):
+            observation_spec[key] = Unbounded(shape=(*observation_spec.shape, 1), dtype=dtype)
+        return observation_spec
+
+    def transform_reward_spec(self, reward_spec: TensorSpec) -> TensorSpec:
+        assert isinstance(reward_spec, Composite)
+        reward_spec["env_reward"] = reward_spec["reward"].clone()
+        return reward_spec
+
+    def _zeros(self, batch_shape: torch.Size) -> dict[str, torch.Tensor]:
+        shape = (*batch_shape, 1)
+        return {INDEX: torch.zeros(shape, dtype=torch.long), "subgoal_return": torch.zeros(shape),
+                "subgoal_steps": torch.zeros(shape, dtype=torch.long)}
+
+    def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
+        reward = next_tensordict.get("reward")
+        _write(next_tensordict, {**self._zeros(next_tensordict.batch_size), "env_reward": reward,
+                                 "reward": reward.clone()})
+        return next_tensordict
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+        _write(tensordict_reset, self._zeros(tensordict_reset.batch_size))
+        return tensordict_reset
+
+
 def setups(n: int) -> dict[str, EnvBase]:
     return {
         "bare": FourRoomsEnv(n),
         "wrapper": TransformedEnv(FourRoomsEnv(n), Compose()),
         "shaping": TransformedEnv(FourRoomsEnv(n), shaping(n, False)),
         "shaping+transitions": TransformedEnv(FourRoomsEnv(n), shaping(n, True)),
+        "keys-only": TransformedEnv(FourRoomsEnv(n), KeysOnly()),
     }
 
 
@@ -87,7 +128,7 @@ def main() -> None:
     print(f"{'set-up':<22}{'us/step (best)':>16}{'median':>10}{'env-steps/s':>14}")
     for name, t in times.items():
         print(f"{name:<22}{best[name] * 1e6:>16.0f}{statistics.median(t) * 1e6:>10.0f}{n / best[name]:>14,.0f}")
-    for name in ("shaping", "shaping+transitions"):
+    for name in ("keys-only", "shaping", "shaping+transitions"):
         print(f"{name}: +{best[name] / best['wrapper'] - 1:.0%} over the wrapper alone, "
               f"+{best[name] / best['bare'] - 1:.0%} over the bare env")
 
