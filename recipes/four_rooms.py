@@ -32,13 +32,21 @@ from typing import Any, Literal
 import torch
 from torchrl.envs import TransformedEnv
 
-from torchrl_subgoal import SubgoalSeries, load_patterns
+from torchrl_subgoal import load_patterns
 from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import GOAL, START, free_cells, room_aggregation
-from torchrl_subgoal.experiments import Chunk, EpisodeTable, MethodSpec, Sweep, write_report
+from torchrl_subgoal.experiments import Chunk, EpisodeTable
 from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
-from torchrl_subgoal.methods import paper_methods, random_patterns, shaping_transform
+from torchrl_subgoal.experiments.recipe import (
+    PatternSets,
+    chunk_patterns,
+    method_specs,
+    pattern_config,
+    pattern_sets,
+    sweep_and_report,
+)
+from torchrl_subgoal.methods import paper_methods, shaping_transform
 from torchrl_subgoal.subgoals import Cell
 
 METHODS = paper_methods(baseline="SARSA")
@@ -85,33 +93,18 @@ class Config:
         return [m.strip() for m in self.methods.split(",") if m.strip()]
 
 
-def build_patterns(cfg: Config) -> dict[str, dict[str, SubgoalSeries]]:
+def build_patterns(cfg: Config) -> PatternSets:
     """The human patterns (from the file) and the seeded random ones, by kind."""
     human = load_patterns(cfg.subgoals, domain="four_rooms")
     candidates = [Cell(r, c) for r, c in free_cells() if (r, c) not in (START, GOAL)]
-    num_subgoals = max(len(p) for p in human.values())
-    rand = random_patterns(candidates, cfg.random_patterns, num_subgoals, seed=cfg.seed)
-    return {"human": human, "random": {p.name: p for p in rand}, "none": {}}
-
-
-def method_specs(cfg: Config, patterns: Mapping[str, Mapping[str, SubgoalSeries]]) -> list[MethodSpec]:
-    """Learners of each method: every pattern ``learnings`` times (unshaped: as many in all)."""
-    specs = []
-    for name in cfg.method_names:
-        kind = METHODS[name].subgoals
-        names = list(patterns[kind]) or ["none"]
-        per_pattern = cfg.learnings if kind != "none" else cfg.learnings * len(patterns["human"])
-        specs.append(MethodSpec(name, names, per_pattern))
-    return specs
+    return pattern_sets(human, candidates, cfg.random_patterns, cfg.seed)
 
 
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
     """One batch of learnings of one method: env batch = learners."""
     sarsa = SARSA_PRESETS[config["preset"]]
     method = METHODS[chunk.method]
-    names = sorted({pattern for pattern, _ in chunk.learners})
-    patterns = [SubgoalSeries.from_dict(config["patterns"][n], name=n) for n in names if n != "none"]
-    pattern_index = torch.tensor([names.index(p) for p, _ in chunk.learners])
+    patterns, pattern_index = chunk_patterns(chunk, config)
 
     env = FourRoomsEnv(num_envs=chunk.n_learners)
     shaping = shaping_transform(
@@ -142,17 +135,14 @@ def main(argv: list[str] | None = None) -> int:
         **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential", "engine", "agent_state")},
         "sarsa": dataclasses.asdict(SARSA_PRESETS[cfg.preset]),
         "subgoal_file": cfg.subgoals,
-        "patterns": {n: s.to_dict() for kind in ("human", "random") for n, s in patterns[kind].items()},
+        "patterns": pattern_config(patterns),
         "report": {"metric": "steps", "thresholds": [500, 300, 100, 50],
                    "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes]},
     }
-    sweep = Sweep("four_rooms", cfg.results, method_specs(cfg, patterns), run_chunk, config,
-                  seed=cfg.seed, chunk_size=cfg.chunk_size, n_episodes=cfg.episodes, overwrite=cfg.overwrite)
-    sweep.run(backend=cfg.backend, workers=cfg.workers)
-    report = write_report(cfg.results)
-    print(report.markdown)
-    print(f"results, report.md, summary.json and plots in {cfg.results}", file=sys.stderr)
-    return 0
+    specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
+    return sweep_and_report("four_rooms", cfg.results, specs, run_chunk, config, seed=cfg.seed,
+                            chunk_size=cfg.chunk_size, episodes=cfg.episodes, overwrite=cfg.overwrite,
+                            backend=cfg.backend, workers=cfg.workers)
 
 
 if __name__ == "__main__":

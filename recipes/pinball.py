@@ -31,12 +31,20 @@ from typing import Any, Literal
 import torch
 from torchrl.envs import TransformedEnv
 
-from torchrl_subgoal import Box, Circle, StateAggregation, SubgoalSeries, load_patterns
+from torchrl_subgoal import Box, Circle, StateAggregation, load_patterns
 from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic, run_episodes
 from torchrl_subgoal.envs import PinBallEnv
-from torchrl_subgoal.experiments import Chunk, EpisodeTable, MethodSpec, Sweep, write_report
+from torchrl_subgoal.experiments import Chunk, EpisodeTable
 from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
-from torchrl_subgoal.methods import paper_methods, random_patterns, shaping_transform
+from torchrl_subgoal.experiments.recipe import (
+    PatternSets,
+    chunk_patterns,
+    method_specs,
+    pattern_config,
+    pattern_sets,
+    sweep_and_report,
+)
+from torchrl_subgoal.methods import paper_methods, shaping_transform
 
 METHODS = paper_methods(baseline="AC")
 PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "pinball_participants.yaml")
@@ -85,35 +93,20 @@ def thirds_of_the_table() -> StateAggregation:
     return StateAggregation.from_regions([Box((c,), (1 / 6,), (0,)) for c in (1 / 6, 1 / 2, 5 / 6)], 4)
 
 
-def build_patterns(cfg: Config) -> dict[str, dict[str, SubgoalSeries]]:
+def build_patterns(cfg: Config) -> PatternSets:
     """The human patterns (from the file) and the seeded random ones, by kind."""
     human = load_patterns(cfg.subgoals, domain="pinball")
     env = PinBallEnv(1, cfg.map)
     points = env.sample_free_positions(500, torch.Generator().manual_seed(cfg.seed))
     candidates = [Circle((float(x), float(y)), SUBGOAL_RADIUS) for x, y in points.tolist()]
-    num_subgoals = max(len(p) for p in human.values())
-    rand = random_patterns(candidates, cfg.random_patterns, num_subgoals, seed=cfg.seed)
-    return {"human": human, "random": {p.name: p for p in rand}, "none": {}}
-
-
-def method_specs(cfg: Config, patterns: Mapping[str, Mapping[str, SubgoalSeries]]) -> list[MethodSpec]:
-    """Learners of each method: every pattern ``learnings`` times (unshaped: as many in all)."""
-    specs = []
-    for name in cfg.method_names:
-        kind = METHODS[name].subgoals
-        names = list(patterns[kind]) or ["none"]
-        per_pattern = cfg.learnings if kind != "none" else cfg.learnings * len(patterns["human"])
-        specs.append(MethodSpec(name, names, per_pattern))
-    return specs
+    return pattern_sets(human, candidates, cfg.random_patterns, cfg.seed)
 
 
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
     """One batch of learnings of one method: env batch = learners."""
     ac = AC_PRESETS[config["preset"]]
     method = METHODS[chunk.method]
-    names = sorted({pattern for pattern, _ in chunk.learners})
-    patterns = [SubgoalSeries.from_dict(config["patterns"][n], name=n) for n in names if n != "none"]
-    pattern_index = torch.tensor([names.index(p) for p, _ in chunk.learners])
+    patterns, pattern_index = chunk_patterns(chunk, config)
 
     env = PinBallEnv(chunk.n_learners, config["map"], max_steps=config["max_steps"], seed=chunk.seed)
     shaping = shaping_transform(
@@ -142,17 +135,14 @@ def main(argv: list[str] | None = None) -> int:
                                     "max_steps", "engine")},
         "actor_critic": dataclasses.asdict(AC_PRESETS[cfg.preset]),
         "subgoal_file": cfg.subgoals,
-        "patterns": {n: s.to_dict() for kind in ("human", "random") for n, s in patterns[kind].items()},
+        "patterns": pattern_config(patterns),
         "report": {"metric": "steps", "thresholds": [3000, 2000, 1000, 500], "window": 10,
                    "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes], "map": {"config": cfg.map}},
     }
-    sweep = Sweep("pinball", cfg.results, method_specs(cfg, patterns), run_chunk, config,
-                  seed=cfg.seed, chunk_size=cfg.chunk_size, n_episodes=cfg.episodes, overwrite=cfg.overwrite)
-    sweep.run(backend=cfg.backend, workers=cfg.workers)
-    report = write_report(cfg.results)
-    print(report.markdown)
-    print(f"results, report.md, summary.json and plots in {cfg.results}", file=sys.stderr)
-    return 0
+    specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
+    return sweep_and_report("pinball", cfg.results, specs, run_chunk, config, seed=cfg.seed,
+                            chunk_size=cfg.chunk_size, episodes=cfg.episodes, overwrite=cfg.overwrite,
+                            backend=cfg.backend, workers=cfg.workers)
 
 
 if __name__ == "__main__":

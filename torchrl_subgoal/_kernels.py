@@ -212,6 +212,44 @@ def grid_reset(state, t, reset, start, cells, cell_out):
 NO_SHAPING, SUBGOAL_SHAPING, LOOKUP_SHAPING = 0, 1, 2
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def shaping_buffers(n):
+    """Per-step outputs of the fused runs' shaping: ``(z', r_h', k', shaped reward)`` and
+    the empty arrays that tell :func:`shape_step` to skip the SMDP transition."""
+    return (np.empty((n, 1), np.int64), np.empty((n, 1), np.float32), np.empty((n, 1), np.int64),
+            np.empty((n, 1), np.float32), np.empty((0, 1), np.float32), np.empty((0, 1), np.int64),
+            np.empty((0, 1), np.bool_))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def shape_or_copy(shaping, z, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma,
+                  value_gamma, value_lr, zero_terminal, buffers):
+    """The transform's step once ``z'`` is in ``buffers[0]``: the shaped reward into ``buffers[3]``
+    (the env's reward itself without shaping)."""
+    z_next, rh_out, k_out, shaped, no_f, no_i, no_b = buffers
+    if shaping == NO_SHAPING:
+        shaped[:, 0] = reward[:, 0]
+    else:
+        shape_step(z, z_next, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma,
+                   value_gamma, value_lr, zero_terminal, rh_out, k_out, shaped, no_f, no_i, no_b)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def carry_abstract_state(b, reset, shaping, initial_z, z, achieved, r_h, k, buffers):
+    """Learner ``b``'s abstract state for the next step: the reset one, or the step's outputs."""
+    if reset:
+        z[b, 0] = initial_z
+        achieved[b, 0] = False
+        r_h[b, 0] = 0.0
+        k[b, 0] = 0
+    elif shaping != NO_SHAPING:
+        z_next, rh_out, k_out = buffers[0], buffers[1], buffers[2]
+        achieved[b, 0] = z_next[b, 0] != z[b, 0]
+        z[b, 0] = z_next[b, 0]
+        r_h[b, 0] = rh_out[b, 0]
+        k[b, 0] = k_out[b, 0]
+
+
 @numba.njit(cache=True, nogil=True)
 def sarsa_grid_run(
     # the grid env (its state arrays are updated in place)
@@ -239,13 +277,8 @@ def sarsa_grid_run(
     truncated = np.empty((n, 1), np.bool_)
     done = np.empty((n, 1), np.bool_)
     cell = np.empty((n, 2), np.int64)
-    z_next = np.empty((n, 1), np.int64)
-    rh_out = np.empty((n, 1), np.float32)
-    k_out = np.empty((n, 1), np.int64)
-    shaped = np.empty((n, 1), np.float32)
-    no_f = np.empty((0, 1), np.float32)
-    no_i = np.empty((0, 1), np.int64)
-    no_b = np.empty((0, 1), np.bool_)
+    buffers = shaping_buffers(n)
+    z_next, shaped = buffers[0], buffers[3]
     rows = np.empty(n, np.int64)
     rows_next = np.empty(n, np.int64)
     rows_root = np.empty(n, np.int64)
@@ -259,36 +292,23 @@ def sarsa_grid_run(
                   reward[:, 0], terminated[:, 0], truncated[:, 0], cell)
         for b in range(n):
             done[b, 0] = terminated[b, 0] or truncated[b, 0]
-        if shaping == NO_SHAPING:
-            shaped[:, 0] = reward[:, 0]
-        else:
-            if shaping == SUBGOAL_SHAPING:
-                if observe_cell:
-                    advance_regions(z, cell, pattern, lo, hi, centre, weight, radius2, succ, z_next)
-                else:
-                    advance_regions(z, state.reshape((n, 1)), pattern, lo, hi, centre, weight, radius2, succ,
-                                    z_next)
+        if shaping == SUBGOAL_SHAPING:
+            if observe_cell:
+                advance_regions(z, cell, pattern, lo, hi, centre, weight, radius2, succ, z_next)
             else:
-                for b in range(n):
-                    z_next[b, 0] = lookup[state[b]]
-            shape_step(z, z_next, achieved, r_h, k, reward, done, terminated, table, shared, eta,
-                       gamma_shaping, value_gamma, value_lr, zero_terminal, rh_out, k_out, shaped,
-                       no_f, no_i, no_b)
+                advance_regions(z, state.reshape((n, 1)), pattern, lo, hi, centre, weight, radius2, succ, z_next)
+        elif shaping == LOOKUP_SHAPING:
+            for b in range(n):
+                z_next[b, 0] = lookup[state[b]]
+        shape_or_copy(shaping, z, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma_shaping,
+                      value_gamma, value_lr, zero_terminal, buffers)
         for b in range(n):
             zn = z_next[b, 0] if shaping != NO_SHAPING else 0
             rows_next[b] = state[b] * abstract_states + (zn if abstract_states > 1 else 0)
             if done[b, 0]:  # the env and the transform reset this learner
                 state[b] = start
                 t_env[b] = 0
-                z[b, 0] = initial_z
-                achieved[b, 0] = False
-                r_h[b, 0] = 0.0
-                k[b, 0] = 0
-            elif shaping != NO_SHAPING:
-                achieved[b, 0] = zn != z[b, 0]
-                z[b, 0] = zn
-                r_h[b, 0] = rh_out[b, 0]
-                k[b, 0] = k_out[b, 0]
+            carry_abstract_state(b, done[b, 0], shaping, initial_z, z, achieved, r_h, k, buffers)
             rows_root[b] = state[b] * abstract_states + (z[b, 0] if abstract_states > 1 else 0)
         sarsa_step(q, rows, action, shaped[:, 0], rows_next, terminated[:, 0], done[:, 0], rows_root,
                    uniforms[step], lr, gamma, inv_temperature, next_action)
@@ -324,6 +344,22 @@ def first_region(z, obs, lo, hi, centre, weight, radius2, z_out):
 
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
+def _basis_exponentials(obs, low, inv_range, k, first_dim, end_dim, out):
+    """``out[i] = exp(iπ c_i · s̃)`` over dimensions ``[first_dim, end_dim)``, with ``c_i``
+    the base-``k`` digits of ``i`` (last dimension least significant), as (re, im) pairs."""
+    for i in range(out.shape[0]):
+        re, im, rem = 1.0, 0.0, i
+        for d in range(end_dim - 1, first_dim - 1, -1):
+            c = rem % k
+            rem //= k
+            x = min(max((obs[d] - low[d]) * inv_range[d], 0.0), 1.0)
+            angle = np.pi * c * x
+            cr, ci = np.cos(angle), np.sin(angle)
+            re, im = re * cr - im * ci, re * ci + im * cr
+        out[i, 0], out[i, 1] = re, im
+
+
+@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
 def fourier_features(obs, low, inv_range, order, half, first, second, out):
     """``out[f] = cos(π c_f · s̃)`` for every coefficient vector ``c_f ∈ {0..order}^D`` in
     lexicographic order, ``s̃ = clip((obs - low) / range, 0, 1)``.
@@ -332,31 +368,10 @@ def fourier_features(obs, low, inv_range, order, half, first, second, out):
     exponentials of the first ``half`` dimensions, ``B`` of the others (one
     complex product per feature instead of a cosine).
     """
-    dim = obs.shape[0]
-    k = order + 1
-    n_first = first.shape[0]
+    _basis_exponentials(obs, low, inv_range, order + 1, 0, half, first)
+    _basis_exponentials(obs, low, inv_range, order + 1, half, obs.shape[0], second)
     n_second = second.shape[0]
-    for a in range(n_first):
-        re, im, rem = 1.0, 0.0, a
-        for d in range(half - 1, -1, -1):
-            c = rem % k
-            rem //= k
-            x = min(max((obs[d] - low[d]) * inv_range[d], 0.0), 1.0)
-            angle = np.pi * c * x
-            cr, ci = np.cos(angle), np.sin(angle)
-            re, im = re * cr - im * ci, re * ci + im * cr
-        first[a, 0], first[a, 1] = re, im
-    for b in range(n_second):
-        re, im, rem = 1.0, 0.0, b
-        for d in range(dim - 1, half - 1, -1):
-            c = rem % k
-            rem //= k
-            x = min(max((obs[d] - low[d]) * inv_range[d], 0.0), 1.0)
-            angle = np.pi * c * x
-            cr, ci = np.cos(angle), np.sin(angle)
-            re, im = re * cr - im * ci, re * ci + im * cr
-        second[b, 0], second[b, 1] = re, im
-    for a in range(n_first):
+    for a in range(first.shape[0]):
         for b in range(n_second):
             out[a * n_second + b] = first[a, 0] * second[b, 0] - first[a, 1] * second[b, 1]
 

@@ -48,10 +48,11 @@ class SubgoalPotentialTransform(Transform):
     Every step it adds ``F`` to the reward; the environment's reward stays
     under ``"env_reward"``, declared as a second reward entry (so use
     ``env.reward_keys``: ``env.reward_key`` expects a single one). When a
-    subgoal is achieved or the episode ends it writes one SMDP transition ``(z, r_h, k, z', terminated)`` under
-    ``("next", "smdp")`` in the layout :class:`~torchrl_subgoal.SubgoalValueLoss`
-    and TorchRL's TD(0) estimator read (``mask`` tells which entries are
-    real). At truncation the transition bootstraps from ``V(z')``.
+    subgoal is achieved or the episode ends it writes one SMDP transition
+    ``(z, r_h, k, z', terminated)`` under ``("next", "smdp")`` in the layout
+    :class:`~torchrl_subgoal.SubgoalValueLoss` and TorchRL's TD(0) estimator
+    read (``mask`` tells which entries are real). At truncation the transition
+    bootstraps from ``V(z')``.
 
     The potential is used *as it is now* (a dynamic potential). With
     ``value_lr`` set, the transform also trains the potential online by SGD on

@@ -113,10 +113,11 @@ class FourierActorCritic:
     def features(self, observation: torch.Tensor) -> torch.Tensor:
         """``φ(s)`` of a batch of observations ``[N, D]`` (the kernel's features, for inspection)."""
         obs = observation.detach().cpu().numpy().astype(np.float64).reshape(-1, self.low.shape[0])
-        out = np.empty((obs.shape[0], self.num_features))
-        theta = np.zeros((obs.shape[0], 1, self.num_features))
-        _kernels.ac_act(theta, out, np.empty((obs.shape[0], 1)), obs, self.low, self.inv_range, self.config.order, self.half,
-                        np.zeros(obs.shape[0]), np.empty(obs.shape[0], np.int64))
+        n = obs.shape[0]
+        out = np.empty((n, self.num_features))
+        theta = np.zeros((n, 1, self.num_features))
+        _kernels.ac_act(theta, out, np.empty((n, 1)), obs, self.low, self.inv_range, self.config.order, self.half,
+                        np.zeros(n), np.empty(n, np.int64))
         return torch.from_numpy(out)
 
     def _obs(self, tensordict: TensorDictBase) -> np.ndarray:

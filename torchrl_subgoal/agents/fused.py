@@ -30,7 +30,7 @@ ones at their last recorded episode.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 import numba
 import numpy as np
@@ -50,18 +50,45 @@ from torchrl_subgoal.transform import SubgoalPotentialTransform
 
 __all__ = ["run_episodes_fused", "run_four_rooms_fused", "run_pinball_fused"]
 
+B = TypeVar("B", bound=EnvBase)
 
-def _unwrap(env: EnvBase) -> tuple[FourRoomsEnv, SubgoalPotentialTransform | None]:
-    if isinstance(env, FourRoomsEnv):
+
+def _unwrap(env: EnvBase, base_type: type[B]) -> tuple[B, SubgoalPotentialTransform | None]:
+    """The ``base_type`` env and its shaping transform (``None`` if bare); a clear error for anything else."""
+    if isinstance(env, base_type):
         return env, None
-    if isinstance(env, TransformedEnv) and isinstance(env.base_env, FourRoomsEnv):
-        transform = env.transform
-        if isinstance(transform, SubgoalPotentialTransform):
-            return env.base_env, transform
+    if (
+        isinstance(env, TransformedEnv)
+        and isinstance(env.base_env, base_type)
+        and isinstance(env.transform, SubgoalPotentialTransform)
+    ):
+        return env.base_env, env.transform
     raise TypeError(
-        "the fused engine runs FourRoomsEnv, alone or with one SubgoalPotentialTransform; "
+        f"the fused engine runs {base_type.__name__}, alone or with one SubgoalPotentialTransform; "
         f"got {env}. Use engine='torchrl' for other envs and transforms."
     )
+
+
+def _run_blocks(
+    n: int,
+    episodes: int,
+    run_block: Callable[[tuple[np.ndarray, ...]], tuple[int, int]],
+    progress: Callable[[int], None] | None,
+) -> EpisodeRecords:
+    """Call ``run_block(records)`` (one compiled block of steps) until every learner has
+    ``episodes`` episodes; ``records`` are the arrays the kernels file episodes into."""
+    steps = torch.zeros(n, episodes, dtype=torch.long)
+    returns = torch.zeros(n, episodes)
+    success = torch.zeros(n, episodes, dtype=torch.bool)
+    done_episodes = np.zeros(n, np.int64)
+    records = (np.zeros(n, np.int64), np.zeros(n), done_episodes, steps.numpy(), returns.numpy(), success.numpy())
+    env_steps = 0
+    while done_episodes.min() < episodes:
+        taken, filed = run_block(records)
+        env_steps += taken
+        if progress is not None and filed:
+            progress(filed)
+    return EpisodeRecords(steps, returns, success, env_steps)
 
 
 def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase, n: int) -> dict[str, Any]:
@@ -135,7 +162,7 @@ def run_four_rooms_fused(
     block: int = 2048,
 ) -> EpisodeRecords:
     """The fused engine for four-rooms with SARSA (see :func:`run_episodes_fused`)."""
-    base, shaping = _unwrap(env)
+    base, shaping = _unwrap(env, FourRoomsEnv)
     td = agent.act(env.reset())  # the same start as the TorchRL loop, tables compiled
     n = max(1, base.batch_size.numel())
     action = td.get("action").reshape(-1).numpy().copy()
@@ -146,27 +173,20 @@ def run_four_rooms_fused(
     if state["kind"] == _kernels.LOOKUP_SHAPING and observe_cell:
         raise TypeError("a lookup aggregation reads the state number ('observation')")
     initial_z = int(state["lookup"][base.start_state]) if state["kind"] == _kernels.LOOKUP_SHAPING else 0
-    steps = torch.zeros(n, episodes, dtype=torch.long)
-    returns = torch.zeros(n, episodes)
-    success = torch.zeros(n, episodes, dtype=torch.bool)
-    t_rec, ret, done_episodes = np.zeros(n, np.int64), np.zeros(n), np.zeros(n, np.int64)
     cfg = agent.config
-    env_steps = 0
-    while done_episodes.min() < episodes:
+
+    def run_block(records: tuple[np.ndarray, ...]) -> tuple[int, int]:
         uniforms = agent.rng.random((block, 2 * n))
-        taken, filed = _kernels.sarsa_grid_run(
+        return _kernels.sarsa_grid_run(
             base._state.numpy(), base._t.numpy(), base._transitions_np, base._cells_np,
             base.start_state, base.goal_state, base.max_steps,
             state["kind"], observe_cell, *state["regions"], state["lookup"], initial_z,
             state["z"], state["achieved"], state["r_h"], state["k"], state["table"], state["shared"],
             state["eta"], state["gamma"], state["value_gamma"], state["value_lr"], state["zero_terminal"],
-            agent._q, agent.abstract_states, action, cfg.lr, cfg.gamma, 1.0 / cfg.temperature, uniforms,
-            t_rec, ret, done_episodes, steps.numpy(), returns.numpy(), success.numpy(),
+            agent._q, agent.abstract_states, action, cfg.lr, cfg.gamma, 1.0 / cfg.temperature, uniforms, *records,
         )
-        env_steps += taken
-        if progress is not None and filed:
-            progress(filed)
-    return EpisodeRecords(steps, returns, success, env_steps)
+
+    return _run_blocks(n, episodes, run_block, progress)
 
 
 # --------------------------------------------------------------------------- PinBall
@@ -201,13 +221,8 @@ def _pinball_ac_run(
     obs = np.empty((n, 4), np.float32)
     obs_next = np.empty((n, 4), np.float64)
     obs_root = np.empty((n, 4), np.float64)
-    z_next = np.empty((n, 1), np.int64)
-    rh_out = np.empty((n, 1), np.float32)
-    k_out = np.empty((n, 1), np.int64)
-    shaped = np.empty((n, 1), np.float32)
-    no_f = np.empty((0, 1), np.float32)
-    no_i = np.empty((0, 1), np.int64)
-    no_b = np.empty((0, 1), np.bool_)
+    buffers = _kernels.shaping_buffers(n)
+    z_next, shaped = buffers[0], buffers[3]
     active = np.empty(n, np.bool_)
     next_action = np.empty(n, np.int64)
     max_episodes = steps_out.shape[1]
@@ -229,17 +244,12 @@ def _pinball_ac_run(
             reward[b, 0] = r
             obs[b, 0], obs[b, 1] = position[b, 0], position[b, 1]
             obs[b, 2], obs[b, 3] = velocity[b, 0], velocity[b, 1]
-        if shaping == _kernels.NO_SHAPING:
-            shaped[:, 0] = reward[:, 0]
-        else:
-            if shaping == _kernels.SUBGOAL_SHAPING:
-                _kernels.advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_next)
-            else:
-                _kernels.first_region(z, obs, region_lo, region_hi, region_centre, region_weight,
-                                      region_radius2, z_next)
-            _kernels.shape_step(z, z_next, achieved, r_h, k, reward, done, terminated, table, shared, eta,
-                                gamma_shaping, value_gamma, value_lr, zero_terminal, rh_out, k_out, shaped,
-                                no_f, no_i, no_b)
+        if shaping == _kernels.SUBGOAL_SHAPING:
+            _kernels.advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_next)
+        elif shaping == _kernels.LOOKUP_SHAPING:
+            _kernels.first_region(z, obs, region_lo, region_hi, region_centre, region_weight, region_radius2, z_next)
+        _kernels.shape_or_copy(shaping, z, achieved, r_h, k, reward, done, terminated, table, shared, eta,
+                               gamma_shaping, value_gamma, value_lr, zero_terminal, buffers)
         for b in range(n):
             for d in range(4):
                 obs_next[b, d] = obs[b, d]
@@ -247,16 +257,7 @@ def _pinball_ac_run(
                 position[b, 0], position[b, 1] = start_x, start_y
                 velocity[b, 0], velocity[b, 1] = 0.0, 0.0
                 env_steps[b] = 0
-                if shaping != _kernels.NO_SHAPING:
-                    achieved[b, 0] = False
-                    r_h[b, 0] = 0.0
-                    k[b, 0] = 0
-                    z[b, 0] = 0
-            elif shaping != _kernels.NO_SHAPING:
-                achieved[b, 0] = z_next[b, 0] != z[b, 0]
-                z[b, 0] = z_next[b, 0]
-                r_h[b, 0] = rh_out[b, 0]
-                k[b, 0] = k_out[b, 0]
+            _kernels.carry_abstract_state(b, done[b, 0], shaping, 0, z, achieved, r_h, k, buffers)
             obs_root[b, 0] = np.float32(position[b, 0])
             obs_root[b, 1] = np.float32(position[b, 1])
             obs_root[b, 2] = np.float32(velocity[b, 0])
@@ -291,7 +292,7 @@ def run_pinball_fused(
 ) -> EpisodeRecords:
     """The fused engine for :class:`~torchrl_subgoal.envs.PinBallEnv` with a
     :class:`~torchrl_subgoal.agents.FourierActorCritic` (see :func:`run_episodes_fused`)."""
-    base, shaping = _unwrap_pinball(env)
+    base, shaping = _unwrap(env, PinBallEnv)
     if base.physics.backend != "numba":
         raise TypeError("the fused engine needs PinBall's numba physics backend")
     td = agent.act(env.reset())
@@ -310,16 +311,12 @@ def run_pinball_fused(
         raise TypeError("the fused PinBall engine skips finished learners, so each needs its own potential table")
     g = base.physics.geometry
     tx, ty, tr = g.target
-    steps = torch.zeros(n, episodes, dtype=torch.long)
-    returns = torch.zeros(n, episodes)
-    success = torch.zeros(n, episodes, dtype=torch.bool)
-    t_rec, ret, done_episodes = np.zeros(n, np.int64), np.zeros(n), np.zeros(n, np.int64)
     cfg = agent.config
-    env_steps = 0
-    while done_episodes.min() < episodes:
+
+    def run_block(records: tuple[np.ndarray, ...]) -> tuple[int, int]:
         env_uniforms = base._rng.random((block, 2 * n)) if base.random_action_prob > 0 else np.ones((block, 2 * n))
         agent_uniforms = agent.rng.random((block, n))
-        taken, filed = _pinball_ac_run(
+        return _pinball_ac_run(
             base._position.numpy(), base._velocity.numpy(), base._steps.numpy(), base.start[0], base.start[1],
             g.edges, g.boxes, g.first_edge, g.ball_radius, tx, ty, tr, base.physics.velocity_limit,
             base.max_steps, base.random_action_prob, base.goal_reward, base.step_penalty, base.thrust_penalty,
@@ -327,25 +324,7 @@ def run_pinball_fused(
             region["radius2"], state["z"], state["achieved"], state["r_h"], state["k"], state["table"],
             state["shared"], state["eta"], state["gamma"], state["value_gamma"], state["value_lr"],
             state["zero_terminal"], agent.w, agent.theta, agent.phi, agent.probs, action, agent.low, agent.inv_range,
-            cfg.order, agent.half, agent_uniforms, cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr,
-            t_rec, ret, done_episodes, steps.numpy(), returns.numpy(), success.numpy(),
+            cfg.order, agent.half, agent_uniforms, cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr, *records,
         )
-        env_steps += taken
-        if progress is not None and filed:
-            progress(filed)
-    return EpisodeRecords(steps, returns, success, env_steps)
 
-
-def _unwrap_pinball(env: EnvBase) -> tuple[PinBallEnv, SubgoalPotentialTransform | None]:
-    if isinstance(env, PinBallEnv):
-        return env, None
-    if (
-        isinstance(env, TransformedEnv)
-        and isinstance(env.base_env, PinBallEnv)
-        and isinstance(env.transform, SubgoalPotentialTransform)
-    ):
-        return env.base_env, env.transform
-    raise TypeError(
-        "the fused engine runs PinBallEnv, alone or with one SubgoalPotentialTransform; "
-        f"got {env}. Use engine='torchrl' for other envs and transforms."
-    )
+    return _run_blocks(n, episodes, run_block, progress)

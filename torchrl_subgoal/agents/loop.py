@@ -69,8 +69,8 @@ def run_episodes(
         progress: called with the number of learner-episodes just finished.
         engine: ``"torchrl"`` steps the env with ``step_and_maybe_reset``;
             ``"fused"`` runs the same objects in one compiled loop with
-            identical results, much faster (four-rooms with SARSA only; see
-            :mod:`torchrl_subgoal.agents.fused`).
+            identical records, much faster (FourRoomsEnv with SoftmaxSarsa,
+            PinBallEnv with FourierActorCritic; see :mod:`torchrl_subgoal.agents.fused`).
 
     Returns:
         steps, (unshaped) return and success (terminated) of every episode.

@@ -154,7 +154,7 @@ class FourRoomsEnv(EnvBase):
         reset = tensordict.get("_reset", None) if tensordict is not None else None
         shape = self.batch_size
         n = self._state.numel()
-        mask = torch.ones(n, dtype=torch.bool) if reset is None else reset.reshape(-1)
+        mask = torch.ones(n, dtype=torch.bool, device=self.device) if reset is None else reset.reshape(-1)
         cell = torch.empty((*shape, 2), dtype=torch.long, device=self.device)
         if self.device.type == "cpu":
             _kernels.grid_reset(self._state.numpy(), self._t.numpy(), mask.numpy(), self.start_state,
@@ -180,10 +180,10 @@ class FourRoomsEnv(EnvBase):
         shape = self.batch_size
         n = self._state.numel()
         action = tensordict.get("action").reshape(-1)
-        reward = torch.empty((*shape, 1), dtype=torch.float32)
-        terminated = torch.empty((*shape, 1), dtype=torch.bool)
-        truncated = torch.empty((*shape, 1), dtype=torch.bool)
-        cell = torch.empty((*shape, 2), dtype=torch.long)
+        reward = torch.empty((*shape, 1), dtype=torch.float32, device=self.device)
+        terminated = torch.empty((*shape, 1), dtype=torch.bool, device=self.device)
+        truncated = torch.empty((*shape, 1), dtype=torch.bool, device=self.device)
+        cell = torch.empty((*shape, 2), dtype=torch.long, device=self.device)
         if self.device.type == "cpu":
             _kernels.grid_step(
                 self._state.numpy(), self._t.numpy(), action.numpy(), self._transitions_np, self._cells_np,

@@ -395,10 +395,6 @@ def random_actions(action: np.ndarray, uniforms: np.ndarray, probability: float)
 step_balls = numba.njit(cache=True, nogil=True)(_step_balls)
 
 
-def _numba_kernel() -> Callable[..., None]:
-    return step_balls
-
-
 def _torch_kernel(
     position: torch.Tensor,
     velocity: torch.Tensor,
@@ -555,7 +551,7 @@ class PinBallPhysics:
         tx, ty, tr = g.target
         if self.backend == "numba":
             reached = torch.empty(position.shape[0], dtype=torch.bool)
-            _numba_kernel()(
+            step_balls(
                 position.numpy(),
                 velocity.numpy(),
                 action.contiguous().numpy(),
