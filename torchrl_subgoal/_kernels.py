@@ -214,40 +214,28 @@ NO_SHAPING, SUBGOAL_SHAPING, LOOKUP_SHAPING = 0, 1, 2
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def shaping_buffers(n):
-    """Per-step outputs of the fused runs' shaping: ``(z', r_h', k', shaped reward)`` and
-    the empty arrays that tell :func:`shape_step` to skip the SMDP transition."""
+    """Per-step outputs of the fused runs' shaping, ``z'``, ``r_h'``, ``k'`` and the shaped
+    reward, and the empty arrays that tell :func:`shape_step` to skip the SMDP transition."""
     return (np.empty((n, 1), np.int64), np.empty((n, 1), np.float32), np.empty((n, 1), np.int64),
             np.empty((n, 1), np.float32), np.empty((0, 1), np.float32), np.empty((0, 1), np.int64),
             np.empty((0, 1), np.bool_))
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def shape_or_copy(shaping, z, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma,
-                  value_gamma, value_lr, zero_terminal, buffers):
-    """The transform's step once ``z'`` is in ``buffers[0]``: the shaped reward into ``buffers[3]``
-    (the env's reward itself without shaping)."""
-    z_next, rh_out, k_out, shaped, no_f, no_i, no_b = buffers
-    if shaping == NO_SHAPING:
-        shaped[:, 0] = reward[:, 0]
-    else:
-        shape_step(z, z_next, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma,
-                   value_gamma, value_lr, zero_terminal, rh_out, k_out, shaped, no_f, no_i, no_b)
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def carry_abstract_state(b, reset, shaping, initial_z, z, achieved, r_h, k, buffers):
-    """Learner ``b``'s abstract state for the next step: the reset one, or the step's outputs."""
-    if reset:
-        z[b, 0] = initial_z
-        achieved[b, 0] = False
-        r_h[b, 0] = 0.0
-        k[b, 0] = 0
-    elif shaping != NO_SHAPING:
-        z_next, rh_out, k_out = buffers[0], buffers[1], buffers[2]
-        achieved[b, 0] = z_next[b, 0] != z[b, 0]
-        z[b, 0] = z_next[b, 0]
-        r_h[b, 0] = rh_out[b, 0]
-        k[b, 0] = k_out[b, 0]
+@numba.njit(cache=True, nogil=True)
+def carry_abstract_states(reset, shaping, initial_z, z, achieved, r_h, k, z_next, rh_out, k_out):
+    """Each learner's abstract state for the next step: the reset one where ``reset``,
+    else this step's outputs (left alone without shaping)."""
+    for b in range(z.shape[0]):
+        if reset[b, 0]:
+            z[b, 0] = initial_z
+            achieved[b, 0] = False
+            r_h[b, 0] = 0.0
+            k[b, 0] = 0
+        elif shaping != NO_SHAPING:
+            achieved[b, 0] = z_next[b, 0] != z[b, 0]
+            z[b, 0] = z_next[b, 0]
+            r_h[b, 0] = rh_out[b, 0]
+            k[b, 0] = k_out[b, 0]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -277,8 +265,7 @@ def sarsa_grid_run(
     truncated = np.empty((n, 1), np.bool_)
     done = np.empty((n, 1), np.bool_)
     cell = np.empty((n, 2), np.int64)
-    buffers = shaping_buffers(n)
-    z_next, shaped = buffers[0], buffers[3]
+    z_next, rh_out, k_out, shaped, no_f, no_i, no_b = shaping_buffers(n)
     rows = np.empty(n, np.int64)
     rows_next = np.empty(n, np.int64)
     rows_root = np.empty(n, np.int64)
@@ -300,15 +287,19 @@ def sarsa_grid_run(
         elif shaping == LOOKUP_SHAPING:
             for b in range(n):
                 z_next[b, 0] = lookup[state[b]]
-        shape_or_copy(shaping, z, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma_shaping,
-                      value_gamma, value_lr, zero_terminal, buffers)
+        if shaping == NO_SHAPING:
+            shaped[:, 0] = reward[:, 0]
+        else:
+            shape_step(z, z_next, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma_shaping,
+                       value_gamma, value_lr, zero_terminal, rh_out, k_out, shaped, no_f, no_i, no_b)
         for b in range(n):
             zn = z_next[b, 0] if shaping != NO_SHAPING else 0
             rows_next[b] = state[b] * abstract_states + (zn if abstract_states > 1 else 0)
             if done[b, 0]:  # the env and the transform reset this learner
                 state[b] = start
                 t_env[b] = 0
-            carry_abstract_state(b, done[b, 0], shaping, initial_z, z, achieved, r_h, k, buffers)
+        carry_abstract_states(done, shaping, initial_z, z, achieved, r_h, k, z_next, rh_out, k_out)
+        for b in range(n):
             rows_root[b] = state[b] * abstract_states + (z[b, 0] if abstract_states > 1 else 0)
         sarsa_step(q, rows, action, shaped[:, 0], rows_next, terminated[:, 0], done[:, 0], rows_root,
                    uniforms[step], lr, gamma, inv_temperature, next_action)

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import json
 
+import pytest
 import torch
 
 from torchrl_subgoal.experiments import plan_chunks
+from torchrl_subgoal.experiments.cli import ConfigError
 from torchrl_subgoal.experiments.recipe import (
     chunk_patterns,
     method_specs,
@@ -53,3 +55,9 @@ def test_chunk_patterns_read_back_what_the_config_stored() -> None:
     (unshaped,) = plan_chunks(method_specs(paper_methods("SARSA"), ["SARSA"], sets, 1), seed=0, chunk_size=10)
     series, index = chunk_patterns(unshaped, config)
     assert series == [] and torch.equal(index, torch.zeros(2, dtype=torch.long))
+
+
+def test_unknown_method_names_the_flag_and_the_known_ones() -> None:
+    sets = pattern_sets(HUMAN, CANDIDATES, 1, seed=0)
+    with pytest.raises(ConfigError, match=r"--methods: unknown method\(s\) \['XYZ'\]; choose from \['HRS'"):
+        method_specs(paper_methods("SARSA"), ["HRS", "XYZ"], sets, 1)

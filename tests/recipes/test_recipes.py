@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
+import subprocess
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -55,7 +57,7 @@ def test_four_rooms_engines_agree(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(("flag", "value", "message"), [
     ("--episodes", "0", "--episodes: must be >= 1"),
-    ("--methods", "HRS,XYZ", "--methods: unknown ['XYZ']"),
+    ("--methods", "HRS,XYZ", "--methods: unknown method(s) ['XYZ']"),
     ("--eta", "-1", "--eta: must be >= 0"),
 ])
 def test_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str], flag: str, value: str,
@@ -84,8 +86,6 @@ def test_pinball_recipe(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
 
 def test_four_rooms_on_ray_equals_local(tmp_path: Path) -> None:
     """The command line with --backend ray (a local Ray instance) gives the local backend's results."""
-    import subprocess
-
     from torchrl_subgoal.experiments import load_frame
 
     frames = []
@@ -94,7 +94,7 @@ def test_four_rooms_on_ray_equals_local(tmp_path: Path) -> None:
         cmd = [sys.executable, str(ROOT / "recipes" / "four_rooms.py"), "--episodes", "15", "--learnings", "1",
                "--methods", "HRS,SARSA", "--chunk-size", "5", "--backend", backend, "--workers", "2",
                "--results", str(out)]
-        env = {k: v for k, v in __import__("os").environ.items() if k != "RAY_ADDRESS"}
+        env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
         assert done.returncode == 0, done.stderr[-2000:]
         frames.append(load_frame(out))

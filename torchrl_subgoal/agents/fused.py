@@ -221,8 +221,7 @@ def _pinball_ac_run(
     obs = np.empty((n, 4), np.float32)
     obs_next = np.empty((n, 4), np.float64)
     obs_root = np.empty((n, 4), np.float64)
-    buffers = _kernels.shaping_buffers(n)
-    z_next, shaped = buffers[0], buffers[3]
+    z_next, rh_out, k_out, shaped, no_f, no_i, no_b = _kernels.shaping_buffers(n)
     active = np.empty(n, np.bool_)
     next_action = np.empty(n, np.int64)
     max_episodes = steps_out.shape[1]
@@ -248,8 +247,13 @@ def _pinball_ac_run(
             _kernels.advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_next)
         elif shaping == _kernels.LOOKUP_SHAPING:
             _kernels.first_region(z, obs, region_lo, region_hi, region_centre, region_weight, region_radius2, z_next)
-        _kernels.shape_or_copy(shaping, z, achieved, r_h, k, reward, done, terminated, table, shared, eta,
-                               gamma_shaping, value_gamma, value_lr, zero_terminal, buffers)
+        if shaping == _kernels.NO_SHAPING:
+            shaped[:, 0] = reward[:, 0]
+        else:
+            _kernels.shape_step(z, z_next, achieved, r_h, k, reward, done, terminated, table, shared, eta,
+                                gamma_shaping, value_gamma, value_lr, zero_terminal, rh_out, k_out, shaped,
+                                no_f, no_i, no_b)
+        _kernels.carry_abstract_states(done, shaping, 0, z, achieved, r_h, k, z_next, rh_out, k_out)
         for b in range(n):
             for d in range(4):
                 obs_next[b, d] = obs[b, d]
@@ -257,7 +261,6 @@ def _pinball_ac_run(
                 position[b, 0], position[b, 1] = start_x, start_y
                 velocity[b, 0], velocity[b, 1] = 0.0, 0.0
                 env_steps[b] = 0
-            _kernels.carry_abstract_state(b, done[b, 0], shaping, 0, z, achieved, r_h, k, buffers)
             obs_root[b, 0] = np.float32(position[b, 0])
             obs_root[b, 1] = np.float32(position[b, 1])
             obs_root[b, 2] = np.float32(velocity[b, 0])

@@ -13,8 +13,9 @@ from typing import Any, Literal
 
 import torch
 
-from torchrl_subgoal.experiments.store import Chunk
-from torchrl_subgoal.experiments.sweep import MethodSpec, RunChunk, Sweep
+from torchrl_subgoal.experiments.cli import ConfigError
+from torchrl_subgoal.experiments.store import Chunk, UnknownMethodError
+from torchrl_subgoal.experiments.sweep import MethodSpec, RunChunk, Sweep, select_methods
 from torchrl_subgoal.methods import Method, random_patterns
 from torchrl_subgoal.subgoals import Predicate, SubgoalSeries
 
@@ -40,14 +41,18 @@ def pattern_config(patterns: PatternSets) -> dict[str, Any]:
 def method_specs(
     methods: Mapping[str, Method], names: Sequence[str], patterns: PatternSets, learnings: int
 ) -> list[MethodSpec]:
-    """Learners of each method: every pattern ``learnings`` times; methods without
-    patterns get as many learnings in all, of one pseudo-pattern ``"none"``."""
+    """Learners of the methods ``names`` (a recipe's ``--methods``): every pattern
+    ``learnings`` times; methods without patterns get as many learnings in all, of
+    one pseudo-pattern ``"none"``. An unknown name is a :class:`ConfigError`."""
     specs = []
-    for name in names:
-        kind = methods[name].subgoals
+    for name, method in methods.items():
+        kind = method.subgoals
         per_pattern = learnings if kind != "none" else learnings * len(patterns["human"])
         specs.append(MethodSpec(name, list(patterns[kind]) or ["none"], per_pattern))
-    return specs
+    try:
+        return select_methods(specs, names)
+    except UnknownMethodError as exc:
+        raise ConfigError(f"--methods: {exc}") from None
 
 
 def chunk_patterns(chunk: Chunk, config: Mapping[str, Any]) -> tuple[list[SubgoalSeries], torch.Tensor]:
