@@ -28,7 +28,7 @@ import argparse
 import statistics
 import time
 from importlib.resources import files
-from typing import Literal
+from typing import ClassVar, Literal
 
 import torch
 from tensordict import TensorDictBase
@@ -39,7 +39,7 @@ from torchrl_subgoal import SubgoalPotentialTransform, TabularPotential, load_pa
 from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.potentials import INDEX
-from torchrl_subgoal.transform import _write
+from torchrl_subgoal.transform import RETURN, STEPS, _write
 
 PATTERNS = list(load_patterns(str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")).values())
 
@@ -54,11 +54,11 @@ def shaping(n: int, write: bool) -> SubgoalPotentialTransform:
 class KeysOnly(Transform):
     """Writes the entries the shaping transform writes, without computing anything."""
 
-    KEYS = ("subgoal_index", "subgoal_return", "subgoal_steps")
+    DTYPES: ClassVar[dict[str, torch.dtype]] = {INDEX: torch.long, RETURN: torch.float32, STEPS: torch.long}
 
     def transform_observation_spec(self, observation_spec: TensorSpec) -> TensorSpec:
         assert isinstance(observation_spec, Composite)
-        for key, dtype in zip(self.KEYS, (torch.long, torch.float32, torch.long), strict=True):
+        for key, dtype in self.DTYPES.items():
             observation_spec[key] = Unbounded(shape=(*observation_spec.shape, 1), dtype=dtype)
         return observation_spec
 
@@ -68,9 +68,7 @@ class KeysOnly(Transform):
         return reward_spec
 
     def _zeros(self, batch_shape: torch.Size) -> dict[str, torch.Tensor]:
-        shape = (*batch_shape, 1)
-        return {INDEX: torch.zeros(shape, dtype=torch.long), "subgoal_return": torch.zeros(shape),
-                "subgoal_steps": torch.zeros(shape, dtype=torch.long)}
+        return {key: torch.zeros((*batch_shape, 1), dtype=dtype) for key, dtype in self.DTYPES.items()}
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         reward = next_tensordict.get("reward")
