@@ -1,0 +1,317 @@
+"""The studio's web server: the page, its JSON API and the command line.
+
+Routes (JSON in and out; every error is ``{"error": message}`` with a 4xx code):
+
+=======================  ==============================================================
+``GET /``                the page
+``GET /api/domains``     the domains, their maps and the "Try it" bounds
+``GET /api/geometry``    ``?domain=&map=``: the map to draw
+``POST /api/validate``   a drawing (see :mod:`~torchrl_subgoal.studio.document`): ok or why not
+``GET /api/files``       the subgoal files in the save folder
+``GET /api/files/NAME``  one file as a drawing (``/files/NAME``: the file itself)
+``PUT /api/files/NAME``  save a drawing as ``NAME`` (``.yaml`` added when no suffix)
+``POST /api/try``        start a "Try it" learning of one pattern: ``{..drawing, pattern,
+                         episodes, learners, max_steps}``; 202 with the job
+``GET /api/try/ID``      the job's state, progress and, when done, its result
+``DELETE /api/try/ID``   cancel it
+=======================  ==============================================================
+"""
+
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import logging
+import socket
+import sys
+import threading
+import webbrowser
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from flask import Flask, Response, jsonify, render_template, request, send_file
+from werkzeug.exceptions import HTTPException
+from werkzeug.serving import BaseWSGIServer, make_server
+
+from torchrl_subgoal.studio.document import (
+    MAX_REQUEST_BYTES,
+    SUFFIXES,
+    RequestError,
+    file_path,
+    infer_domain,
+    parse_json,
+    read_drawing,
+    save_drawing,
+    to_document,
+)
+from torchrl_subgoal.studio.domains import Domain, default_domains
+from torchrl_subgoal.studio.jobs import JobError, Jobs
+from torchrl_subgoal.studio.training import TrySettings, try_pattern
+from torchrl_subgoal.subgoals import SubgoalFileError, load_patterns
+
+__all__ = ["create_app", "main", "serve"]
+
+log = logging.getLogger(__name__)
+DEFAULT_PORT = 8765
+
+
+class Studio:
+    """The state behind one app: save folder, domains, jobs."""
+
+    def __init__(self, folder: Path, domains: Mapping[str, Domain], jobs: Jobs) -> None:
+        self.folder = folder
+        self.domains = domains
+        self.jobs = jobs
+
+
+def _error(message: str, status: int) -> tuple[Response, int]:
+    return jsonify(error=message), status
+
+
+def _body() -> Any:
+    return parse_json(request.get_data(cache=False))
+
+
+def create_app(
+    folder: str | Path,
+    *,
+    pinball_maps: Mapping[str, str | Path] | None = None,
+    max_jobs: int = 2,
+) -> Flask:
+    """The studio as a Flask app saving into ``folder`` (created if missing).
+
+    Args:
+        folder: where subgoal files are listed, opened and saved.
+        pinball_maps: extra PinBall maps, name -> configuration file.
+        max_jobs: "Try it" learnings that may run at once.
+
+    Examples:
+        >>> import tempfile
+        >>> app = create_app(tempfile.mkdtemp())
+        >>> app.test_client().get("/api/domains").json[0]["name"]
+        'four_rooms'
+    """
+    app = Flask(__name__)
+    app.config["MAX_CONTENT_LENGTH"] = MAX_REQUEST_BYTES
+    app.url_map.merge_slashes = False  # "//etc/passwd" is a bad file name, not a redirect
+    root = Path(folder)
+    root.mkdir(parents=True, exist_ok=True)
+    studio = Studio(root, default_domains(pinball_maps), Jobs(max_running=max_jobs))
+    app.extensions["studio"] = studio
+
+    @app.errorhandler(RequestError)
+    def bad_request(exc: RequestError) -> tuple[Response, int]:
+        return _error(str(exc), exc.status)
+
+    @app.errorhandler(JobError)
+    def job_refused(exc: JobError) -> tuple[Response, int]:
+        return _error(str(exc), exc.status)
+
+    @app.errorhandler(HTTPException)
+    def http_error(exc: HTTPException) -> Any:
+        if not request.path.startswith("/api/"):
+            return exc
+        if exc.code == 413:
+            return _error(f"request: over the limit of {MAX_REQUEST_BYTES} bytes", 413)
+        return _error(f"{request.method} {request.path}: {exc.description}", exc.code or 500)
+
+    @app.errorhandler(Exception)
+    def internal_error(exc: Exception) -> tuple[Response, int]:
+        log.exception("studio: %s %s failed", request.method, request.path)
+        return _error(f"internal error: {type(exc).__name__}: {exc} (please report it)", 500)
+
+    @app.get("/")
+    def index() -> str:
+        return render_template("index.html", folder=str(root.resolve()))
+
+    @app.get("/api/domains")
+    def domains() -> Response:
+        return jsonify([d.describe() for d in studio.domains.values()])
+
+    @app.get("/api/geometry")
+    def geometry() -> Response:
+        domain = _domain(studio, request.args.get("domain"))
+        map_name = request.args.get("map") or next(iter(domain.maps), "")
+        if domain.maps and map_name not in domain.maps:
+            raise RequestError(f"map: expected one of {list(domain.maps)}, got {map_name!r}")
+        return jsonify(domain.geometry(map_name))
+
+    @app.post("/api/validate")
+    def validate() -> Response:
+        data = _body()
+        source = _source(data)
+        drawing = read_drawing(data, studio.domains, source=source)
+        return jsonify(ok=True, patterns=list(drawing.patterns))
+
+    @app.get("/api/files")
+    def files() -> Response:
+        found = sorted(p for p in root.iterdir() if p.is_file() and p.suffix.lower() in SUFFIXES
+                       and not p.name.startswith("."))
+        return jsonify(folder=str(root.resolve()), files=[{"name": p.name, "bytes": p.stat().st_size} for p in found])
+
+    @app.get("/api/files/<path:name>")
+    def open_file(name: str) -> Response:
+        path = _existing(root, name)
+        try:
+            patterns = load_patterns(path)
+        except SubgoalFileError as exc:
+            raise RequestError(str(exc).replace(str(path), path.name), status=422) from None
+        domain = infer_domain(patterns, studio.domains, path.name)
+        return jsonify(file=path.name, domain=domain.name, patterns=to_document(patterns, domain))
+
+    @app.get("/files/<path:name>")
+    def download(name: str) -> Response:
+        return send_file(_existing(root, name), mimetype="text/plain", as_attachment=True)
+
+    @app.put("/api/files/<path:name>")
+    def save(name: str) -> Response:
+        path = file_path(root, name)
+        data = _body()
+        drawing = read_drawing(data, studio.domains, source=path.name)
+        save_drawing(drawing, path)
+        return jsonify(file=path.name, path=str(path), domain=drawing.domain.name, patterns=list(drawing.patterns),
+                       recipe=f"python {drawing.domain.recipe} --subgoals {path}"
+                       + (f" --map {drawing.map}" if drawing.domain.maps else ""))
+
+    @app.post("/api/try")
+    def start_try() -> tuple[Response, int]:
+        data = _body()
+        if not isinstance(data, Mapping):
+            raise RequestError("request: expected a JSON object")
+        fields = {"pattern", "episodes", "learners", "max_steps"}
+        drawing = read_drawing({k: v for k, v in data.items() if k not in fields}, studio.domains,
+                               source=_source(data))
+        name = data.get("pattern", next(iter(drawing.patterns)) if len(drawing.patterns) == 1 else None)
+        if name not in drawing.patterns:
+            raise RequestError(f"pattern: expected one of {list(drawing.patterns)}, got {name!r}")
+        domain = drawing.domain
+        given = {k: data.get(k, limit.default) for k, limit in domain.limits.items()}
+        try:
+            values = {k: domain.limits[k].check(v, k) for k, v in given.items()}
+        except ValueError as exc:
+            raise RequestError(str(exc)) from None
+        settings = TrySettings(values["episodes"], values["learners"], max_steps=values["max_steps"])
+        series = drawing.patterns[name]
+        map_ = domain.maps.get(drawing.map)
+
+        def work(progress: Any) -> dict[str, Any]:
+            result = try_pattern(domain.name, series, settings, map=map_, progress=progress).to_json()
+            return {**result, "pattern": name}
+
+        key = f"{domain.name}/{name}"
+        job = studio.jobs.start(key, 2 * settings.learners * settings.episodes, work)
+        return jsonify(job.status()), 202
+
+    @app.get("/api/try/<job_id>")
+    def poll(job_id: str) -> Response:
+        return jsonify(_job(studio, job_id).status())
+
+    @app.delete("/api/try/<job_id>")
+    def cancel(job_id: str) -> Response:
+        studio.jobs.cancel(job_id)
+        return jsonify(_job(studio, job_id).status())
+
+    return app
+
+
+def _source(data: Any) -> str:
+    """The file name messages about a drawing name (the page's file name, else ``drawing.yaml``)."""
+    name = data.get("file") if isinstance(data, Mapping) else None
+    if not name:
+        return "drawing.yaml"
+    return Path(file_path(Path("."), str(name))).name
+
+
+def _domain(studio: Studio, name: str | None) -> Domain:
+    if name is None or name not in studio.domains:
+        raise RequestError(f"domain: expected one of {sorted(studio.domains)}, got {name!r}")
+    return studio.domains[name]
+
+
+def _existing(root: Path, name: str) -> Path:
+    path = file_path(root, name)
+    if not path.is_file():
+        raise RequestError(f"{path.name}: no such file in the save folder", status=404)
+    return path
+
+
+def _job(studio: Studio, job_id: str) -> Any:
+    job = studio.jobs.get(job_id)
+    if job is None:
+        raise RequestError(f"job {job_id!r}: unknown (finished jobs are forgotten after a while)", status=404)
+    return job
+
+
+def serve(app: Flask, host: str = "127.0.0.1", port: int = 0) -> BaseWSGIServer:
+    """A threaded server for ``app`` (``port=0``: a free port; see ``.server_port``); call ``serve_forever``."""
+    return make_server(host, port, app, threaded=True)
+
+
+def _pinball_maps(values: Sequence[str]) -> dict[str, str]:
+    maps = {}
+    for value in values:
+        name, _, path = value.rpartition("=")
+        maps[name or Path(path).stem] = path
+    return maps
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``torchrl-subgoal studio`` / ``python -m torchrl_subgoal.studio``: serve the studio until Ctrl-C."""
+    parser = argparse.ArgumentParser(
+        prog="torchrl-subgoal studio",
+        description="Subgoal studio: draw subgoal series on the map, save subgoal files, try them.",
+    )
+    parser.add_argument("--folder", type=Path, default=Path("subgoals"),
+                        help="where subgoal files are opened and saved (default: ./subgoals)")
+    parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1)")
+    parser.add_argument("--port", type=int, default=None,
+                        help=f"port (default: {DEFAULT_PORT}, or a free one if taken; 0: a free one)")
+    parser.add_argument("--pinball-map", action="append", default=[], metavar="[NAME=]FILE",
+                        help="an extra PinBall configuration file to draw on (repeatable)")
+    parser.add_argument("--max-jobs", type=int, default=2, help="'Try it' learnings at once (default: 2)")
+    parser.add_argument("--open", action="store_true", help="open the page in a web browser")
+    args = parser.parse_args(argv)
+    if args.max_jobs < 1:
+        print("error: --max-jobs: must be >= 1", file=sys.stderr)
+        return 2
+    import torch
+
+    logging.getLogger("werkzeug").setLevel(logging.WARNING)  # no line per request
+    torch.set_num_threads(1)  # batched small ops run fastest on one thread
+    try:
+        app = create_app(args.folder, pinball_maps=_pinball_maps(args.pinball_map), max_jobs=args.max_jobs)
+    except (OSError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    ports = [args.port] if args.port is not None else [DEFAULT_PORT, 0]
+    server = None
+    error: Exception | None = None
+    for port in ports:
+        try:
+            server = serve(app, args.host, port)
+            break
+        except (OSError, socket.gaierror) as exc:
+            error = exc
+    if server is None:
+        print(f"error: --host {args.host} --port {ports[-1]}: cannot listen: {error}", file=sys.stderr)
+        return 2
+    try:
+        loopback = ipaddress.ip_address(socket.gethostbyname(args.host)).is_loopback
+    except (OSError, ValueError):
+        loopback = False
+    if not loopback:
+        print(f"warning: listening on {args.host}: the studio has no login; anyone who reaches it can write "
+              f"subgoal files in {args.folder} and start learnings", file=sys.stderr)
+    url = f"http://{args.host}:{server.server_port}/"
+    print(f"Subgoal studio at {url} (files in {args.folder.resolve()}); Ctrl-C stops it", flush=True)
+    if args.open:
+        threading.Timer(0.5, webbrowser.open, args=(url,)).start()
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.server_close()
+        app.extensions["studio"].jobs.shutdown()
+    return 0

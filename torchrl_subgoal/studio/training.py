@@ -1,0 +1,180 @@
+"""The studio's "Try it": a short learning with one drawn pattern against the unshaped baseline.
+
+Everything the studio trains goes through :func:`try_pattern`, built from the
+library's pieces: the domain's batched env, the paper's learner (SARSA on
+four-rooms, the Fourier actor-critic on PinBall), the HRS shaping transform of
+:func:`torchrl_subgoal.methods.shaping_transform` and
+:func:`torchrl_subgoal.agents.run_episodes` on the fused engine. Both runs use
+the same seeds, so the two curves differ only by the shaping. This is the one
+place to update when the engine's interface changes.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from torchrl.envs import EnvBase, TransformedEnv
+
+from torchrl_subgoal.agents import (
+    AC_PRESETS,
+    SARSA_PRESETS,
+    FourierActorCritic,
+    SoftmaxSarsa,
+    run_episodes,
+)
+from torchrl_subgoal.agents.loop import OnlineAgent
+from torchrl_subgoal.envs import FourRoomsEnv, PinBallEnv
+from torchrl_subgoal.methods import paper_methods, shaping_transform
+from torchrl_subgoal.potentials import TabularPotential
+from torchrl_subgoal.subgoals import SubgoalSeries
+from torchrl_subgoal.transform import SubgoalPotentialTransform
+
+__all__ = ["Curve", "TryResult", "TrySettings", "try_pattern"]
+
+#: The shaped method: HRS (a learned potential over the drawn series).
+HRS = paper_methods(baseline="none")["HRS"]
+Progress = Callable[[int], None]
+
+
+@dataclass(frozen=True)
+class TrySettings:
+    """How long a "Try it" learns.
+
+    Attributes:
+        episodes: episodes per learner.
+        learners: independent learners per method (the batch).
+        seed: seed of the envs and learners (the same for both methods).
+        max_steps: episode cap (``None``: the domain's default).
+    """
+
+    episodes: int
+    learners: int
+    seed: int = 0
+    max_steps: int | None = None
+
+
+@dataclass
+class Curve:
+    """Steps per episode, mean and standard error over the learners, one entry per episode."""
+
+    mean: list[float]
+    sem: list[float]
+    success: float  # fraction of episodes that reached the goal
+
+    @classmethod
+    def of(cls, steps: torch.Tensor, success: torch.Tensor) -> Curve:
+        """From ``[learners, episodes]`` records."""
+        s = steps.double()
+        n = s.shape[0]
+        sem = s.std(0, unbiased=True) / math.sqrt(n) if n > 1 else torch.zeros(s.shape[1], dtype=s.dtype)
+        return cls(s.mean(0).tolist(), sem.tolist(), float(success.double().mean()))
+
+
+@dataclass
+class TryResult:
+    """What the page draws: both learning curves and the learned potential ``V(z)``.
+
+    Attributes:
+        shaped: steps per episode with the drawn subgoals (HRS).
+        baseline: steps per episode without shaping.
+        potential: mean over learners of the learned ``V(z)``, ``z = 0..n``
+            (``z = 0`` before any subgoal, ``z = i + 1`` once subgoal ``i`` is achieved).
+        potential_sem: its standard error over learners.
+        settings: the settings of the run.
+        seconds: wall time of both runs.
+    """
+
+    shaped: Curve
+    baseline: Curve
+    potential: list[float]
+    potential_sem: list[float]
+    settings: dict[str, Any] = field(default_factory=dict)
+    seconds: float = 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict."""
+        return asdict(self)
+
+
+def _four_rooms(settings: TrySettings, map_: str | Path | None) -> tuple[EnvBase, OnlineAgent, dict[str, Any]]:
+    sarsa = SARSA_PRESETS["released"]
+    env = FourRoomsEnv(num_envs=settings.learners, max_steps=settings.max_steps or 1000)
+    agent = SoftmaxSarsa(settings.learners, env.num_states, 4, sarsa, seed=settings.seed)
+    return env, agent, {"gamma": sarsa.gamma, "value_lr": sarsa.value_lr, "observation_key": "cell"}
+
+
+def _pinball(settings: TrySettings, map_: str | Path | None) -> tuple[EnvBase, OnlineAgent, dict[str, Any]]:
+    ac = AC_PRESETS["released"]
+    env = PinBallEnv(settings.learners, map_ or "simple", max_steps=settings.max_steps or 10_000,
+                     seed=settings.seed)
+    spec = env.observation_spec["observation"]
+    agent = FourierActorCritic(settings.learners, spec.low[0], spec.high[0], 5, ac, seed=settings.seed)
+    return env, agent, {"gamma": ac.gamma, "value_lr": ac.value_lr, "observation_key": "observation"}
+
+
+#: domain -> a fresh (env, learner, shaping settings) for ``settings`` (and a PinBall map).
+BUILDERS: dict[str, Callable[[TrySettings, str | Path | None], tuple[EnvBase, OnlineAgent, dict[str, Any]]]] = {
+    "four_rooms": _four_rooms,
+    "pinball": _pinball,
+}
+
+
+def try_pattern(
+    domain: str,
+    series: SubgoalSeries,
+    settings: TrySettings,
+    *,
+    map: str | Path | None = None,
+    progress: Progress | None = None,
+) -> TryResult:
+    """Learn with ``series`` (HRS) and without shaping, same seeds, on the fused engine.
+
+    Args:
+        domain: ``"four_rooms"`` or ``"pinball"`` (a key of :data:`BUILDERS`).
+        series: the drawn pattern.
+        settings: episodes, learners, seed, episode cap.
+        map: the PinBall map (``"simple"``, ``"hard"`` or a file); ignored by four-rooms.
+        progress: called with the number of learner-episodes just finished
+            (``2 * learners * episodes`` in all); it may raise to cancel.
+
+    Returns:
+        Both curves and the learned potential.
+
+    Examples:
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> series = SubgoalSeries([Cell(3, 6), Cell(7, 9)], name="hallways")
+        >>> result = try_pattern("four_rooms", series, TrySettings(episodes=3, learners=2))
+        >>> len(result.shaped.mean), len(result.potential)
+        (3, 3)
+    """
+    if domain not in BUILDERS:
+        raise ValueError(f"unknown domain {domain!r}; known: {sorted(BUILDERS)}")
+    start = time.perf_counter()
+    curves: dict[str, Curve] = {}
+    transform: SubgoalPotentialTransform | None = None
+    for label in ("baseline", "shaped"):
+        env, agent, shaping = BUILDERS[domain](settings, map)
+        if label == "shaped":
+            transform = shaping_transform(
+                HRS, env.batch_size, gamma=shaping["gamma"], value_lr=shaping["value_lr"], patterns=[series],
+                pattern_index=torch.zeros(settings.learners, dtype=torch.long),
+                observation_key=shaping["observation_key"],
+            )
+            assert transform is not None
+            env = TransformedEnv(env, transform)
+        records = run_episodes(env, agent, settings.episodes, progress=progress, engine="fused")
+        curves[label] = Curve.of(records.steps, records.success)
+    assert transform is not None and isinstance(transform.potential, TabularPotential)
+    table = transform.potential.table.detach().double().reshape(settings.learners, -1)
+    sem = table.std(0) / math.sqrt(settings.learners) if settings.learners > 1 else torch.zeros(table.shape[1])
+    return TryResult(
+        shaped=curves["shaped"], baseline=curves["baseline"], potential=table.mean(0).tolist(),
+        potential_sem=sem.tolist(), settings={**asdict(settings), "domain": domain, "map": str(map or "")},
+        seconds=time.perf_counter() - start,
+    )
