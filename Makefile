@@ -8,6 +8,11 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: demo test lint install clean
 
+# The studio's browser tests drive Debian's Chromium through Playwright (a dev
+# dependency); nothing downloads a browser build. Installed once, with apt.
+CHROMIUM := /usr/bin/chromium
+SUDO     := $(if $(filter 0,$(shell id -u)),,sudo)
+
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
@@ -25,7 +30,11 @@ lint: $(STAMP)
 	$(PY) -m ruff check torchrl_subgoal recipes tests benchmarks
 	$(PY) -m mypy
 
-test: lint
+$(CHROMIUM):
+	$(SUDO) apt-get update -qq
+	$(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium
+
+test: lint $(CHROMIUM)
 	$(PY) -m pytest -q
 
 clean:

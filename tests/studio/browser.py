@@ -35,7 +35,7 @@ def live_studio(folder: Path, **kwargs: Any) -> Iterator[tuple[str, Any]]:
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     try:
-        yield f"http://127.0.0.1:{server.server_port}/", app
+        yield f"http://127.0.0.1:{server.port}/", app
     finally:
         server.shutdown()
         server.server_close()

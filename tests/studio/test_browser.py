@@ -139,7 +139,7 @@ def test_try_it_shows_both_curves_and_the_potential(browser: Any, studio: Studio
         points = page.locator(f'#curves polyline[data-series="{series}"]').get_attribute("points")
         assert points is not None and len(points.split()) == 20
     expect(page.locator("#values tbody tr")).to_have_count(3)
-    expect(page.locator("#result-title")).to_contain_text("3 learners × 20 episodes")
+    expect(page.locator("#result-title")).to_contain_text("3 learners \u00d7 20 episodes")
     assert page.locator("#map-view text.value").count() == 2  # V next to each subgoal
     page.fill("#episodes", "0")
     page.click("#try")

@@ -32,7 +32,7 @@ from typing import Any
 
 from flask import Flask, Response, jsonify, render_template, request, send_file
 from werkzeug.exceptions import HTTPException
-from werkzeug.serving import BaseWSGIServer, make_server
+from werkzeug.serving import BaseWSGIServer, get_sockaddr, make_server, select_address_family
 
 from torchrl_subgoal.studio.document import (
     MAX_REQUEST_BYTES,
@@ -50,7 +50,7 @@ from torchrl_subgoal.studio.jobs import JobError, Jobs
 from torchrl_subgoal.studio.training import TrySettings, try_pattern
 from torchrl_subgoal.subgoals import SubgoalFileError, load_patterns
 
-__all__ = ["create_app", "main", "serve"]
+__all__ = ["create_app", "listen", "main", "serve"]
 
 log = logging.getLogger(__name__)
 DEFAULT_PORT = 8765
@@ -158,7 +158,8 @@ def create_app(
         except SubgoalFileError as exc:
             raise RequestError(str(exc).replace(str(path), path.name), status=422) from None
         domain = infer_domain(patterns, studio.domains, path.name)
-        return jsonify(file=path.name, domain=domain.name, patterns=to_document(patterns, domain))
+        return jsonify(file=path.name, path=str(path), domain=domain.name, recipe=_recipe(domain, path),
+                       patterns=to_document(patterns, domain))
 
     @app.get("/files/<path:name>")
     def download(name: str) -> Response:
@@ -171,8 +172,7 @@ def create_app(
         drawing = read_drawing(data, studio.domains, source=path.name)
         save_drawing(drawing, path)
         return jsonify(file=path.name, path=str(path), domain=drawing.domain.name, patterns=list(drawing.patterns),
-                       recipe=f"python {drawing.domain.recipe} --subgoals {path}"
-                       + (f" --map {drawing.map}" if drawing.domain.maps else ""))
+                       recipe=_recipe(drawing.domain, path, drawing.map))
 
     @app.post("/api/try")
     def start_try() -> tuple[Response, int]:
@@ -223,6 +223,12 @@ def _source(data: Any) -> str:
     return Path(file_path(Path("."), str(name))).name
 
 
+def _recipe(domain: Domain, path: Path, map_name: str = "") -> str:
+    """The command that trains with the file (on the map it was drawn on)."""
+    command = f"python {domain.recipe} --subgoals {path}"
+    return f"{command} --map {domain.maps[map_name]}" if map_name else command
+
+
 def _domain(studio: Studio, name: str | None) -> Domain:
     if name is None or name not in studio.domains:
         raise RequestError(f"domain: expected one of {sorted(studio.domains)}, got {name!r}")
@@ -244,8 +250,30 @@ def _job(studio: Studio, job_id: str) -> Any:
 
 
 def serve(app: Flask, host: str = "127.0.0.1", port: int = 0) -> BaseWSGIServer:
-    """A threaded server for ``app`` (``port=0``: a free port; see ``.server_port``); call ``serve_forever``."""
-    return make_server(host, port, app, threaded=True)
+    """A threaded server for ``app`` (``port=0``: a free port; see ``.port``); call ``serve_forever``.
+
+    Raises:
+        OSError: when ``host:port`` cannot be bound (in use, unknown host).
+    """
+    family = select_address_family(host, port)
+    with socket.socket(family, socket.SOCK_STREAM) as sock:  # bound here: werkzeug would exit the process
+        sock.bind(get_sockaddr(host, port, family))
+        sock.listen(128)
+        return make_server(host, port, app, threaded=True, fd=sock.fileno())
+
+
+def listen(app: Flask, host: str, port: int | None) -> BaseWSGIServer:
+    """:func:`serve` on ``port``; ``None``: on :data:`DEFAULT_PORT`, or a free port when it is taken.
+
+    Raises:
+        OSError: naming the host and port when the server cannot listen.
+    """
+    for candidate in [port] if port is not None else [DEFAULT_PORT, 0]:
+        try:
+            return serve(app, host, candidate)
+        except OSError as exc:
+            error = f"--host {host} --port {candidate}: cannot listen: {exc}"
+    raise OSError(error)
 
 
 def _pinball_maps(values: Sequence[str]) -> dict[str, str]:
@@ -284,17 +312,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    ports = [args.port] if args.port is not None else [DEFAULT_PORT, 0]
-    server = None
-    error: Exception | None = None
-    for port in ports:
-        try:
-            server = serve(app, args.host, port)
-            break
-        except (OSError, socket.gaierror) as exc:
-            error = exc
-    if server is None:
-        print(f"error: --host {args.host} --port {ports[-1]}: cannot listen: {error}", file=sys.stderr)
+    try:
+        server = listen(app, args.host, args.port)
+    except OSError as exc:
+        print(f"error: {exc}", file=sys.stderr)
         return 2
     try:
         loopback = ipaddress.ip_address(socket.gethostbyname(args.host)).is_loopback
@@ -303,7 +324,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not loopback:
         print(f"warning: listening on {args.host}: the studio has no login; anyone who reaches it can write "
               f"subgoal files in {args.folder} and start learnings", file=sys.stderr)
-    url = f"http://{args.host}:{server.server_port}/"
+    url = f"http://{args.host}:{server.port}/"
     print(f"Subgoal studio at {url} (files in {args.folder.resolve()}); Ctrl-C stops it", flush=True)
     if args.open:
         threading.Timer(0.5, webbrowser.open, args=(url,)).start()

@@ -64,7 +64,8 @@ function newPattern(d) {
 }
 
 function newDoc(domain) {
-  const d = { file: `${domain}_subgoals.yaml`, patterns: [], current: 0 };
+  // saved: the file as last saved or opened (for the download link); recipe: the command that trains with it
+  const d = { file: `${domain}_subgoals.yaml`, patterns: [], current: 0, saved: null, recipe: "" };
   d.patterns.push(newPattern(d));
   return d;
 }
@@ -362,6 +363,9 @@ function renderPanels() {
   const d = doc();
   const p = pattern();
   $("file-name").value = d.file;
+  $("recipe").textContent = d.recipe ? `Train with it: ${d.recipe}` : "";
+  $("download").hidden = !d.saved;
+  if (d.saved) $("download").href = `/files/${encodeURIComponent(d.saved)}`;
 
   const chips = $("patterns");
   chips.replaceChildren();
@@ -468,11 +472,9 @@ async function save() {
   d.file = $("file-name").value.trim();
   try {
     const data = await api("PUT", `/api/files/${encodeURIComponent(d.file)}`, drawing(d.patterns));
-    d.file = data.file;
+    Object.assign(d, { file: data.file, saved: data.file, recipe: data.recipe });
     history.replaceState(null, "", `?file=${encodeURIComponent(data.file)}`);
     say(`Saved ${data.path} (${data.patterns.length} pattern${data.patterns.length > 1 ? "s" : ""}).`, "ok");
-    $("recipe").textContent = `Train with it: ${data.recipe}`;
-    showDownload(data.file);
     await refreshFiles(data.file);
     renderPanels();
   } catch (e) {
@@ -480,21 +482,14 @@ async function save() {
   }
 }
 
-function showDownload(name) {
-  const link = $("download");
-  link.href = `/files/${encodeURIComponent(name)}`;
-  link.hidden = false;
-}
-
 async function openFile(name) {
   try {
     const data = await api("GET", `/api/files/${encodeURIComponent(name)}`);
     if (data.domain !== S.domain) await setDomain(data.domain);
-    S.docs[data.domain] = { file: data.file, patterns: data.patterns.map(fromDocument), current: 0 };
+    S.docs[data.domain] = { file: data.file, patterns: data.patterns.map(fromDocument), current: 0,
+      saved: data.file, recipe: data.recipe };
     S.selected = null;
     history.replaceState(null, "", `?file=${encodeURIComponent(data.file)}`);
-    $("recipe").textContent = "";
-    showDownload(data.file);
     render();
     await validate();
     if ($("message").className === "ok") say(`Opened ${data.file}: ${data.patterns.length} pattern(s).`, "ok");
@@ -749,8 +744,6 @@ function wire() {
     S.docs[S.domain] = newDoc(S.domain);
     S.selected = null;
     history.replaceState(null, "", location.pathname);
-    $("recipe").textContent = "";
-    $("download").hidden = true;
     changed();
   });
   $("add-pattern").addEventListener("click", () => {

@@ -1,0 +1,46 @@
+"""Wall time of the studio's "Try it" at its default and largest settings, per domain.
+
+One run of :func:`torchrl_subgoal.studio.training.try_pattern` (HRS and the
+unshaped learner, both on the fused engine, one torch thread) with a shipped
+participant's pattern: four-rooms participant 7, PinBall participant 1 on the
+simple map. The kernels are compiled (and cached) by a tiny run first. Settings
+are the bounds of :func:`torchrl_subgoal.studio.domains.default_domains`.
+
+Usage::
+
+    python benchmarks/studio_try_it.py
+"""
+
+from __future__ import annotations
+
+import time
+from importlib.resources import files
+
+import torch
+
+from torchrl_subgoal import load_patterns
+from torchrl_subgoal.studio.domains import default_domains
+from torchrl_subgoal.studio.training import TrySettings, try_pattern
+
+PATTERNS = {"four_rooms": ("four_rooms_participants.yaml", "participant_7"),
+            "pinball": ("pinball_participants.yaml", "participant_1")}
+
+
+def main() -> None:
+    torch.set_num_threads(1)
+    print("| domain | episodes x learners | seconds |\n|---|---|---|")
+    for name, domain in default_domains().items():
+        file, pattern = PATTERNS[name]
+        series = load_patterns(str(files("torchrl_subgoal") / "data" / file))[pattern]
+        map_ = next(iter(domain.maps), None)
+        try_pattern(name, series, TrySettings(1, 1, max_steps=100), map=map_)  # compile
+        limits = domain.limits
+        for which in ("default", "high"):
+            episodes, learners = getattr(limits["episodes"], which), getattr(limits["learners"], which)
+            start = time.perf_counter()
+            try_pattern(name, series, TrySettings(episodes, learners), map=map_)
+            print(f"| {name} ({which}) | {episodes} x {learners} | {time.perf_counter() - start:.1f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
