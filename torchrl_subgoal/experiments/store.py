@@ -151,7 +151,9 @@ class EpisodeTable:
     Args:
         steps: int array ``[n_learners, n_episodes]``, steps taken in each episode.
         returns: float array of the same shape, undiscounted environment return.
-        success: bool array of the same shape, whether the episode reached the goal.
+        success: array of the same shape: whether the episode reached the goal (bool), or
+            the fraction of a row's test episodes that did (e.g. one row per training epoch);
+            stored as a float in [0, 1].
 
     Examples:
         >>> import numpy as np
@@ -162,7 +164,7 @@ class EpisodeTable:
 
     steps: npt.NDArray[np.int64]
     returns: npt.NDArray[np.float64]
-    success: npt.NDArray[np.bool_]
+    success: npt.NDArray[np.float64]
 
     def __init__(self, steps: npt.ArrayLike, returns: npt.ArrayLike, success: npt.ArrayLike) -> None:
         steps_ = np.asarray(steps)
@@ -172,7 +174,10 @@ class EpisodeTable:
             raise ValueError("steps must hold whole numbers")
         object.__setattr__(self, "steps", steps_.astype(np.int64))
         object.__setattr__(self, "returns", np.asarray(returns, dtype=np.float64))
-        object.__setattr__(self, "success", np.asarray(success).astype(bool))
+        success_ = np.asarray(success, dtype=np.float64)
+        if success_.size and not ((success_ >= 0) & (success_ <= 1)).all():
+            raise ValueError("success must be a bool or a fraction in [0, 1]")
+        object.__setattr__(self, "success", success_)
         for name in ("returns", "success"):
             shape = getattr(self, name).shape
             if shape != steps_.shape:

@@ -1,0 +1,283 @@
+"""DDPG from TorchRL parts, configured as the authors' pick-and-place runs.
+
+* actor ``π(o)`` and critic ``Q(o, a)``: MLPs with ``hidden`` layers (3 × 256),
+  as :class:`~torchrl.modules.Actor` and :class:`~torchrl.modules.ValueOperator`;
+  both read the observation normalised by running statistics
+  (:class:`RunningNorm`, clipped to ±5, as the authors' normaliser);
+* :class:`~torchrl.objectives.DDPGLoss` with a TD(0) target clipped to
+  ``[-clip_return, 0]`` (:class:`ClippedTD0Estimator`; the authors clip the
+  target of a −1/0 reward to ``[−1/(1−γ), 0]``), plus an L2 penalty on the
+  actor's actions (``action_l2``);
+* :class:`~torchrl.objectives.SoftUpdate` with Polyak 0.95, once per cycle;
+* exploration: Gaussian noise of s.d. 0.2 (:class:`~torchrl.modules.AdditiveGaussianModule`),
+  then with probability 0.3 a uniformly random action
+  (:class:`~torchrl.modules.EGreedyModule`);
+* a TorchRL :class:`~torchrl.data.ReplayBuffer` of the DDPG keys only.
+
+:class:`DDPGAgent` holds them all and exposes what a training loop needs:
+``policy`` (exploring) and ``greedy`` (for evaluation), ``extend`` (store a
+collected batch and update the normaliser), ``update`` (one gradient step
+of critic and actor) and ``soft_update``; its ``state_dict`` covers networks,
+optimisers and normaliser (the replay buffer's contents are saved by the caller,
+see :mod:`torchrl_subgoal.experiments.checkpoint`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModule, TensorDictSequential
+from torch import nn
+from torchrl.data import Bounded, LazyTensorStorage, ReplayBuffer
+from torchrl.data.replay_buffers import RandomSampler
+from torchrl.modules import MLP, Actor, AdditiveGaussianModule, EGreedyModule, ValueOperator
+from torchrl.objectives import DDPGLoss, SoftUpdate
+from torchrl.objectives.value import TD0Estimator
+
+__all__ = ["ClippedTD0Estimator", "DDPGAgent", "DDPGConfig", "RunningNorm", "mlp"]
+
+OBSERVATION = "observation"
+NORMALIZED = "observation_normalized"
+#: What the replay buffer keeps of a collected batch.
+DDPG_KEYS = (
+    OBSERVATION,
+    "action",
+    ("next", OBSERVATION),
+    ("next", "reward"),
+    ("next", "done"),
+    ("next", "terminated"),
+)
+
+
+@dataclass(frozen=True)
+class DDPGConfig:
+    """DDPG hyper-parameters (defaults: facts.md and the authors' released configuration).
+
+    Attributes:
+        hidden: hidden layer sizes of actor and critic.
+        actor_lr: Adam learning rate of the actor.
+        critic_lr: Adam learning rate of the critic.
+        gamma: discount.
+        polyak: target ← polyak · target + (1 − polyak) · online.
+        batch_size: transitions per gradient step.
+        buffer_size: replay capacity.
+        random_eps: probability of a uniformly random action.
+        noise_eps: s.d. of the Gaussian action noise (actions lie in [−1, 1]).
+        action_l2: weight of the actor's ``mean(π(o)²)`` penalty.
+        clip_return: TD targets are clipped to ``[-clip_return, 0]`` (the return of a
+            −1/0 reward lies there); ``None`` leaves them unclipped. Default ``1/(1−γ)``.
+        clip_positive: clip targets above at 0 (the authors' ``clip_pos_returns``).
+        norm_clip: normalised observations are clipped to ``±norm_clip``.
+        norm_eps: the normaliser's smallest standard deviation.
+    """
+
+    hidden: tuple[int, ...] = (256, 256, 256)
+    actor_lr: float = 1e-3
+    critic_lr: float = 1e-3
+    gamma: float = 0.98
+    polyak: float = 0.95
+    batch_size: int = 256
+    buffer_size: int = 1_000_000
+    random_eps: float = 0.3
+    noise_eps: float = 0.2
+    action_l2: float = 1.0
+    clip_return: float | None = 50.0
+    clip_positive: bool = True
+    norm_clip: float = 5.0
+    norm_eps: float = 0.01
+
+
+def mlp(in_features: int, out_features: int, hidden: Sequence[int]) -> MLP:
+    """A ReLU MLP with ``hidden`` layers (TorchRL's :class:`~torchrl.modules.MLP`)."""
+    return MLP(in_features=in_features, out_features=out_features, num_cells=list(hidden),
+               activation_class=nn.ReLU)
+
+
+class RunningNorm(nn.Module):
+    """``clip((x − mean) / max(std, eps), ±clip)`` with mean and s.d. of all data seen so far.
+
+    The statistics are buffers (saved in ``state_dict``) changed only by :meth:`update`.
+
+    Args:
+        size: features of ``x``.
+        eps: the smallest standard deviation.
+        clip: bound of the normalised values.
+
+    Examples:
+        >>> norm = RunningNorm(2)
+        >>> norm.update(torch.tensor([[0.0, 1.0], [2.0, 1.0]]))
+        >>> norm(torch.tensor([[2.0, 1.0]]))
+        tensor([[1., 0.]])
+    """
+
+    def __init__(self, size: int, eps: float = 0.01, clip: float = 5.0) -> None:
+        super().__init__()
+        self.eps, self.clip = float(eps), float(clip)
+        self.register_buffer("total", torch.zeros(size, dtype=torch.float64))
+        self.register_buffer("total_sq", torch.zeros(size, dtype=torch.float64))
+        self.register_buffer("count", torch.zeros((), dtype=torch.float64))
+        self.register_buffer("mean", torch.zeros(size))
+        self.register_buffer("std", torch.ones(size))
+
+    @torch.no_grad()
+    def update(self, x: torch.Tensor) -> None:
+        """Add a batch ``[..., size]`` to the statistics."""
+        flat = x.reshape(-1, x.shape[-1]).to(torch.float64)
+        self.total += flat.sum(0)
+        self.total_sq += flat.square().sum(0)
+        self.count += flat.shape[0]
+        mean = self.total / self.count
+        var = (self.total_sq / self.count - mean.square()).clamp_min(self.eps**2)
+        self.mean.copy_(mean)
+        self.std.copy_(var.sqrt())
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return ((x - self.mean) / self.std).clamp(-self.clip, self.clip)
+
+
+class ClippedTD0Estimator(TD0Estimator):
+    """TorchRL's TD(0) estimator with the target clipped to ``[low, high]``.
+
+    Args:
+        low: lower bound of the target (``None``: none).
+        high: upper bound of the target (``None``: none).
+        **kwargs: :class:`~torchrl.objectives.value.TD0Estimator`'s arguments.
+    """
+
+    def __init__(self, *, low: float | None, high: float | None, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.low, self.high = low, high
+
+    def value_estimate(self, tensordict: TensorDictBase, *args: Any, **kwargs: Any) -> torch.Tensor:
+        return super().value_estimate(tensordict, *args, **kwargs).clamp(self.low, self.high)
+
+
+class DDPGAgent(nn.Module):
+    """Actor, critic, their optimisers, target networks, exploration and replay buffer.
+
+    Args:
+        observation_size: entries of the ``"observation"`` vector.
+        action_spec: the env's (unbatched) bounded action spec.
+        config: hyper-parameters.
+        device: where networks and replay buffer live.
+
+    Examples:
+        >>> from torchrl.data import Bounded
+        >>> from tensordict import TensorDict
+        >>> spec = Bounded(-1.0, 1.0, shape=(4,))
+        >>> agent = DDPGAgent(25, spec, DDPGConfig(hidden=(32,), batch_size=8))
+        >>> data = TensorDict({"observation": torch.randn(16, 25), "action": spec.rand((16,)),
+        ...     "next": {"observation": torch.randn(16, 25), "reward": -torch.ones(16, 1),
+        ...              "done": torch.zeros(16, 1, dtype=torch.bool),
+        ...              "terminated": torch.zeros(16, 1, dtype=torch.bool)}}, [16])
+        >>> agent.extend(data)
+        >>> sorted(agent.update())
+        ['loss_actor', 'loss_value']
+    """
+
+    def __init__(
+        self,
+        observation_size: int,
+        action_spec: Bounded,
+        config: DDPGConfig,
+        device: str | torch.device = "cpu",
+    ) -> None:
+        super().__init__()
+        self.config = config
+        self.device = torch.device(device)
+        action_size = int(action_spec.shape[-1])
+        self.norm = RunningNorm(observation_size, config.norm_eps, config.norm_clip)
+        normalize = TensorDictModule(self.norm, in_keys=[OBSERVATION], out_keys=[NORMALIZED])
+        self.actor = Actor(nn.Sequential(mlp(observation_size, action_size, config.hidden), nn.Tanh()),
+                           in_keys=[NORMALIZED], spec=action_spec)
+        self.critic = ValueOperator(_QNet(mlp(observation_size + action_size, 1, config.hidden)),
+                                    in_keys=[NORMALIZED, "action"])
+        self.greedy = TensorDictSequential(normalize, self.actor)
+        self.policy = TensorDictSequential(
+            normalize,
+            self.actor,
+            AdditiveGaussianModule(action_spec, sigma_init=config.noise_eps, sigma_end=config.noise_eps,
+                                   annealing_num_steps=1, device=self.device),
+            EGreedyModule(action_spec, eps_init=config.random_eps, eps_end=config.random_eps,
+                          annealing_num_steps=1, device=self.device),
+        )
+        self.loss = DDPGLoss(self.actor, self.critic, delay_actor=True, delay_value=True)
+        high = 0.0 if config.clip_positive else None
+        low = -config.clip_return if config.clip_return is not None else None
+        self.loss.value_estimator = ClippedTD0Estimator(
+            low=low, high=high, gamma=config.gamma, value_network=self.loss.actor_critic
+        )
+        self.loss._forward_value_estimator_keys()
+        self.target_updater = SoftUpdate(self.loss, eps=config.polyak)
+        self.actor_optimizer = torch.optim.Adam(self.loss.actor_network_params.values(True, True),
+                                                lr=config.actor_lr)
+        self.critic_optimizer = torch.optim.Adam(self.loss.value_network_params.values(True, True),
+                                                 lr=config.critic_lr)
+        self.replay = ReplayBuffer(
+            storage=LazyTensorStorage(config.buffer_size, device=self.device),
+            sampler=RandomSampler(),
+            batch_size=config.batch_size,
+        )
+        self.to(self.device)
+
+    def extend(self, data: TensorDictBase) -> None:
+        """Store a collected batch (any batch shape) and add its observations to the normaliser."""
+        flat = data.select(*DDPG_KEYS).reshape(-1).to(self.device)
+        self.norm.update(flat[OBSERVATION])
+        self.replay.extend(flat)
+
+    def update(self) -> dict[str, float]:
+        """One Adam step of critic and actor on a replay sample; returns the two losses."""
+        batch = self.replay.sample()
+        batch.set(NORMALIZED, self.norm(batch[OBSERVATION]))
+        batch.set(("next", NORMALIZED), self.norm(batch["next", OBSERVATION]))
+        losses = self.loss(batch)
+        loss_actor = losses["loss_actor"]
+        if self.config.action_l2:
+            action = self.actor(batch.select(NORMALIZED))["action"]
+            loss_actor = loss_actor + self.config.action_l2 * action.square().mean()
+        # the actor's loss reads the critic through detached parameters and the critic's loss
+        # reads no actor parameter: one backward pass gives each optimiser its own gradients
+        self.critic_optimizer.zero_grad(set_to_none=True)
+        self.actor_optimizer.zero_grad(set_to_none=True)
+        (losses["loss_value"] + loss_actor).backward()
+        self.critic_optimizer.step()
+        self.actor_optimizer.step()
+        return {"loss_value": losses["loss_value"].item(), "loss_actor": loss_actor.item()}
+
+    def soft_update(self) -> None:
+        """Move the target networks towards the online ones (Polyak averaging)."""
+        self.target_updater.step()
+
+    def training_state(self) -> dict[str, Any]:
+        """Networks, targets, normaliser and optimiser states (not the replay buffer)."""
+        # the target estimator's gamma is a lazily created buffer: configuration, not state
+        modules = {k: v for k, v in self.state_dict().items() if "_value_estimator." not in k}
+        return {
+            "modules": modules,
+            "actor_optimizer": self.actor_optimizer.state_dict(),
+            "critic_optimizer": self.critic_optimizer.state_dict(),
+        }
+
+    def load_training_state(self, state: dict[str, Any]) -> None:
+        """Inverse of :meth:`training_state`."""
+        missing, unexpected = self.load_state_dict(state["modules"], strict=False)
+        if unexpected or any("_value_estimator." not in k for k in missing):
+            raise KeyError(f"training state does not fit this agent: missing {missing}, unexpected {unexpected}")
+        self.actor_optimizer.load_state_dict(state["actor_optimizer"])
+        self.critic_optimizer.load_state_dict(state["critic_optimizer"])
+
+
+class _QNet(nn.Module):
+    """``Q(o, a)``: the MLP over the concatenated observation and action."""
+
+    def __init__(self, net: nn.Module) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return self.net(torch.cat([observation, action], -1))

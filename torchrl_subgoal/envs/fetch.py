@@ -1,0 +1,247 @@
+"""Single-goal FetchPickAndPlace (gymnasium-robotics) as a TorchRL ``GymEnv``.
+
+Potential-based shaping over subgoals needs one task per learning, so the
+multi-goal ``FetchPickAndPlace-v4`` becomes a single-goal task: the goal and
+the object's start position are drawn once from the learning's ``goal_seed``
+and are the same at every reset (the gripper's start is fixed by the task
+itself). The reward is gymnasium-robotics' sparse one, ``-1`` per step and
+``0`` while the object lies within 0.05 of the goal; episodes last 50 steps
+and never terminate early (a time-out is a truncation). The agent sees the
+25-d ``"observation"`` only, as float32; ``"is_success"`` is kept for
+evaluation.
+
+The observation's components, by name (:data:`COMPONENTS`), are the single
+place that says which entry means what; subgoal predicates, the random
+subgoals of RRS and the SARSA-RS aggregation below are written with them.
+
+Needs the ``fetch`` extra: ``pip install 'torchrl_subgoal[fetch]'`` (MuJoCo
+3.3 to 3.11 and gymnasium-robotics 1.4.2; MuJoCo 3.12 breaks Fetch's reset).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from importlib import metadata
+from importlib.resources import files
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+import torch
+
+from torchrl_subgoal.subgoals import Box, StateAggregation, SubgoalSeries, load_patterns
+
+__all__ = [
+    "COMPONENTS",
+    "ENV_ID",
+    "INSTALL_HINT",
+    "OBSERVATION_SIZE",
+    "PARTICIPANTS_FILE",
+    "SUBGOAL_MARGIN",
+    "FetchUnavailableError",
+    "component_dims",
+    "human_patterns",
+    "make_fetch_env",
+    "random_patterns",
+    "require_fetch",
+    "three_state_aggregation",
+]
+
+#: Entries of the 25-d FetchPickAndPlace observation, by name.
+COMPONENTS: dict[str, slice] = {
+    "gripper_position": slice(0, 3),
+    "object_position": slice(3, 6),
+    "object_relative_position": slice(6, 9),  # object minus gripper
+    "finger_joints": slice(9, 11),
+    "object_rotation": slice(11, 14),
+    "object_velocity": slice(14, 17),  # relative to the gripper
+    "object_angular_velocity": slice(17, 20),
+    "gripper_velocity": slice(20, 23),
+    "finger_velocities": slice(23, 25),
+}
+OBSERVATION_SIZE = 25
+ENV_ID = "torchrl_subgoal/SingleGoalFetchPickAndPlace-v0"
+BASE_ENV_ID = "FetchPickAndPlace-v4"
+MAX_EPISODE_STEPS = 50
+SUBGOAL_MARGIN = 0.01
+INSTALL_HINT = "pip install 'torchrl_subgoal[fetch]'  (or `make install` in a checkout)"
+PARTICIPANTS_FILE = str(files("torchrl_subgoal") / "data" / "pick_and_place_participants.yaml")
+_MUJOCO_RANGE = ((3, 3), (3, 12))  # >= 3.3, < 3.12
+
+
+class FetchUnavailableError(ImportError):
+    """The ``fetch`` extra (MuJoCo, gymnasium-robotics) is missing or has a broken version."""
+
+
+def component_dims(*names: str) -> tuple[int, ...]:
+    """Observation entries of the named components, in order.
+
+    Examples:
+        >>> component_dims("object_relative_position", "finger_joints")
+        (6, 7, 8, 9, 10)
+    """
+    unknown = [n for n in names if n not in COMPONENTS]
+    if unknown:
+        raise KeyError(f"unknown observation component(s) {unknown}; known: {list(COMPONENTS)}")
+    return tuple(d for n in names for d in range(COMPONENTS[n].start, COMPONENTS[n].stop))
+
+
+def _version_tuple(version: str) -> tuple[int, int]:
+    parts = [int("".join(c for c in p if c.isdigit()) or 0) for p in version.split(".")[:2]]
+    return parts[0], parts[1] if len(parts) > 1 else 0
+
+
+def require_fetch() -> ModuleType:
+    """Import gymnasium with the robotics envs registered, or say how to install them.
+
+    Raises:
+        FetchUnavailableError: naming the install command.
+    """
+    try:
+        import gymnasium
+        import gymnasium_robotics
+        import mujoco  # noqa: F401
+    except ImportError as exc:
+        raise FetchUnavailableError(
+            f"pick-and-place needs MuJoCo and gymnasium-robotics ({exc.name} is missing): {INSTALL_HINT}"
+        ) from None
+    low, high = _MUJOCO_RANGE
+    version = metadata.version("mujoco")
+    if not low <= _version_tuple(version) < high:
+        raise FetchUnavailableError(
+            f"mujoco {version} is installed; Fetch needs mujoco>=3.3,<3.12 (3.12 breaks its reset): "
+            f"{INSTALL_HINT}"
+        )
+    gymnasium.register_envs(gymnasium_robotics)
+    if ENV_ID not in gymnasium.registry:
+        gymnasium.register(ENV_ID, entry_point=_make_single_goal, max_episode_steps=MAX_EPISODE_STEPS)
+    return gymnasium
+
+
+def _make_single_goal(goal_seed: int = 0) -> Any:
+    """The gymnasium env behind :data:`ENV_ID` (``gymnasium.make`` adds the 50-step limit)."""
+    gymnasium = require_fetch()
+
+    class SingleGoal(gymnasium.Wrapper):
+        """Reset to the goal and object start of ``goal_seed``; 25-d float32 observation."""
+
+        def __init__(self, env: Any, seed: int) -> None:
+            super().__init__(env)
+            self.goal_seed = int(seed)
+            self.observation_space = gymnasium.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float32)
+
+        def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+            # Re-seeding the task's generator at every reset draws the same goal and object
+            # start each time; the seed a caller passes (e.g. ParallelEnv.set_seed) is ignored.
+            obs, info = self.env.reset(seed=self.goal_seed, options=options)
+            self.goal = np.array(obs["desired_goal"], dtype=np.float32)
+            return obs["observation"].astype(np.float32), {**info, "is_success": np.zeros(1, dtype=bool)}
+
+        def step(self, action: Any) -> Any:
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            info = {**info, "is_success": np.array([bool(info["is_success"])])}
+            # +0.0 turns the task's -0.0 on success into 0.0
+            return obs["observation"].astype(np.float32), float(reward) + 0.0, terminated, truncated, info
+
+    return SingleGoal(gymnasium.make(BASE_ENV_ID).unwrapped, goal_seed)
+
+
+def make_fetch_env(goal_seed: int, *, device: str | torch.device = "cpu", **kwargs: Any) -> Any:
+    """One single-goal FetchPickAndPlace env, a TorchRL ``GymEnv`` (picklable via ``functools.partial``).
+
+    Args:
+        goal_seed: draws the goal and the object's start (the same for every episode).
+        device: where the env's TensorDicts live.
+        **kwargs: more keyword arguments for ``GymEnv``.
+
+    Examples:
+        >>> env = make_fetch_env(goal_seed=3)  # doctest: +SKIP
+        >>> env.rollout(5)["next", "is_success"].shape  # doctest: +SKIP
+        torch.Size([5, 1])
+    """
+    require_fetch()
+    from torchrl.data import Binary
+    from torchrl.envs import GymEnv
+    from torchrl.envs.libs.gym import default_info_dict_reader
+
+    env = GymEnv(ENV_ID, goal_seed=goal_seed, device=device, **kwargs)
+    reader = default_info_dict_reader(["is_success"], spec=[Binary(n=1, shape=(1,), dtype=torch.bool)])
+    env.set_info_dict_reader(reader)
+    return env
+
+
+# --------------------------------------------------------------------------- subgoals
+
+
+def human_patterns(path: str = PARTICIPANTS_FILE) -> dict[str, SubgoalSeries]:
+    """The participants' subgoal series (all five gave the same): gripper at the object, then grasped."""
+    return load_patterns(path)
+
+
+def random_patterns(human: SubgoalSeries, num_patterns: int, seed: int) -> list[SubgoalSeries]:
+    """RRS: chains of random boxes over the same components as ``human``'s, with its margins.
+
+    Each random subgoal keeps the entries and the margin of the human subgoal at the
+    same position; its centre is drawn uniformly per component from
+    :data:`RANDOM_CENTRE_RANGE` (relative positions within ±0.1, finger joints in
+    [0, 0.05]), reproducibly from ``seed``.
+
+    Examples:
+        >>> series = random_patterns(human_patterns()["participants"], 2, seed=0)
+        >>> [p.predicates[1].box_dims for p in series]
+        [(6, 7, 8, 9, 10), (6, 7, 8, 9, 10)]
+    """
+    generator = torch.Generator().manual_seed(seed)
+    out = []
+    for i in range(num_patterns):
+        boxes = []
+        for predicate in human.predicates:
+            if not isinstance(predicate, Box):
+                raise TypeError(f"random_patterns needs box subgoals, got {type(predicate).__name__}")
+            low = torch.tensor([RANDOM_CENTRE_RANGE[_component_of(d)][0] for d in predicate.box_dims])
+            high = torch.tensor([RANDOM_CENTRE_RANGE[_component_of(d)][1] for d in predicate.box_dims])
+            centre = low + (high - low) * torch.rand(len(predicate.box_dims), generator=generator)
+            boxes.append(Box(tuple(round(float(c), 4) for c in centre), predicate.margin, predicate.box_dims))
+        out.append(SubgoalSeries(boxes, name=f"random_{i + 1}"))
+    return out
+
+
+#: Per component, the range RRS draws subgoal centres from.
+RANDOM_CENTRE_RANGE: dict[str, tuple[float, float]] = {
+    "gripper_position": (1.05, 1.55),
+    "object_position": (1.05, 1.55),
+    "object_relative_position": (-0.1, 0.1),
+    "finger_joints": (0.0, 0.05),
+}
+
+
+def _component_of(dim: int) -> str:
+    for name, part in COMPONENTS.items():
+        if part.start <= dim < part.stop:
+            if name not in RANDOM_CENTRE_RANGE:
+                raise KeyError(f"no random range for observation component {name!r} (entry {dim})")
+            return name
+    raise IndexError(f"entry {dim} is outside the {OBSERVATION_SIZE}-d observation")
+
+
+def three_state_aggregation(near: float = 0.05) -> StateAggregation:
+    """SARSA-RS's hand-given ``z = g(s)`` over three states.
+
+    ``z = 0``: the object is grasped (the second subgoal's box); ``z = 1``: the
+    gripper is within ``near`` of the object in every axis; ``z = 2``: anything else.
+
+    Examples:
+        >>> g = three_state_aggregation()
+        >>> obs = torch.zeros(3, OBSERVATION_SIZE)
+        >>> obs[0, 9:11] = 0.02      # at the object, fingers closed on it
+        >>> obs[1, 6] = 0.03         # near the object, fingers open (0 here)
+        >>> obs[2, 6] = 0.3          # far away
+        >>> g.initial(obs, torch.Size([3])).flatten().tolist()
+        [0, 1, 2]
+    """
+    rel, fingers = component_dims("object_relative_position"), component_dims("finger_joints")
+    grasped = Box((0.0, 0.0, 0.0, 0.02, 0.02), (SUBGOAL_MARGIN,) * 5, rel + fingers)
+    close = Box((0.0, 0.0, 0.0), (near,) * 3, rel)
+    anywhere = Box((0.0,), (float("inf"),), (0,))
+    return StateAggregation.from_regions([grasped, close, anywhere], OBSERVATION_SIZE)
+
