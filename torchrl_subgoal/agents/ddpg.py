@@ -208,9 +208,11 @@ class DDPGAgent(nn.Module):
         self.loss = DDPGLoss(self.actor, self.critic, delay_actor=True, delay_value=True)
         high = 0.0 if config.clip_positive else None
         low = -config.clip_return if config.clip_return is not None else None
-        self.loss.value_estimator = ClippedTD0Estimator(
-            low=low, high=high, gamma=config.gamma, value_network=self.loss.actor_critic
-        )
+        estimator = ClippedTD0Estimator(low=low, high=high, gamma=config.gamma,
+                                        value_network=self.loss.actor_critic)
+        # through the property's setter: nn.Module.__setattr__ would register a module assigned
+        # to `loss.value_estimator` under that name, and the property would still build its default
+        type(self.loss).value_estimator.fset(self.loss, estimator)  # type: ignore[attr-defined]
         self.loss._forward_value_estimator_keys()
         self.target_updater = SoftUpdate(self.loss, eps=config.polyak)
         self.actor_optimizer = torch.optim.Adam(self.loss.actor_network_params.values(True, True),
@@ -265,9 +267,12 @@ class DDPGAgent(nn.Module):
 
     def load_training_state(self, state: dict[str, Any]) -> None:
         """Inverse of :meth:`training_state`."""
-        missing, unexpected = self.load_state_dict(state["modules"], strict=False)
+        try:
+            missing, unexpected = self.load_state_dict(state["modules"], strict=False)
+        except (RuntimeError, ValueError) as exc:
+            raise ValueError(f"training state does not fit this agent: {exc}") from None
         if unexpected or any("_value_estimator." not in k for k in missing):
-            raise KeyError(f"training state does not fit this agent: missing {missing}, unexpected {unexpected}")
+            raise ValueError(f"training state does not fit this agent: missing {missing}, unexpected {unexpected}")
         self.actor_optimizer.load_state_dict(state["actor_optimizer"])
         self.critic_optimizer.load_state_dict(state["critic_optimizer"])
 

@@ -1,0 +1,107 @@
+"""Single-goal FetchPickAndPlace: fixed per seed, the participants' boxes, RRS, SARSA-RS, install errors."""
+
+from __future__ import annotations
+
+from importlib import metadata
+
+import pytest
+import torch
+
+from torchrl_subgoal.envs import fetch
+from torchrl_subgoal.subgoals import SubgoalTables
+
+
+@pytest.fixture(scope="module")
+def env_seed_3():
+    env = fetch.make_fetch_env(goal_seed=3)
+    yield env
+    env.close()
+
+
+def test_goal_and_object_fixed_per_seed_different_across_seeds(env_seed_3) -> None:
+    first = env_seed_3.reset()["observation"]
+    env_seed_3.rollout(7)  # move the arm, then reset again: the same start
+    again = env_seed_3.reset()["observation"]
+    assert torch.equal(first, again)
+    same = fetch.make_fetch_env(goal_seed=3)
+    same.set_seed(12345)  # a caller's seed does not change the task
+    assert torch.equal(same.reset()["observation"], first)
+    goal = same._env.get_wrapper_attr("goal").copy()
+    other = fetch.make_fetch_env(goal_seed=4)
+    object_position = fetch.COMPONENTS["object_position"]
+    assert not torch.equal(other.reset()["observation"][object_position], first[object_position])
+    assert (other._env.get_wrapper_attr("goal") != goal).any()
+    same.close(), other.close()
+
+
+def test_observation_reward_and_episode(env_seed_3) -> None:
+    rollout = env_seed_3.rollout(60)  # stops at the 50-step time-out
+    assert rollout.shape == (50,)
+    assert rollout["observation"].dtype == torch.float32
+    assert rollout["observation"].shape == (50, fetch.OBSERVATION_SIZE)
+    assert set(rollout["next", "reward"].unique().tolist()) <= {-1.0, 0.0}
+    assert rollout["next", "truncated"][-1].item() and not rollout["next", "terminated"].any()
+    assert rollout["next", "is_success"].dtype == torch.bool
+    # reward 0 exactly when the object is at the goal
+    assert torch.equal(rollout["next", "reward"] == 0, rollout["next", "is_success"])
+
+
+def _observations(rows: list[dict[str, list[float]]]) -> torch.Tensor:
+    obs = torch.full((len(rows), fetch.OBSERVATION_SIZE), 0.5)
+    for i, row in enumerate(rows):
+        for name, values in row.items():
+            obs[i, fetch.COMPONENTS[name]] = torch.tensor(values)
+    return obs
+
+
+def test_participants_boxes_on_hand_made_observations() -> None:
+    series = fetch.human_patterns()["participants"]
+    rel, fingers = "object_relative_position", "finger_joints"
+    obs = _observations([
+        {rel: [0.009, -0.009, 0.0], fingers: [0.04, 0.04]},  # gripper at the object (inside ±0.01)
+        {rel: [0.011, 0.0, 0.0], fingers: [0.02, 0.02]},     # 0.011 off in x: not at the object
+        {rel: [0.0, 0.0, 0.005], fingers: [0.025, 0.015]},   # at the object, fingers closed on it
+        {rel: [0.0, 0.0, 0.005], fingers: [0.035, 0.02]},    # one finger 0.015 open: not grasped
+    ])
+    tables = SubgoalTables([series], torch.zeros(4, dtype=torch.long), fetch.OBSERVATION_SIZE)
+    assert tables.inside(obs).tolist() == [[True, False], [False, False], [True, True], [True, False]]
+    # in order: from z = 0 only the first box counts, from z = 1 only the second
+    z0, z1 = torch.zeros(4, 1, dtype=torch.long), torch.ones(4, 1, dtype=torch.long)
+    assert tables.advance(z0, obs).flatten().tolist() == [1, 0, 1, 1]
+    assert tables.advance(z1, obs).flatten().tolist() == [1, 1, 2, 1]
+    assert torch.equal(tables.advance_eager(z1, obs), tables.advance(z1, obs))
+
+
+def test_random_patterns_reproducible_over_the_same_components() -> None:
+    human = fetch.human_patterns()["participants"]
+    a = fetch.random_patterns(human, 3, seed=0)
+    assert a == fetch.random_patterns(human, 3, seed=0)
+    assert a != fetch.random_patterns(human, 3, seed=1)
+    assert len({p.predicates for p in a}) == 3
+    for pattern in a:
+        for mine, theirs in zip(pattern.predicates, human.predicates, strict=True):
+            assert mine.box_dims == theirs.box_dims and mine.margin == theirs.margin
+            fingers = [c for d, c in zip(mine.box_dims, mine.centre, strict=True) if d in (9, 10)]
+            assert all(0.0 <= c <= 0.05 for c in fingers)
+
+
+def test_missing_extra_names_the_install_command(monkeypatch: pytest.MonkeyPatch) -> None:
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_robotics(name: str, *args, **kwargs):
+        if name == "gymnasium_robotics":
+            raise ImportError("No module named 'gymnasium_robotics'", name="gymnasium_robotics")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_robotics)
+    with pytest.raises(fetch.FetchUnavailableError, match=r"gymnasium_robotics is missing.*torchrl_subgoal\[fetch\]"):
+        fetch.require_fetch()
+
+
+def test_mujoco_312_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    real = metadata.version
+    monkeypatch.setattr(fetch.metadata, "version", lambda name: "3.12.0" if name == "mujoco" else real(name))
+    with pytest.raises(fetch.FetchUnavailableError, match=r"mujoco 3.12.0 is installed.*<3.12"):
+        fetch.require_fetch()
