@@ -1,0 +1,127 @@
+"""Pick and place: the neural potential's SMDP step, V shared with a ParallelEnv, the recipe, resume."""
+
+from __future__ import annotations
+
+import json
+from functools import partial
+from pathlib import Path
+
+import pytest
+import torch
+from torch import nn
+from torchrl.collectors import Collector
+from torchrl.envs import ParallelEnv, TransformedEnv
+
+from tests.recipes.test_recipes import recipe
+from torchrl_subgoal import NeuralPotential, SubgoalPotentialTransform, SubgoalValueLoss
+from torchrl_subgoal.envs import fetch
+from torchrl_subgoal.experiments import load_frame
+
+GAMMA = 0.98
+
+
+def shaped_env(num_envs: int, potential: NeuralPotential, parallel: bool):
+    make = partial(fetch.make_fetch_env, 5)
+    base = ParallelEnv(num_envs, make) if parallel else make()
+    series = fetch.human_patterns()["participants"]
+    return TransformedEnv(base, SubgoalPotentialTransform(series, potential, gamma=GAMMA, write_transitions=True))
+
+
+def test_neural_potential_step_matches_the_smdp_target() -> None:
+    torch.manual_seed(0)
+    potential = NeuralPotential(nn.Linear(fetch.OBSERVATION_SIZE, 1))
+    env = shaped_env(1, potential, parallel=False)
+    data = env.rollout(50, break_when_any_done=False)  # one time-out: one SMDP transition
+    smdp = data["next", "smdp"]
+    emitted = smdp[smdp["mask"].squeeze(-1)]
+    assert emitted.shape == (1,) and emitted["steps_to_next_obs"].item() == 50
+    assert emitted["next", "reward"].item() == pytest.approx(-(1 - GAMMA**50) / (1 - GAMMA), rel=1e-5)
+    # by hand: δ = r_h + γ^k V(o') − V(o), and SGD on ½δ² moves w by α δ o, b by α δ
+    lr = 1e-3
+    w, b = potential.network.weight.detach().clone(), potential.network.bias.detach().clone()
+    anchor, next_anchor = emitted["subgoal_anchor"], emitted["next", "subgoal_anchor"]
+    delta = emitted["next", "reward"] + GAMMA**50 * (next_anchor @ w.T + b) - (anchor @ w.T + b)
+    optimizer = torch.optim.SGD(potential.parameters(), lr=lr)
+    recipe("pick_and_place").train_potential(SubgoalValueLoss(potential, gamma=GAMMA, reduction="mean"),
+                                             optimizer, data)
+    assert torch.allclose(potential.network.weight, w + lr * delta * anchor, atol=1e-6)
+    assert torch.allclose(potential.network.bias, b + lr * delta.flatten(), atol=1e-6)
+
+
+def test_parallel_env_shapes_with_the_potential_the_loss_trains() -> None:
+    pick_and_place = recipe("pick_and_place")
+    torch.manual_seed(0)
+    potential = NeuralPotential(nn.Linear(fetch.OBSERVATION_SIZE, 1))
+    env = shaped_env(2, potential, parallel=True)
+    transform = env.transform
+    loss = SubgoalValueLoss(transform.potential, gamma=GAMMA, reduction="mean")
+    optimizer = torch.optim.Adam(loss.potential.parameters(), lr=0.1)
+    collector = Collector(env, None, frames_per_batch=100, total_frames=200, auto_register_policy_transforms=False)
+    batches = iter(collector)
+    before = potential.network.weight.detach().clone()
+    pick_and_place.train_potential(loss, optimizer, next(batches))  # both envs timed out: V moves
+    after = potential.network.weight.detach().clone()
+    data = next(batches)
+    collector.shutdown()
+    assert loss.potential is transform.potential is potential
+    # the next batch was shaped in this process with the trained V: F = γ V(o_z') − V(o_z)
+    with torch.no_grad():
+        phi = potential(data["subgoal_anchor"])
+        phi_next = potential(data["next", "subgoal_anchor"])
+    shaping = data["next", "reward"] - data["next", "env_reward"]
+    assert torch.allclose(shaping, GAMMA * phi_next - phi, atol=1e-4)
+    assert not torch.equal(after, before)
+
+
+TINY = ["--preset", "tiny", "--learnings", "1", "--envs", "1", "--no-env-processes", "--workers", "0"]
+
+
+def test_recipe_all_methods_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pick_and_place = recipe("pick_and_place")
+    args = [*TINY, "--epochs", "1", "--methods", "DDPG,HRS,RRS,NRS,SARSA-RS", "--results", str(tmp_path)]
+    assert pick_and_place.main(args) == 0
+    out = capsys.readouterr().out
+    assert "| 0.6 | HRS |" in out and "| HRS | 0 (—) | 0 [0, 0] | 0.67 |" in out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["metric"] == "success" and summary["unit"] == "epoch"
+    assert not summary["lower_is_better"]
+    assert set(summary["methods"]) == {"DDPG", "HRS", "RRS", "NRS", "SARSA-RS"}
+    frame = load_frame(tmp_path)
+    assert (frame["steps"] == 100).all() and frame["return"].between(-50.0, 0.0).all()
+
+
+def test_kill_and_resume_equals_an_uninterrupted_learning(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    pick_and_place = recipe("pick_and_place")
+    args = [*TINY, "--epochs", "3", "--methods", "HRS"]
+    assert pick_and_place.main([*args, "--results", str(tmp_path / "whole")]) == 0
+
+    evaluate, calls = pick_and_place.evaluate, []
+
+    def crash_in_second_epoch(*a, **k):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt  # as a kill: mid-epoch 2, after epoch 1's checkpoint
+        return evaluate(*a, **k)
+
+    monkeypatch.setattr(pick_and_place, "evaluate", crash_in_second_epoch)
+    with pytest.raises(KeyboardInterrupt):
+        pick_and_place.main([*args, "--results", str(tmp_path / "resumed")])
+    state = torch.load(tmp_path / "resumed" / "checkpoints" / "HRS" / "00000" / "state.pt", weights_only=False)
+    assert state["epoch"] == 1
+    monkeypatch.setattr(pick_and_place, "evaluate", evaluate)
+    assert pick_and_place.main([*args, "--results", str(tmp_path / "resumed")]) == 0
+
+    assert load_frame(tmp_path / "whole").equals(load_frame(tmp_path / "resumed"))
+    whole, resumed = (torch.load(tmp_path / d / "checkpoints" / "HRS" / "00000" / "state.pt", weights_only=False)
+                      for d in ("whole", "resumed"))
+    for part in ("agent", "potential"):
+        a, b = (whole[part]["modules"], resumed[part]["modules"]) if part == "agent" else (whole[part], resumed[part])
+        assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pick_and_place = recipe("pick_and_place")
+    assert pick_and_place.main(["--envs", "3", "--results", str(tmp_path)]) == 2
+    assert "--envs: an epoch's 2500 steps must split into whole 50-step episodes over 3 envs" in capsys.readouterr().err
+    assert pick_and_place.main(["--shaping", "{bad", "--results", str(tmp_path)]) == 2
+    assert "--shaping: not valid JSON" in capsys.readouterr().err
