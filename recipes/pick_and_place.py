@@ -66,8 +66,8 @@ class Config:
     epochs: int = setting(0, "epochs per learning (0: the preset's; paper: 200 of 2,500 steps)")
     learnings: int = setting(5, "learnings per method (paper: 5)")
     methods: str = setting("HRS,RRS,DDPG,NRS", f"comma-separated methods among {','.join(METHODS)}")
-    envs: int = setting(2, "MuJoCo envs collecting in parallel")
-    env_processes: bool = setting(True, "one worker process per env (ParallelEnv); else SerialEnv")
+    envs: int = setting(2, "MuJoCo envs collecting together (a batch)")
+    env_processes: int = setting(2, "worker processes the envs are spread over (ParallelEnv); 0: this process")
     subgoals: str = setting(fetch.PARTICIPANTS_FILE, "subgoal file of the human pattern (HRS, NRS)")
     value_lr: float = setting(1e-3, "Adam learning rate of the neural potential V(o; θ)")
     aggregation_lr: float = setting(0.1, "SGD learning rate of SARSA-RS's table")
@@ -87,6 +87,8 @@ class Config:
         for name in ("learnings", "envs"):
             check(getattr(self, name) >= 1, name, f"must be >= 1, got {getattr(self, name)}")
         check(self.workers >= 0, "workers", f"must be >= 0, got {self.workers}")
+        check(self.env_processes >= 0 and self.envs % max(self.env_processes, 1) == 0, "env_processes",
+              f"must be >= 0 and divide --envs {self.envs}, got {self.env_processes}")
         check(self.value_lr > 0 and self.aggregation_lr > 0, "value_lr", "learning rates must be > 0")
         schedule = PRESETS[self.preset]
         check(schedule["cycles"] * schedule["cycle_steps"] % (self.envs * fetch.MAX_EPISODE_STEPS) == 0,
@@ -120,7 +122,11 @@ def make_shaping(method_name: str, series: SubgoalSeries | None, config: Mapping
 
 def make_env(goal_seed: int, config: Mapping[str, Any]) -> EnvBase:
     make = partial(fetch.make_fetch_env, goal_seed)
-    return (ParallelEnv if config["env_processes"] else SerialEnv)(config["envs"], make)
+    processes, envs = config["env_processes"], config["envs"]
+    if processes == 0:
+        return SerialEnv(envs, make)
+    per_process = envs // processes
+    return ParallelEnv(processes, make if per_process == 1 else partial(SerialEnv, per_process, make))
 
 
 def evaluate(env: EnvBase, agent: DDPGAgent, episodes: int) -> tuple[float, float]:

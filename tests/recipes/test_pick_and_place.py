@@ -73,7 +73,7 @@ def test_parallel_env_shapes_with_the_potential_the_loss_trains() -> None:
     assert not torch.equal(after, before)
 
 
-TINY = ["--preset", "tiny", "--learnings", "1", "--envs", "1", "--no-env-processes", "--workers", "0"]
+TINY = ["--preset", "tiny", "--learnings", "1", "--envs", "1", "--env-processes", "0", "--workers", "0"]
 
 
 def test_recipe_all_methods_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
