@@ -37,13 +37,35 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 from torchrl.collectors import Collector
-from torchrl.envs import EnvBase, ExplorationType, ParallelEnv, SerialEnv, TransformedEnv, set_exploration_type
+from torchrl.envs import (
+    EnvBase,
+    ExplorationType,
+    ParallelEnv,
+    SerialEnv,
+    TransformedEnv,
+    set_exploration_type,
+)
 
-from torchrl_subgoal import NeuralPotential, SubgoalPotentialTransform, SubgoalSeries, SubgoalValueLoss
+from torchrl_subgoal import (
+    NeuralPotential,
+    SubgoalPotentialTransform,
+    SubgoalSeries,
+    SubgoalValueLoss,
+)
 from torchrl_subgoal.agents.ddpg import DDPG_KEYS, DDPGAgent, DDPGConfig, mlp
 from torchrl_subgoal.envs import fetch
-from torchrl_subgoal.experiments import Chunk, EpisodeTable, MethodSpec, UnknownMethodError, select_methods
-from torchrl_subgoal.experiments.checkpoint import LearningCheckpoint, restore_rng_states, rng_states
+from torchrl_subgoal.experiments import (
+    Chunk,
+    EpisodeTable,
+    MethodSpec,
+    UnknownMethodError,
+    select_methods,
+)
+from torchrl_subgoal.experiments.checkpoint import (
+    LearningCheckpoint,
+    restore_rng_states,
+    rng_states,
+)
 from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
 from torchrl_subgoal.experiments.recipe import chunk_patterns, pattern_config, sweep_and_report
 from torchrl_subgoal.methods import paper_methods, shaping_transform
@@ -105,19 +127,23 @@ class Config:
         return [m.strip() for m in self.methods.split(",") if m.strip()]
 
 
+PotentialTrainer = tuple[SubgoalValueLoss, torch.optim.Optimizer]
+
+
 def make_shaping(method_name: str, series: SubgoalSeries | None, config: Mapping[str, Any],
-                 gamma: float) -> tuple[SubgoalPotentialTransform | None, torch.optim.Optimizer | None]:
-    """The method's shaping transform and, for a neural potential, its optimiser."""
+                 gamma: float) -> tuple[SubgoalPotentialTransform | None, PotentialTrainer | None]:
+    """The method's shaping transform and, for a neural potential, its loss and optimiser."""
     method, options = METHODS[method_name], dict(config["shaping"])
     if method.shaping == "subgoals":  # HRS, RRS: V(o; θ) trained from the SMDP transitions
         potential = NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, config["ddpg"]["hidden"]))
         assert series is not None
         transform = SubgoalPotentialTransform(series, potential, gamma=gamma, write_transitions=True, **options)
-        return transform, torch.optim.Adam(potential.parameters(), lr=config["value_lr"])
-    transform = shaping_transform(method, torch.Size([]), gamma=gamma, value_lr=config["aggregation_lr"],
-                                  patterns=[series] if series is not None else None,
-                                  aggregation=fetch.three_state_aggregation(), eta=config["eta"], **options)
-    return transform, None
+        loss = SubgoalValueLoss(potential, gamma=gamma, reduction="mean")  # the transform's own potential
+        return transform, (loss, torch.optim.Adam(potential.parameters(), lr=config["value_lr"]))
+    baseline = shaping_transform(method, torch.Size([]), gamma=gamma, value_lr=config["aggregation_lr"],
+                                 patterns=[series] if series is not None else None,
+                                 aggregation=fetch.three_state_aggregation(), eta=config["eta"], **options)
+    return baseline, None
 
 
 def make_env(goal_seed: int, config: Mapping[str, Any]) -> EnvBase:
@@ -148,12 +174,11 @@ def learn(chunk: Chunk, learning: int, series: SubgoalSeries | None, config: Map
     goal_seed = int(np.random.SeedSequence([config["seed"], learning]).generate_state(1)[0])
     ddpg = DDPGConfig(**{**config["ddpg"], "hidden": tuple(config["ddpg"]["hidden"])})
     device = torch.device(config["device"])
-    shaping, value_optimizer = make_shaping(chunk.method, series, config, ddpg.gamma)
+    shaping, trainer = make_shaping(chunk.method, series, config, ddpg.gamma)
     env = make_env(goal_seed, config)
     train_env = TransformedEnv(env, shaping) if shaping is not None else env
     test_env = fetch.make_fetch_env(goal_seed, device=device)
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, test_env.action_spec_unbatched, ddpg, device)
-    value_loss = SubgoalValueLoss(shaping.potential, gamma=ddpg.gamma, reduction="mean") if value_optimizer else None
 
     checkpoint = LearningCheckpoint(Path(config["checkpoints"]) / chunk.name)
     records: list[list[float]] = []
@@ -164,8 +189,8 @@ def learn(chunk: Chunk, learning: int, series: SubgoalSeries | None, config: Map
         agent.load_training_state(state["agent"])
         if shaping is not None:
             shaping.potential.load_state_dict(state["potential"])
-        if value_optimizer is not None:
-            value_optimizer.load_state_dict(state["value_optimizer"])
+        if trainer is not None:
+            trainer[1].load_state_dict(state["value_optimizer"])
         records = state["records"]
         progress(len(records))
     epochs = config["epochs"]
@@ -180,8 +205,8 @@ def learn(chunk: Chunk, learning: int, series: SubgoalSeries | None, config: Map
             collected = []
             for _ in range(config["cycles"]):
                 data: TensorDictBase = next(batches)
-                if value_loss is not None and value_optimizer is not None:
-                    train_potential(value_loss, value_optimizer, data)
+                if trainer is not None:
+                    train_potential(*trainer, data)
                 agent.extend(data)
                 collected.append(data.select(*DDPG_KEYS).reshape(-1))
                 for _ in range(config["updates"]):
@@ -191,7 +216,7 @@ def learn(chunk: Chunk, learning: int, series: SubgoalSeries | None, config: Map
             records.append([config["cycles"] * config["cycle_steps"], test_return, success])
             state = {"agent": agent.training_state(), "records": records, "rng": rng_states(),
                      "potential": shaping.potential.state_dict() if shaping is not None else None,
-                     "value_optimizer": value_optimizer.state_dict() if value_optimizer else None}
+                     "value_optimizer": trainer[1].state_dict() if trainer is not None else None}
             checkpoint.save(epoch + 1, state, torch.cat(collected))
             progress(1)
         collector.shutdown()

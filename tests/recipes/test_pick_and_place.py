@@ -121,7 +121,9 @@ def test_kill_and_resume_equals_an_uninterrupted_learning(tmp_path: Path, monkey
 
 def test_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pick_and_place = recipe("pick_and_place")
-    assert pick_and_place.main(["--envs", "3", "--results", str(tmp_path)]) == 2
+    assert pick_and_place.main(["--envs", "3", "--env-processes", "0", "--results", str(tmp_path)]) == 2
     assert "--envs: an epoch's 2500 steps must split into whole 50-step episodes over 3 envs" in capsys.readouterr().err
     assert pick_and_place.main(["--shaping", "{bad", "--results", str(tmp_path)]) == 2
     assert "--shaping: not valid JSON" in capsys.readouterr().err
+    assert pick_and_place.main(["--envs", "4", "--env-processes", "3", "--results", str(tmp_path)]) == 2
+    assert "--env-processes: must be >= 0 and divide --envs 4, got 3" in capsys.readouterr().err

@@ -114,6 +114,12 @@ class RunningNorm(nn.Module):
         tensor([[1., 0.]])
     """
 
+    total: torch.Tensor
+    total_sq: torch.Tensor
+    count: torch.Tensor
+    mean: torch.Tensor
+    std: torch.Tensor
+
     def __init__(self, size: int, eps: float = 0.01, clip: float = 5.0) -> None:
         super().__init__()
         self.eps, self.clip = float(eps), float(clip)
@@ -212,7 +218,7 @@ class DDPGAgent(nn.Module):
                                         value_network=self.loss.actor_critic)
         # through the property's setter: nn.Module.__setattr__ would register a module assigned
         # to `loss.value_estimator` under that name, and the property would still build its default
-        type(self.loss).value_estimator.fset(self.loss, estimator)  # type: ignore[attr-defined]
+        type(self.loss).value_estimator.fset(self.loss, estimator)
         self.loss._forward_value_estimator_keys()
         self.target_updater = SoftUpdate(self.loss, eps=config.polyak)
         self.actor_optimizer = torch.optim.Adam(self.loss.actor_network_params.values(True, True),

@@ -20,7 +20,6 @@ Needs the ``fetch`` extra: ``pip install 'torchrl_subgoal[fetch]'`` (MuJoCo
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from importlib import metadata
 from importlib.resources import files
 from types import ModuleType
@@ -114,15 +113,17 @@ def require_fetch() -> ModuleType:
         )
     gymnasium.register_envs(gymnasium_robotics)
     if ENV_ID not in gymnasium.registry:
-        gymnasium.register(ENV_ID, entry_point=_make_single_goal, max_episode_steps=MAX_EPISODE_STEPS)
+        gymnasium.register(ENV_ID, entry_point=f"{__name__}:_make_single_goal",
+                           max_episode_steps=MAX_EPISODE_STEPS)
     return gymnasium
 
 
 def _make_single_goal(goal_seed: int = 0) -> Any:
     """The gymnasium env behind :data:`ENV_ID` (``gymnasium.make`` adds the 50-step limit)."""
     gymnasium = require_fetch()
+    wrapper: Any = gymnasium.Wrapper
 
-    class SingleGoal(gymnasium.Wrapper):
+    class SingleGoal(wrapper):
         """Reset to the goal and object start of ``goal_seed``; 25-d float32 observation."""
 
         def __init__(self, env: Any, seed: int) -> None:

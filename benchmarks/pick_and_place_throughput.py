@@ -5,8 +5,10 @@ Measures, in one run (the machine is shared: compare the ratios, not the absolut
 * the raw gymnasium ``FetchPickAndPlace-v4`` env stepped in this process under
   random actions (the reference rate);
 * a TorchRL ``Collector`` over ``TransformedEnv(ParallelEnv(n), HRS shaping)`` with
-  the exploring DDPG policy, for ``n`` = 1 and 2 MuJoCo worker processes, as the
-  recipe collects (shaping and the neural potential in this process);
+  the exploring DDPG policy, as the recipe collects (shaping and the neural potential
+  in this process), for ``n`` = 1 and 2 MuJoCo worker processes of one env each, and
+  2 workers of 5 envs each (``--envs 10 --env-processes 2`` in the recipe: the
+  policy, the shaping and the inter-process hand-over are paid once per batch);
 * DDPG gradient steps per second (critic + actor + Polyak-free, batch 256, 3 × 256
   hidden units, ``torch.set_num_threads(1)`` unless ``--threads``);
 * from these, the projected wall time of one paper-scale learning (200 epochs of
@@ -18,8 +20,8 @@ before and after: it says how busy the shared cores were.
 
 Usage::
 
-    python benchmarks/pick_and_place.py            # ~2 minutes on an idle machine
-    python benchmarks/pick_and_place.py --quick    # fewer steps
+    python benchmarks/pick_and_place_throughput.py            # ~2 minutes on an idle machine
+    python benchmarks/pick_and_place_throughput.py --quick    # fewer steps
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from functools import partial
 import torch
 from tensordict import TensorDict
 from torchrl.collectors import Collector
-from torchrl.envs import ParallelEnv, TransformedEnv
+from torchrl.envs import ParallelEnv, SerialEnv, TransformedEnv
 
 from torchrl_subgoal import NeuralPotential, SubgoalPotentialTransform
 from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, mlp
@@ -65,13 +67,14 @@ def raw_rate(steps: int) -> float:
     return rate
 
 
-def collector_rate(workers: int, steps: int, repeats: int) -> float:
-    base = ParallelEnv(workers, partial(fetch.make_fetch_env, 0))
+def collector_rate(workers: int, per_worker: int, steps: int, repeats: int) -> float:
+    make = partial(fetch.make_fetch_env, 0)
+    base = ParallelEnv(workers, make if per_worker == 1 else partial(SerialEnv, per_worker, make))
     series = fetch.human_patterns()["participants"]
     potential = NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, (256, 256, 256)))
     env = TransformedEnv(base, SubgoalPotentialTransform(series, potential, gamma=0.98, write_transitions=True))
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, base.action_spec_unbatched, DDPGConfig(buffer_size=1000))
-    collector = Collector(env, agent.policy, frames_per_batch=50 * workers, total_frames=-1,
+    collector = Collector(env, agent.policy, frames_per_batch=50 * workers * per_worker, total_frames=-1,
                           auto_register_policy_transforms=False)
     batches = iter(collector)
     next(batches)  # warm-up: workers started, first reset done
@@ -123,14 +126,14 @@ def main() -> None:
     raw = best(lambda: raw_rate(steps), args.repeats)
     print(f"raw gymnasium env, 1 process:        {raw:8.0f} env-steps/s  (1.00x)")
     rates = {}
-    for workers in (1, 2):
-        rates[workers] = collector_rate(workers, steps, args.repeats)
-        print(f"Collector, HRS shaping, {workers} worker(s):  {rates[workers]:8.0f} env-steps/s  "
-              f"({rates[workers] / raw:.2f}x raw)")
+    for workers, per_worker in ((1, 1), (2, 1), (2, 5)):
+        rate = rates[workers, per_worker] = collector_rate(workers, per_worker, steps, args.repeats)
+        print(f"Collector, HRS shaping, {workers} worker(s) x {per_worker} env(s): {rate:8.0f} env-steps/s  "
+              f"({rate / raw:.2f}x raw)")
     updates = update_rate(200 if args.quick else 600, args.repeats)
     print(f"DDPG gradient steps, batch 256, {args.threads} thread(s): {updates:6.1f} steps/s "
           f"({1e3 / updates:.1f} ms each)")
-    env_seconds = PAPER_STEPS * (1 + TEST_STEPS_PER_STEP) / rates[1]
+    env_seconds = PAPER_STEPS * (1 + TEST_STEPS_PER_STEP) / rates[1, 1]
     update_seconds = PAPER_STEPS * UPDATES_PER_STEP / updates
     total = env_seconds + update_seconds
     print(f"projected paper-scale learning (5e5 steps, 4e5 gradient steps) on one core: {total / 60:.0f} min "
