@@ -37,13 +37,17 @@ from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import GOAL, START, free_cells, room_aggregation
 from torchrl_subgoal.experiments import Chunk, EpisodeTable
-from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
+from torchrl_subgoal.experiments.cli import check, parse_config, setting
 from torchrl_subgoal.experiments.recipe import (
+    RECIPE_ERRORS,
     PatternSets,
+    check_patterns,
     chunk_patterns,
+    fail,
     method_specs,
     pattern_config,
     pattern_sets,
+    pattern_sources,
     sweep_and_report,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_transform
@@ -51,6 +55,7 @@ from torchrl_subgoal.subgoals import Cell
 
 METHODS = paper_methods(baseline="SARSA")
 PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")
+OBSERVATION_KEY = "cell"  # what the subgoal predicates read: (row, col)
 
 
 @dataclass
@@ -108,7 +113,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     shaping = shaping_transform(
         method, env.batch_size, gamma=sarsa.gamma, value_lr=sarsa.value_lr,
         patterns=patterns, pattern_index=pattern_index, aggregation=room_aggregation(),
-        eta=config["eta"], observation_key="cell",
+        eta=config["eta"], observation_key=OBSERVATION_KEY,
         zero_terminal_potential=config["zero_terminal_potential"],
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
@@ -125,22 +130,24 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = parse_config(Config, argv, description=__doc__.splitlines()[0] if __doc__ else None)
         patterns = build_patterns(cfg)
+        check_patterns(patterns, FourRoomsEnv(num_envs=1), OBSERVATION_KEY)
         specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
-    except (ConfigError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    settings = dataclasses.asdict(cfg)
-    config = {
-        **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential", "engine", "agent_state")},
-        "sarsa": dataclasses.asdict(SARSA_PRESETS[cfg.preset]),
-        "subgoal_file": cfg.subgoals,
-        "patterns": pattern_config(patterns),
-        "report": {"metric": "steps", "thresholds": [500, 300, 100, 50],
-                   "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes]},
-    }
-    return sweep_and_report("four_rooms", cfg.results, specs, run_chunk, config, seed=cfg.seed,
-                            chunk_size=cfg.chunk_size, episodes=cfg.episodes, overwrite=cfg.overwrite,
-                            backend=cfg.backend, workers=cfg.workers)
+        settings = dataclasses.asdict(cfg)
+        config = {
+            **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential", "engine",
+                                        "agent_state")},
+            "sarsa": dataclasses.asdict(SARSA_PRESETS[cfg.preset]),
+            "subgoal_file": cfg.subgoals,
+            "patterns": pattern_config(patterns),
+            "pattern_sources": pattern_sources(patterns),
+            "report": {"metric": "steps", "thresholds": [500, 300, 100, 50],
+                       "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes]},
+        }
+        return sweep_and_report("four_rooms", cfg.results, specs, run_chunk, config, seed=cfg.seed,
+                                chunk_size=cfg.chunk_size, episodes=cfg.episodes, overwrite=cfg.overwrite,
+                                backend=cfg.backend, workers=cfg.workers)
+    except RECIPE_ERRORS as exc:
+        return fail(exc)
 
 
 if __name__ == "__main__":

@@ -35,18 +35,23 @@ from torchrl_subgoal import Box, Circle, StateAggregation, load_patterns
 from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic, run_episodes
 from torchrl_subgoal.envs import PinBallEnv
 from torchrl_subgoal.experiments import Chunk, EpisodeTable
-from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
+from torchrl_subgoal.experiments.cli import check, parse_config, setting
 from torchrl_subgoal.experiments.recipe import (
+    RECIPE_ERRORS,
     PatternSets,
+    check_patterns,
     chunk_patterns,
+    fail,
     method_specs,
     pattern_config,
     pattern_sets,
+    pattern_sources,
     sweep_and_report,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 
 METHODS = paper_methods(baseline="AC")
+OBSERVATION_KEY = "observation"  # what the subgoal predicates read: (x, y, ẋ, ẏ)
 PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "pinball_participants.yaml")
 SUBGOAL_RADIUS = 0.04  # the target's radius, as in the paper
 
@@ -110,7 +115,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     shaping = shaping_transform(
         method, env.batch_size, gamma=ac.gamma, value_lr=ac.value_lr, patterns=patterns,
         pattern_index=pattern_index, aggregation=thirds_of_the_table(), eta=config["eta"],
-        zero_terminal_potential=config["zero_terminal_potential"],
+        zero_terminal_potential=config["zero_terminal_potential"], observation_key=OBSERVATION_KEY,
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     spec = env.observation_spec["observation"]
@@ -124,23 +129,24 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = parse_config(Config, argv, description=__doc__.splitlines()[0] if __doc__ else None)
         patterns = build_patterns(cfg)
+        check_patterns(patterns, PinBallEnv(1, cfg.map), OBSERVATION_KEY)
         specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
-    except (ConfigError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    settings = dataclasses.asdict(cfg)
-    config = {
-        **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential", "map",
-                                    "max_steps", "engine")},
-        "actor_critic": dataclasses.asdict(AC_PRESETS[cfg.preset]),
-        "subgoal_file": cfg.subgoals,
-        "patterns": pattern_config(patterns),
-        "report": {"metric": "steps", "thresholds": [3000, 2000, 1000, 500], "window": 10,
-                   "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes], "map": {"config": cfg.map}},
-    }
-    return sweep_and_report("pinball", cfg.results, specs, run_chunk, config, seed=cfg.seed,
-                            chunk_size=cfg.chunk_size, episodes=cfg.episodes, overwrite=cfg.overwrite,
-                            backend=cfg.backend, workers=cfg.workers)
+        settings = dataclasses.asdict(cfg)
+        config = {
+            **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential", "map",
+                                        "max_steps", "engine")},
+            "actor_critic": dataclasses.asdict(AC_PRESETS[cfg.preset]),
+            "subgoal_file": cfg.subgoals,
+            "patterns": pattern_config(patterns),
+            "pattern_sources": pattern_sources(patterns),
+            "report": {"metric": "steps", "thresholds": [3000, 2000, 1000, 500], "window": 10,
+                       "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes], "map": {"config": cfg.map}},
+        }
+        return sweep_and_report("pinball", cfg.results, specs, run_chunk, config, seed=cfg.seed,
+                                chunk_size=cfg.chunk_size, episodes=cfg.episodes, overwrite=cfg.overwrite,
+                                backend=cfg.backend, workers=cfg.workers)
+    except RECIPE_ERRORS as exc:
+        return fail(exc)
 
 
 if __name__ == "__main__":

@@ -4,16 +4,24 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 from collections.abc import Sequence
-from typing import Any, Literal, TypeVar, get_args, get_origin, get_type_hints
+from typing import Any, Literal, NoReturn, TypeVar, get_args, get_origin, get_type_hints
 
-__all__ = ["ConfigError", "parse_config", "setting"]
+__all__ = ["ConfigError", "OneLineParser", "parse_config", "setting"]
 
 T = TypeVar("T")
 
 
 class ConfigError(ValueError):
     """A bad setting; the message names the field (``--flag``) and what is allowed."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An :class:`argparse.ArgumentParser` whose usage errors are one line on stderr (exit 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"error: {message} (see {self.prog} --help)\n")
 
 
 def setting(default: Any, help: str, *, choices: Sequence[Any] | None = None) -> Any:
@@ -30,11 +38,11 @@ def parse_config(cls: type[T], argv: Sequence[str] | None = None, description: s
 
     Every field ``foo_bar`` becomes ``--foo-bar`` (booleans: ``--foo-bar`` /
     ``--no-foo-bar``). Values are converted with the field's type; fields with
-    ``choices`` only accept those. The dataclass's ``__post_init__`` may raise
+    ``choices`` only accept those; float values must be finite. The dataclass's ``__post_init__`` may raise
     :class:`ConfigError` for other checks.
     """
     hints = get_type_hints(cls)
-    parser = argparse.ArgumentParser(description=description or (cls.__doc__ or "").strip().splitlines()[0])
+    parser = OneLineParser(description=description or (cls.__doc__ or "").strip().splitlines()[0])
     for f in dataclasses.fields(cls):  # type: ignore[arg-type]
         kind = hints[f.name]
         help_text = f"{f.metadata.get('help', '')} (default: {f.default})"
@@ -49,6 +57,9 @@ def parse_config(cls: type[T], argv: Sequence[str] | None = None, description: s
             parser.add_argument(_flag(f.name), type=kind, default=f.default, help=help_text,
                                 choices=f.metadata.get("choices"), metavar=f.name.upper())
     args = parser.parse_args(argv)
+    for name, value in vars(args).items():
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ConfigError(f"{_flag(name)}: must be a finite number, got {value}")
     return cls(**vars(args))
 
 

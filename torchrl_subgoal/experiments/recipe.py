@@ -13,15 +13,38 @@ from typing import Any, Literal
 
 import torch
 
-from torchrl_subgoal.experiments.cli import ConfigError
-from torchrl_subgoal.experiments.store import Chunk, UnknownMethodError
-from torchrl_subgoal.experiments.sweep import MethodSpec, RunChunk, Sweep, select_methods
-from torchrl_subgoal.methods import Method, random_patterns
-from torchrl_subgoal.subgoals import Predicate, SubgoalSeries
+from torchrl.envs import EnvBase, TransformedEnv
 
-__all__ = ["chunk_patterns", "method_specs", "pattern_config", "pattern_sets", "sweep_and_report"]
+from torchrl_subgoal.experiments.cli import ConfigError
+from torchrl_subgoal.experiments.store import Chunk, ResultsError, UnknownMethodError
+from torchrl_subgoal.experiments.sweep import ChunkFailedError, MethodSpec, RunChunk, Sweep, select_methods
+from torchrl_subgoal.methods import Method, random_patterns
+from torchrl_subgoal.potentials import NaivePotential
+from torchrl_subgoal.subgoals import Predicate, SubgoalFileError, SubgoalSeries
+from torchrl_subgoal.transform import SubgoalPotentialTransform
+
+__all__ = [
+    "RECIPE_ERRORS",
+    "check_patterns",
+    "chunk_patterns",
+    "fail",
+    "method_specs",
+    "pattern_config",
+    "pattern_sets",
+    "pattern_sources",
+    "sweep_and_report",
+]
 
 PatternSets = dict[str, dict[str, SubgoalSeries]]
+
+#: What a recipe reports as one line on stderr instead of a traceback (see :func:`fail`).
+RECIPE_ERRORS = (ConfigError, SubgoalFileError, ResultsError, ChunkFailedError)
+
+
+def fail(exc: BaseException) -> int:
+    """Print ``exc`` as one line on stderr; the exit code: 1 for a failed chunk, else 2 (a user error)."""
+    print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
+    return 1 if isinstance(exc, ChunkFailedError) else 2
 
 
 def pattern_sets(
@@ -29,13 +52,45 @@ def pattern_sets(
 ) -> PatternSets:
     """The patterns by kind: ``human`` (as given), ``random`` (RRS, seeded, as long as the longest human one)."""
     num_subgoals = max(len(p) for p in human.values())
-    rand = random_patterns(candidates, num_random, num_subgoals, seed=seed)
+    if num_subgoals > len(candidates):
+        longest = max(human.values(), key=len)
+        raise SubgoalFileError(
+            f"{longest.source or '<subgoals>'}: pattern {longest.name!r}: has {num_subgoals} subgoals, more "
+            f"than the {len(candidates)} candidate subgoals random patterns (RRS) of that length are drawn from"
+        )
+    source = f"random patterns (seed {seed})"
+    rand = [SubgoalSeries(p.predicates, name=p.name, source=source)
+            for p in random_patterns(candidates, num_random, num_subgoals, seed=seed)]
     return {"human": dict(human), "random": {p.name: p for p in rand}, "none": {}}
 
 
 def pattern_config(patterns: PatternSets) -> dict[str, Any]:
     """Every pattern a sweep may use, as stored in its configuration (read back by :func:`chunk_patterns`)."""
     return {n: s.to_dict() for kind in ("human", "random") for n, s in patterns[kind].items()}
+
+
+def pattern_sources(patterns: PatternSets) -> dict[str, str]:
+    """Where each pattern came from (its subgoal file), so a chunk's errors can name it."""
+    return {n: s.source for kind in ("human", "random") for n, s in patterns[kind].items() if s.source}
+
+
+def check_patterns(patterns: PatternSets, env: EnvBase, observation_key: str) -> None:
+    """Compile every pattern against the observation its shaping transform will read.
+
+    The same check the transform makes at its first reset (one entry per read index,
+    ``state:`` only on a scalar state or a one-hot observation, …), made before a
+    sweep starts, so a subgoal that does not fit fails with nothing written.
+
+    Raises:
+        SubgoalFileError: naming the file, the pattern and the field.
+    """
+    series = [s for kind in ("human", "random") for s in patterns[kind].values()]
+    if not series:
+        return
+    index = torch.zeros(env.batch_size, dtype=torch.long)
+    transform = SubgoalPotentialTransform(series, NaivePotential(1.0), gamma=1.0,
+                                          observation_key=observation_key, pattern_index=index)
+    TransformedEnv(env, transform).reset()
 
 
 def method_specs(
@@ -49,6 +104,8 @@ def method_specs(
         kind = method.subgoals
         per_pattern = learnings if kind != "none" else learnings * len(patterns["human"])
         specs.append(MethodSpec(name, list(patterns[kind]) or ["none"], per_pattern))
+    if not names:
+        raise ConfigError(f"--methods: give at least one method; choose from {list(methods)}")
     try:
         return select_methods(specs, names)
     except UnknownMethodError as exc:
@@ -58,7 +115,9 @@ def method_specs(
 def chunk_patterns(chunk: Chunk, config: Mapping[str, Any]) -> tuple[list[SubgoalSeries], torch.Tensor]:
     """The chunk's subgoal series (from the sweep's configuration) and each learner's index into them."""
     names = sorted({pattern for pattern, _ in chunk.learners})
-    series = [SubgoalSeries.from_dict(config["patterns"][n], name=n) for n in names if n != "none"]
+    sources = config.get("pattern_sources") or {}
+    series = [SubgoalSeries.from_dict(config["patterns"][n], name=n, source=sources.get(n))
+              for n in names if n != "none"]
     return series, torch.tensor([names.index(p) for p, _ in chunk.learners])
 
 
@@ -76,12 +135,30 @@ def sweep_and_report(
     backend: Literal["local", "ray"],
     workers: int,
 ) -> int:
-    """Run (or resume) the sweep, write the report, print its Markdown; the recipe's exit code."""
+    """Run (or resume) the sweep, write the report, print its Markdown; the recipe's exit code.
+
+    Raises:
+        ConfigError: a setting the sweep cannot use, naming its flag.
+        ResultsError: the results directory cannot be used (not ours, another experiment,
+            busy, unwritable).
+        ChunkFailedError: a chunk failed; the message says what was saved and what to do.
+    """
     from torchrl_subgoal.experiments.report import write_report
 
+    for flag, value, low in (("seed", seed, 0), ("chunk_size", chunk_size, 1), ("episodes", episodes, 1),
+                             ("workers", workers, 0)):
+        if value < low:
+            raise ConfigError(f"--{flag.replace('_', '-')}: must be >= {low}, got {value}")
+    if not results.strip():
+        raise ConfigError("--results: give a directory")
     sweep = Sweep(domain, results, specs, run_chunk, config, seed=seed, chunk_size=chunk_size,
                   n_episodes=episodes, overwrite=overwrite)
-    sweep.run(backend=backend, workers=workers)
+    try:
+        sweep.run(backend=backend, workers=workers)
+    except KeyboardInterrupt:
+        print(f"interrupted: finished chunks are saved in {results}; run the same command again to resume",
+              file=sys.stderr)
+        return 130
     report = write_report(results)
     print(report.markdown)
     print(f"results, report.md, summary.json and plots in {results}", file=sys.stderr)

@@ -22,7 +22,6 @@ What it computes (per method; see :mod:`~torchrl_subgoal.experiments.stats`):
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -38,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from torchrl_subgoal.experiments import stats
+from torchrl_subgoal.experiments.cli import OneLineParser
 from torchrl_subgoal.experiments.paper import PaperResults, paper_results
 from torchrl_subgoal.experiments.plots import plot_learning_curves, plot_pattern_maps
 from torchrl_subgoal.experiments.store import (
@@ -45,6 +45,7 @@ from torchrl_subgoal.experiments.store import (
     IncompleteResultsError,
     Results,
     ResultsError,
+    ResultsStore,
     load_results,
 )
 
@@ -52,6 +53,8 @@ SUMMARY_FILE = "summary.json"
 REPORT_FILE = "report.md"
 CURVES_FILE = "learning_curves.png"
 PATTERNS_FILE = "patterns.png"
+#: Largest ``--n-boot``: the bootstrap holds ``n_boot x learners`` indices in memory.
+MAX_BOOT = 100_000
 
 
 @dataclass(frozen=True)
@@ -450,10 +453,12 @@ def write_report(
         >>> out = write_report("results/four_rooms")  # doctest: +SKIP
         >>> print(out.markdown)  # doctest: +SKIP
     """
+    if n_boot < 1:
+        raise ValueError(f"n_boot must be >= 1, got {n_boot}")
     results = load_results(results_dir, allow_incomplete=allow_incomplete)
     spec = ReportSpec.from_config(results.config)
     out = Path(out_dir) if out_dir is not None else results.root
-    out.mkdir(parents=True, exist_ok=True)
+    _check_output_dir(out)
     summary = summarize(results, spec, n_boot=n_boot, seed=seed)
     paper = paper_results(results.domain)
     notes, figures, files = [], {}, []
@@ -483,20 +488,54 @@ def write_report(
     return ReportOutput(markdown, summary, tuple(files))
 
 
+REPORT_FILES = (REPORT_FILE, SUMMARY_FILE, CURVES_FILE, PATTERNS_FILE)
+
+
+def _is_report_dir(out: Path) -> bool:
+    """Whether ``out`` holds a results directory's ``config.json`` or a summary this module wrote."""
+    try:
+        if ResultsStore(out).read_manifest() is not None:
+            return True
+        summary = json.loads((out / SUMMARY_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError, ResultsError):
+        return False
+    return isinstance(summary, dict) and {"results_dir", "bootstrap", "asymptotic"} <= set(summary)
+
+
+def _check_output_dir(out: Path) -> None:
+    """Create ``out``; refuse to replace report-named files that a report did not write there."""
+    if out.exists() and not out.is_dir():
+        raise ResultsError(f"{out} is a file, not a directory; choose another output directory")
+    existing = [out / name for name in REPORT_FILES if (out / name).exists()]
+    if existing and not _is_report_dir(out):
+        raise ResultsError(
+            f"{existing[0]} exists and was not written by a report of torchrl_subgoal; choose another "
+            "output directory (or move it away)"
+        )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ResultsError(f"cannot create the output directory {out} ({exc.strerror or exc})") from exc
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point: ``torchrl-subgoal-report RESULTS_DIR [--out DIR]``."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="torchrl-subgoal-report",
         description="Write report.md, summary.json and plots for a sweep's results directory.",
     )
     parser.add_argument("results_dir", type=Path)
     parser.add_argument("--out", type=Path, default=None, help="output directory (default: RESULTS_DIR)")
-    parser.add_argument("--n-boot", type=int, default=2000, help="bootstrap samples (default 2000)")
+    parser.add_argument("--n-boot", type=int, default=2000, help=f"bootstrap samples, 1 to {MAX_BOOT} (default 2000)")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
     parser.add_argument(
         "--allow-incomplete", action="store_true", help="report on an unfinished sweep's chunks"
     )
     args = parser.parse_args(argv)
+    if not 1 <= args.n_boot <= MAX_BOOT:
+        parser.error(f"--n-boot: must lie in [1, {MAX_BOOT}], got {args.n_boot}")
+    if args.seed < 0:
+        parser.error(f"--seed: must be >= 0, got {args.seed}")
     start = time.perf_counter()
     try:
         output = write_report(
@@ -509,6 +548,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ResultsError as exc:
         hint = " (or pass --allow-incomplete)" if isinstance(exc, IncompleteResultsError) else ""
         print(f"error: {exc}{hint}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # e.g. the output directory is not writable
+        print(f"error: cannot write the report: {exc}", file=sys.stderr)
         return 2
     print(output.markdown)
     written = ", ".join(str(p) for p in output.files)

@@ -29,7 +29,6 @@ import json
 import os
 import platform
 import re
-import shutil
 import uuid
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -49,6 +48,7 @@ CHUNKS_DIR = "chunks"
 LOCK_FILE = ".lock"
 _META_KEY = b"torchrl_subgoal.chunk"
 _METHOD_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+_CHUNK_FILE = re.compile(r"^[0-9]{5,}\.parquet(\.corrupt)?$")
 #: Fields of config.json that define an experiment; a mismatch on any is an error.
 IDENTITY_FIELDS = ("domain", "methods", "config", "seed", "chunk_size", "n_episodes", "chunks")
 #: The per-episode metrics an :class:`EpisodeTable` holds, by their column names.
@@ -361,17 +361,19 @@ def _fsync_dir(path: Path) -> None:
 @contextlib.contextmanager
 def _atomic_file(path: Path) -> Iterator[BinaryIO]:
     """Open a temporary file beside ``path``; on success fsync it and rename it over ``path``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.parent / f".{path.name}.{uuid.uuid4().hex}.tmp"  # open() honours the umask
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         with open(tmp, "xb") as handle:
             yield handle
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(exc, OSError):  # disk full, permissions: a message, not a traceback
+            raise ResultsError(f"cannot write {path} ({_reason(exc)}); finished chunks are kept") from exc
         raise
     _fsync_dir(path.parent)
 
@@ -412,19 +414,32 @@ class ResultsStore:
     # -- config.json ---------------------------------------------------------------------
 
     def read_manifest(self) -> dict[str, Any] | None:
-        """The parsed ``config.json``, or ``None`` when the directory has none."""
+        """The parsed ``config.json``, or ``None`` when the directory has none.
+
+        Raises:
+            ResultsError: the path is not a directory, or ``config.json`` is unreadable, not
+                JSON, or not a results file of this format (missing or malformed fields).
+        """
+        if self.root.exists() and not self.root.is_dir():
+            raise ResultsError(f"{self.root} is a file, not a results directory; choose a directory")
         try:
-            text = self.config_path.read_text()
+            text = self.config_path.read_text(encoding="utf-8")
         except FileNotFoundError:
             return None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ResultsError(f"{self.config_path} cannot be read ({_reason(exc)})") from exc
+        fix = "repair it, or delete the directory to start afresh"
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
-            raise ResultsError(f"{self.config_path} is not valid JSON: {exc}") from exc
+            raise ResultsError(f"{self.config_path} is not valid JSON ({exc}); {fix}") from exc
         if not isinstance(data, dict) or data.get("format") != FORMAT_VERSION:
             raise ResultsError(
-                f"{self.config_path} is not a torchrl_subgoal results file of format {FORMAT_VERSION}"
+                f"{self.config_path} is not a torchrl_subgoal results file of format {FORMAT_VERSION}; {fix}"
             )
+        problem = _manifest_problem(data)
+        if problem:
+            raise ResultsError(f"{self.config_path}: {problem}; {fix}")
         return data
 
     def write_manifest(self, manifest: Mapping[str, Any]) -> None:
@@ -540,19 +555,57 @@ class ResultsStore:
                     removed.append(path)
         return removed
 
-    def clear(self) -> None:
-        """Remove ``config.json`` and ``chunks/`` (and nothing else)."""
+    def foreign_entries(self) -> list[Path]:
+        """What the directory holds besides a sweep's own files, when it has no ``config.json``.
+
+        A sweep starts only in a missing or empty directory (its own ``.lock`` and
+        temporary files excepted): anything else may be someone's data.
+        """
+        if not self.root.exists():
+            return []
+        return sorted(p for p in self.root.iterdir() if p.name != LOCK_FILE and not _is_temp(p))
+
+    def clear(self) -> list[Path]:
+        """Remove what a sweep wrote: ``config.json`` and the chunk files below ``chunks/``.
+
+        Only files the store can identify as its own go: ``chunks/<method>/<index>.parquet``
+        (and ``.corrupt`` or temporary ones) whose method directory's name is valid.
+        Anything else below ``chunks/`` is left alone, as are the directories holding
+        it. Returns what was removed.
+        """
+        removed = []
         with contextlib.suppress(FileNotFoundError):
             self.config_path.unlink()
-        shutil.rmtree(self.chunks_dir, ignore_errors=True)
+            removed.append(self.config_path)
+        if self.chunks_dir.is_dir():
+            for method_dir in self.chunks_dir.iterdir():
+                if not (method_dir.is_dir() and _METHOD_NAME.match(method_dir.name)):
+                    continue
+                for path in method_dir.iterdir():
+                    if path.is_file() and (_CHUNK_FILE.match(path.name) or _is_temp(path)):
+                        path.unlink()
+                        removed.append(path)
+                with contextlib.suppress(OSError):  # kept when something else is in it
+                    method_dir.rmdir()
+            with contextlib.suppress(OSError):
+                self.chunks_dir.rmdir()
+        return removed
 
     @contextlib.contextmanager
     def lock(self) -> Iterator[None]:
         """Hold an exclusive lock on the directory; the OS releases it if the process dies."""
         import fcntl
 
-        self.root.mkdir(parents=True, exist_ok=True)
-        with open(self.root / LOCK_FILE, "w") as handle:
+        try:
+            self.root.mkdir(parents=True, exist_ok=True)
+            handle = open(self.root / LOCK_FILE, "w")  # noqa: SIM115 (closed below)
+        except FileExistsError as exc:
+            raise ResultsError(f"{self.root} is a file, not a results directory; choose a directory") from exc
+        except OSError as exc:
+            raise ResultsError(
+                f"cannot write the results directory {self.root} ({_reason(exc)}); choose a writable one"
+            ) from exc
+        with handle:
             try:
                 fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError as exc:
@@ -563,6 +616,34 @@ class ResultsStore:
                 yield
             finally:
                 fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def _reason(exc: BaseException) -> str:
+    """An OS error's reason without the repeated path (``Permission denied``), else the message."""
+    return getattr(exc, "strerror", None) or str(exc)
+
+
+def _is_temp(path: Path) -> bool:
+    return path.name.startswith(".") and path.name.endswith(".tmp")
+
+
+def _manifest_problem(data: Mapping[str, Any]) -> str | None:
+    """What is wrong with a parsed ``config.json`` of the right format, if anything."""
+    kinds: dict[str, type | tuple[type, ...]] = {
+        "domain": str, "methods": list, "config": dict, "seed": int, "chunk_size": int, "chunks": list,
+    }
+    for key, kind in kinds.items():
+        if not isinstance(data.get(key), kind):
+            return f"field {key!r} is missing or malformed"
+    try:
+        names = [str(m["name"]) for m in data["methods"]]
+        planned = [Chunk.from_json(item) for item in data["chunks"]]
+    except (KeyError, TypeError, ValueError):
+        return "fields 'methods' or 'chunks' are malformed"
+    for chunk in planned:
+        if chunk.method not in names or not _METHOD_NAME.match(chunk.method):
+            return f"chunk {chunk.name} belongs to no method of the file"
+    return None
 
 
 def planned_chunks(manifest: Mapping[str, Any]) -> list[Chunk]:

@@ -37,6 +37,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from torchrl_subgoal.experiments.store import (
+    CONFIG_FILE,
     FORMAT_VERSION,
     IDENTITY_FIELDS,
     Chunk,
@@ -272,10 +273,9 @@ def _execute_chunk_ray(
 
 
 def _failure(chunk: Chunk, exc: BaseException) -> ChunkFailedError:
-    return ChunkFailedError(
-        f"chunk {chunk.name} failed: {type(exc).__name__}: {exc}. Finished chunks are saved; "
-        "fix the cause and re-run the same command to resume."
-    )
+    """The error for a chunk whose ``run_chunk`` raised; :meth:`Sweep.run` adds what to do next."""
+    reason = " ".join(str(exc).split()) or "(no message)"  # one line, however the cause wrote it
+    return ChunkFailedError(f"chunk {chunk.name} failed: {type(exc).__name__}: {reason}.")
 
 
 # -- backends: each yields (chunk, table) as chunks finish ----------------------------------
@@ -527,12 +527,37 @@ class Sweep:
             "versions": collect_versions(),
         }
 
-    def _open_store(self) -> None:
-        """Write config.json, or check the existing one matches this sweep."""
-        requested = self.manifest()
+    def _check_directory(self) -> dict[str, Any] | None:
+        """The stored ``config.json`` (or None); refuse a directory that is not a results directory.
+
+        A sweep writes only into a new or empty directory, or one holding a sweep's
+        ``config.json``: files it cannot identify as its own are never touched.
+        """
         stored = self.store.read_manifest()
+        if stored is None:
+            foreign = self.store.foreign_entries()
+            if foreign:
+                shown = ", ".join(p.name for p in foreign[:3]) + (" ..." if len(foreign) > 3 else "")
+                raise ResultsError(
+                    f"{self.store.root} is not empty ({shown}) and is not a results directory "
+                    f"(no {CONFIG_FILE}); choose a new or empty directory"
+                )
+        return stored
+
+    def finished_chunks(self) -> int:
+        """How many chunk files the store holds (valid or not; they are checked on resume)."""
+        return sum(1 for _ in self.store.chunks_dir.glob("*/*.parquet"))
+
+    def _open_store(self) -> None:
+        """Write config.json, or check the existing one matches this sweep.
+
+        A stored experiment that differs is replaced only with ``overwrite``, or when
+        it has no finished chunk (nothing to lose).
+        """
+        requested = self.manifest()
+        stored = self._check_directory()
         root = self.store.root
-        if stored is not None and not self.overwrite:
+        if stored is not None and not self.overwrite and self.finished_chunks():
             if stored["domain"] != self.domain:
                 raise DomainMismatchError(
                     f"{root} holds results of domain {stored['domain']!r}, not {self.domain!r}; "
@@ -557,12 +582,21 @@ class Sweep:
                     stacklevel=3,
                 )
             return
-        if stored is None and not self.overwrite and any(self.store.chunks_dir.glob("*/*.parquet")):
-            raise ResultsError(
-                f"{root} has chunk files but no config.json; pass overwrite to start afresh"
-            )
+        if stored is not None and stored == requested:
+            return  # nothing finished yet, the same experiment: keep its config.json
         self.store.clear()
         self.store.write_manifest(requested)
+
+    def _resume_advice(self) -> str:
+        """What to do after a chunk failed, given what the store holds."""
+        saved = self.finished_chunks()
+        if not saved:
+            return "No chunk was finished; fix the cause and run the command again."
+        return (
+            f"{saved} finished chunk(s) are saved in {self.store.root}: fix the cause and run the "
+            "same command again to compute the rest (a fix that changes a setting or the subgoals "
+            "makes a different experiment: use another results dir, or pass overwrite to discard them)."
+        )
 
     def pending(self) -> list[Chunk]:
         """Chunks not (validly) stored yet; corrupt ones are reported and moved aside."""
@@ -622,6 +656,7 @@ class Sweep:
                 raise TypeError(
                     "run_chunk must be picklable: define it at module level in an importable module"
                 ) from exc
+        self._check_directory()  # before the lock file is created in a directory that is not ours
         with self.store.lock():
             self._open_store()
             self.store.clean_temp_files()
@@ -640,6 +675,8 @@ class Sweep:
                         table = self._check_table(chunk, table)
                         self.store.write_chunk(chunk, table)
                         bar.done(chunk, table.n_episodes)
+                except ChunkFailedError as exc:
+                    raise ChunkFailedError(f"{exc} {self._resume_advice()}") from exc.__cause__
                 finally:
                     finished.close()  # on an error here: stops the backend's workers
                     bar.close()
