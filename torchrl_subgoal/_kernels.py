@@ -18,14 +18,39 @@ import numba
 import numpy as np
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _in_region(o, lo, hi, centre, weight, radius2):
+    """Whether the observation ``o`` lies in one region: ``lo ≤ o ≤ hi`` and
+    ``Σ w (o − c)² ≤ r²`` over the entries with ``w ≠ 0``, all in float64.
+
+    The comparisons are written so that NaN is never inside (as in torch), ±inf
+    compares as a number, and an entry the region does not read (open bounds,
+    zero weight) never matters, whatever it holds but NaN. ``SubgoalTables``'s
+    torch path computes the same, in the same order, so the two agree exactly.
+    """
+    for d in range(lo.shape[0]):
+        if not (o[d] >= lo[d] and o[d] <= hi[d]):
+            return False
+    if radius2 < np.inf:
+        s = 0.0
+        for d in range(lo.shape[0]):
+            w = np.float64(weight[d])
+            if w != 0.0:
+                diff = np.float64(o[d]) - np.float64(centre[d])
+                s += w * diff * diff
+        return s <= radius2
+    return True
+
+
 @numba.njit(cache=True, nogil=True)
 def advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_out):
     """``z_out[b]``: abstract state after observing ``obs[b]`` in ``z[b]`` (see SubgoalTables).
 
     Learner ``b`` follows pattern ``pattern[b]``; the region tables are per pattern
     (``[P, J, D]``), which keeps them in cache whatever the number of learners.
+    See :func:`_in_region` for how an observation is compared (NaN is never inside).
     """
-    n_nodes, dim = lo.shape[1], lo.shape[2]
+    n_nodes = lo.shape[1]
     for b in range(z.shape[0]):
         p = pattern[b]
         zb = z[b, 0]
@@ -33,19 +58,7 @@ def advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_ou
         for j in range(n_nodes):
             if not succ[p, zb, j]:
                 continue
-            inside = True
-            for d in range(dim):
-                o = obs[b, d]
-                if o < lo[p, j, d] or o > hi[p, j, d]:
-                    inside = False
-                    break
-            if inside and radius2[p, j] < np.inf:
-                s = 0.0
-                for d in range(dim):
-                    diff = obs[b, d] - centre[p, j, d]
-                    s += weight[p, j, d] * diff * diff
-                inside = s <= radius2[p, j]
-            if inside:
+            if _in_region(obs[b], lo[p, j], hi[p, j], centre[p, j], weight[p, j], radius2[p, j]):
                 z_out[b, 0] = j + 1
                 break
 
@@ -314,22 +327,10 @@ def sarsa_grid_run(
 @numba.njit(cache=True, nogil=True)
 def first_region(z, obs, lo, hi, centre, weight, radius2, z_out):
     """``z_out[b]``: the first region (shared ``[J, D]`` tables) containing ``obs[b]``, else ``z[b]``."""
-    n_regions, dim = lo.shape
     for b in range(obs.shape[0]):
         z_out[b, 0] = z[b, 0]
-        for j in range(n_regions):
-            inside = True
-            for d in range(dim):
-                if obs[b, d] < lo[j, d] or obs[b, d] > hi[j, d]:
-                    inside = False
-                    break
-            if inside and radius2[j] < np.inf:
-                s = 0.0
-                for d in range(dim):
-                    diff = obs[b, d] - centre[j, d]
-                    s += weight[j, d] * diff * diff
-                inside = s <= radius2[j]
-            if inside:
+        for j in range(lo.shape[0]):
+            if _in_region(obs[b], lo[j], hi[j], centre[j], weight[j], radius2[j]):
                 z_out[b, 0] = j
                 break
 

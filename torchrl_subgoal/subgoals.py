@@ -23,11 +23,12 @@ error names the file, the pattern and the field.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import torch
@@ -46,10 +47,16 @@ __all__ = [
     "SubgoalSeries",
     "SubgoalTables",
     "load_patterns",
+    "parse_text",
+    "patterns_from_data",
     "save_patterns",
 ]
 
 FORMAT = "torchrl_subgoal/v1"
+#: Largest subgoal file :func:`load_patterns` reads (1 MiB, a thousand times a study's file).
+MAX_FILE_BYTES = 1 << 20
+#: Most subgoals one pattern of a file may have.
+MAX_SUBGOALS = 1000
 
 
 class SubgoalFileError(ValueError):
@@ -63,6 +70,141 @@ def _where(source: str | None, pattern: str | None, field_: str) -> str:
     if field_:
         parts.append(field_)
     return ": ".join(parts)
+
+
+# --------------------------------------------------------------------------- reading files
+
+
+class _Mapping(dict):  # type: ignore[type-arg]
+    """A parsed mapping that remembers the keys it held more than once (and their lines)."""
+
+    duplicates: list[tuple[Any, int | None]]
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self.duplicates = []
+
+
+class _AliasError(Exception):
+    def __init__(self, line: int) -> None:
+        super().__init__(line)
+        self.line = line
+
+
+_YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's parser when present
+_STR, _INT = "tag:yaml.org,2002:str", "tag:yaml.org,2002:int"
+
+
+def _load_yaml(text: str) -> Any:
+    """Parse YAML with the safe loader's parser and resolver, then build the Python values
+    in one walk over the nodes: mappings remember duplicate keys, and a node met twice
+    (a YAML alias, whose re-use would let a small file expand without bound) is refused."""
+    loader = _YAML_LOADER(text)
+    try:
+        root = loader.get_single_node()
+        seen: set[int] = set()
+
+        def build(node: yaml.Node) -> Any:
+            if id(node) in seen:
+                raise _AliasError(node.start_mark.line + 1)
+            seen.add(id(node))
+            if isinstance(node, yaml.ScalarNode):
+                if node.tag == _STR:
+                    return node.value
+                if node.tag == _INT and node.value.isdigit():
+                    return int(node.value)
+                return loader.construct_object(node, deep=True)  # floats, bools, nulls, other ints
+            if isinstance(node, yaml.SequenceNode):
+                return [build(child) for child in node.value]
+            if node.tag != "tag:yaml.org,2002:map":
+                return loader.construct_object(node, deep=True)  # sets, ordered maps: refused later
+            mapping = _Mapping()
+            for key_node, value_node in node.value:
+                key = build(key_node)
+                try:
+                    if key in mapping:
+                        mapping.duplicates.append((key, key_node.start_mark.line + 1))
+                except TypeError:
+                    raise yaml.constructor.ConstructorError(
+                        None, None, f"unhashable key {key!r}", key_node.start_mark
+                    ) from None
+                mapping[key] = build(value_node)
+            return mapping
+
+        return None if root is None else build(root)
+    finally:
+        loader.dispose()
+
+
+def _json_pairs(pairs: list[tuple[str, Any]]) -> _Mapping:
+    mapping = _Mapping(pairs)
+    if len(mapping) != len(pairs):
+        seen: set[str] = set()
+        mapping.duplicates = [(k, None) for k, _ in pairs if k in seen or seen.add(k)]  # type: ignore[func-returns-value]
+    return mapping
+
+
+def parse_text(text: str | bytes, source: str = "<subgoals>") -> Any:
+    """Parse the YAML or JSON text of a subgoal file, in time linear in its size.
+
+    JSON goes through :mod:`json`; other text through libyaml's safe loader.
+    Mappings remember duplicate keys (see :func:`patterns_from_data`, which refuses
+    them); YAML aliases are refused. Bytes must be UTF-8.
+
+    Raises:
+        SubgoalFileError: the text is larger than :data:`MAX_FILE_BYTES`, not UTF-8,
+            or not valid YAML/JSON; the message names ``source``.
+    """
+    if len(text) > MAX_FILE_BYTES:
+        raise SubgoalFileError(
+            f"{source}: larger than {MAX_FILE_BYTES} bytes, the limit for a subgoal file; "
+            "split it into several files"
+        )
+    if isinstance(text, bytes):
+        try:
+            text = text.decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            raise SubgoalFileError(
+                f"{source}: not a text file (byte {exc.object[exc.start]:#04x} at offset {exc.start} "
+                "is not UTF-8); a subgoal file is YAML or JSON text"
+            ) from None
+    if text.lstrip().startswith("{"):
+        try:
+            return json.loads(text, object_pairs_hook=_json_pairs)
+        except ValueError:
+            pass  # YAML flow style, or broken: the YAML parser says where
+        except RecursionError:
+            raise SubgoalFileError(f"{source}: nested too deeply to be a subgoal file") from None
+    try:
+        return _load_yaml(text)
+    except _AliasError as exc:
+        raise SubgoalFileError(
+            f"{source}: line {exc.line}: YAML aliases (*name) are not supported in subgoal files; "
+            "write the value out"
+        ) from None
+    except yaml.YAMLError as exc:
+        message = " ".join(str(exc).split())
+        raise SubgoalFileError(f"{source}: not valid YAML/JSON: {message}") from None
+    except RecursionError:
+        raise SubgoalFileError(f"{source}: nested too deeply to be a subgoal file") from None
+
+
+def _read_file(path: Path) -> bytes:
+    """At most :data:`MAX_FILE_BYTES` + 1 bytes of ``path`` (also for FIFOs and devices)."""
+    try:
+        with open(path, "rb") as handle:
+            return handle.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise SubgoalFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def _unique(mapping: Any, where: str, what: str) -> None:
+    """Refuse a parsed mapping that held a key twice (YAML and JSON both keep the last one)."""
+    duplicates = getattr(mapping, "duplicates", None)
+    if duplicates:
+        key, line = duplicates[0]
+        at = f" (line {line})" if line else ""
+        raise SubgoalFileError(f"{where}: duplicate {what} {key!r}{at}; each must appear once")
 
 
 # --------------------------------------------------------------------------- predicates
@@ -247,6 +389,7 @@ def parse_predicate(spec: Any, where: str) -> Predicate:
     """Build a predicate from its file form; ``where`` prefixes error messages."""
     if not isinstance(spec, Mapping):
         raise SubgoalFileError(f"{where}: expected a mapping such as {{cell: [4, 9]}}, got {spec!r}")
+    _unique(spec, where, "field")
     kinds = [k for k in ("state", "cell", "circle", "box") if k in spec]
     if len(kinds) != 1:
         raise SubgoalFileError(
@@ -268,6 +411,7 @@ def parse_predicate(spec: Any, where: str) -> Predicate:
         raise SubgoalFileError(f"{where}: unknown field(s) {sorted(set(spec) - {kind})}")
     if not isinstance(body, Mapping):
         raise SubgoalFileError(f"{where}.{kind}: expected a mapping, got {body!r}")
+    _unique(body, f"{where}.{kind}", "field")
     body = dict(body)
     if "center" in body and "centre" not in body:
         body["centre"] = body.pop("center")
@@ -364,6 +508,9 @@ class SubgoalSeries:
             raise SubgoalFileError(f"{where}: a pattern needs at least one subgoal")
         if names is not None and len(names) != n:
             raise SubgoalFileError(f"{where}: {len(names)} names for {n} subgoals")
+        if names is not None and len(set(names)) != n:
+            twice = next(nm for i, nm in enumerate(names) if nm in names[:i])
+            raise SubgoalFileError(f"{_where(source, name, 'subgoals')}: duplicate subgoal name {twice!r}")
         edges = None
         if order is not None:
             edges = tuple((int(a), int(b)) for a, b in order)
@@ -406,31 +553,53 @@ class SubgoalSeries:
         after: list[set[int]] = [set() for _ in range(n)]
         for a, b in self.order:
             after[a].add(b)
-        # reachability (detects cycles) by depth-first search from each node
-        reach: list[set[int]] = []
-        for start in range(n):
+        # topological order (Kahn); what is left over lies on or after a cycle
+        indegree = [0] * n
+        for a in range(n):
+            for b in after[a]:
+                indegree[b] += 1
+        sources = tuple(i for i in range(n) if indegree[i] == 0)
+        topo, stack = [], list(sources)
+        while stack:
+            v = stack.pop()
+            topo.append(v)
+            for b in after[v]:
+                indegree[b] -= 1
+                if indegree[b] == 0:
+                    stack.append(b)
+        if len(topo) < n:
+            self._raise_cycle(after, set(range(n)) - set(topo))
+        # reach[a]: bitset of the subgoals after a, filled in reverse topological order
+        reach = [0] * n
+        for a in reversed(topo):
+            for b in after[a]:
+                reach[a] |= reach[b] | (1 << b)
+        # b directly follows a when no other successor c of a comes before b
+        cover = []
+        for a in range(n):
+            later = 0
+            for c in after[a]:
+                later |= reach[c]
+            cover.append(tuple(sorted(b for b in after[a] if not later >> b & 1)))
+        return (tuple(sorted(sources)), *cover)
+
+    def _raise_cycle(self, after: list[set[int]], left: set[int]) -> NoReturn:
+        """Name the first subgoal (by index) that lies on a cycle of the order."""
+        for start in sorted(left):
             seen: set[int] = set()
-            stack = list(after[start])
+            stack = [b for b in after[start] if b in left]
             while stack:
                 v = stack.pop()
                 if v == start:
-                    names = self.names or tuple(str(i) for i in range(n))
+                    names = self.names or tuple(str(i) for i in range(len(self)))
                     raise SubgoalFileError(
                         f"{_where(self.source, self.name, 'order')}: the order has a cycle through "
                         f"subgoal {names[start]!r}"
                     )
                 if v not in seen:
                     seen.add(v)
-                    stack.extend(after[v])
-            reach.append(seen)
-        # covering relation: b directly after a when no c with a < c < b
-        cover = [
-            tuple(sorted(b for b in reach[a] if not any(b in reach[c] for c in reach[a])))
-            for a in range(n)
-        ]
-        has_pred = {b for a in range(n) for b in reach[a]}
-        sources = tuple(i for i in range(n) if i not in has_pred)
-        return (sources, *cover)
+                    stack.extend(b for b in after[v] if b in left)
+        raise AssertionError("no cycle found among the subgoals a topological order left over")
 
     # ---------------------------------------------------------------- file I/O
 
@@ -452,10 +621,16 @@ class SubgoalSeries:
             body = {"subgoals": body}
         if not isinstance(body, Mapping):
             raise SubgoalFileError(f"{where}: expected a mapping with 'subgoals', got {body!r}")
+        _unique(body, where, "field")
         _check_keys(body, {"subgoals", "order", "description"}, where)
         if "subgoals" not in body:
             raise SubgoalFileError(f"{where}: missing field 'subgoals'")
         subgoals = body["subgoals"]
+        if isinstance(subgoals, list | Mapping) and len(subgoals) > MAX_SUBGOALS:
+            raise SubgoalFileError(
+                f"{_where(source, name, 'subgoals')}: {len(subgoals)} subgoals; a pattern may have at "
+                f"most {MAX_SUBGOALS}"
+            )
         if isinstance(subgoals, list):
             if "order" in body:
                 raise SubgoalFileError(
@@ -466,6 +641,7 @@ class SubgoalSeries:
             return cls(preds, name=name, source=source)
         if not isinstance(subgoals, Mapping):
             raise SubgoalFileError(f"{_where(source, name, 'subgoals')}: expected a list or a mapping")
+        _unique(subgoals, _where(source, name, "subgoals"), "subgoal name")
         names = [str(k) for k in subgoals]
         preds = [parse_predicate(subgoals[k], _where(source, name, f"subgoals.{k}")) for k in subgoals]
         if "order" not in body:
@@ -555,27 +731,43 @@ def load_patterns(path: str | Path, *, domain: str | None = None) -> dict[str, S
     subgoal against that domain's map (a cell in a wall or off the grid, a
     circle off the table).
 
+    Loading takes time linear in the file's size. Files larger than
+    :data:`MAX_FILE_BYTES` (1 MiB) are refused, as are patterns of more than
+    :data:`MAX_SUBGOALS` subgoals, a pattern, subgoal or field named twice, YAML
+    aliases, and files that are not UTF-8 text.
+
     Raises:
         SubgoalFileError: naming the file, the pattern and the field.
     """
     path = Path(path)
-    source = str(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise SubgoalFileError(f"{source}: cannot read: {exc}") from exc
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise SubgoalFileError(f"{source}: not valid YAML/JSON: {exc}") from exc
+    return patterns_from_data(parse_text(_read_file(path), str(path)), str(path), domain=domain)
+
+
+def patterns_from_data(
+    data: Any, source: str = "<subgoals>", *, domain: str | None = None
+) -> dict[str, SubgoalSeries]:
+    """:func:`load_patterns` for a file's already parsed content (see :func:`parse_text`).
+
+    Args:
+        data: the parsed YAML/JSON document.
+        source: the file's name, for error messages.
+        domain: as for :func:`load_patterns`.
+
+    Examples:
+        >>> text = "domain: four_rooms\npatterns:\n  p: {subgoals: [{cell: [3, 6]}]}\n"
+        >>> patterns_from_data(parse_text(text, "mine.yaml"), "mine.yaml")["p"].predicates
+        (Cell(row=3, col=6, cell_dims=(0, 1)),)
+    """
     if not isinstance(data, Mapping):
         raise SubgoalFileError(f"{source}: expected a mapping with a 'patterns' field")
+    _unique(data, source, "field")
     _check_keys(data, {"format", "domain", "observation_key", "description", "patterns"}, source)
     if "format" in data and data["format"] != FORMAT:
         raise SubgoalFileError(f"{source}: format: expected {FORMAT!r}, got {data['format']!r}")
     raw = data.get("patterns")
     if not isinstance(raw, Mapping) or not raw:
         raise SubgoalFileError(f"{source}: patterns: expected a non-empty mapping of name -> pattern")
+    _unique(raw, f"{source}: patterns", "pattern name")
     domain = domain if domain is not None else data.get("domain")
     try:
         check = _domain_check(str(domain)) if domain is not None else None
@@ -583,6 +775,8 @@ def load_patterns(path: str | Path, *, domain: str | None = None) -> dict[str, S
         raise SubgoalFileError(f"{source}: domain: {exc}") from None
     patterns: dict[str, SubgoalSeries] = {}
     for name, body in raw.items():
+        if str(name) in patterns:  # e.g. 1 and "1"
+            raise SubgoalFileError(f"{source}: patterns: duplicate pattern name {str(name)!r}")
         series = SubgoalSeries.from_dict(body, name=str(name), source=source)
         if check is not None:
             labels = series.names or tuple(f"subgoals[{i}]" for i in range(len(series)))
@@ -685,12 +879,8 @@ class SubgoalTables:
 
     def inside(self, observation: torch.Tensor) -> torch.Tensor:
         """Which subgoal regions contain the observation, ``[B, J]`` (flattened batch)."""
-        obs = observation.reshape(self._rows.numel(), 1, -1).to(self.lo.dtype)
-        hit = ((obs >= self.lo) & (obs <= self.hi)).all(-1)
-        if self.uses_circle:
-            d2 = (self.weight * (obs - self.centre).square()).sum(-1)
-            hit = hit & (d2 <= self.radius2)
-        return hit
+        obs = observation.reshape(self._rows.numel(), 1, -1).to(torch.float64)
+        return _in_regions(obs, self.lo, self.hi, self.centre, self.weight, self.radius2, self.uses_circle)
 
     def advance(self, z: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
         """Next abstract state after observing ``observation`` in abstract state ``z``.
@@ -716,17 +906,31 @@ class SubgoalTables:
         if self.chain:
             # only subgoal z can be achieved next: test that one region
             j = zf.clamp(max=self.num_states - 2)
-            obs = observation.reshape(zf.numel(), -1).to(self.lo.dtype)
-            lo, hi = self.lo[self._rows, j], self.hi[self._rows, j]
-            hit = ((obs >= lo) & (obs <= hi)).all(-1)
-            if self.uses_circle:
-                d2 = (self.weight[self._rows, j] * (obs - self.centre[self._rows, j]).square()).sum(-1)
-                hit = hit & (d2 <= self.radius2[self._rows, j])
+            obs = observation.reshape(zf.numel(), -1).to(torch.float64)
+            rows = self._rows
+            hit = _in_regions(obs, self.lo[rows, j], self.hi[rows, j], self.centre[rows, j],
+                              self.weight[rows, j], self.radius2[rows, j], self.uses_circle)
             hit = hit & self.succ[self._rows, zf, j]
             return (zf + hit.long()).view_as(z)
         cand = self.succ[self._rows, zf] & self.inside(observation)
         first = cand.long().argmax(-1)  # lowest-index achievable subgoal
         return torch.where(cand.any(-1), first + 1, zf).view_as(z)
+
+
+def _in_regions(obs: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor, centre: torch.Tensor,
+                weight: torch.Tensor, radius2: torch.Tensor, circles: bool) -> torch.Tensor:
+    """``_kernels._in_region`` in torch: the same float64 comparisons, summed in the same order,
+    so both paths agree on every input (NaN is never inside; unread entries never matter)."""
+    hit = ((obs >= lo) & (obs <= hi)).all(-1)
+    if circles:
+        diff = obs - centre.to(torch.float64)
+        w = weight.to(torch.float64)
+        terms = torch.where(w != 0, w * diff * diff, 0.0)
+        d2 = torch.zeros(terms.shape[:-1], dtype=torch.float64, device=terms.device)
+        for d in range(terms.shape[-1]):  # in order, as the kernel adds them
+            d2 = d2 + terms[..., d]
+        hit = hit & (d2 <= radius2)
+    return hit
 
 
 class StateAggregation:
