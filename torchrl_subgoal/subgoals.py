@@ -803,6 +803,21 @@ def save_patterns(
 # --------------------------------------------------------------------------- batched evaluation
 
 
+def _misfit(pred: Predicate, size: int, one_hot: bool) -> str | None:
+    """Why ``pred`` cannot read an observation of ``size`` entries (one-hot or not), or None.
+
+    A ``state`` predicate reads a scalar state index or a one-hot vector; on any other
+    observation it would silently compare entry 0 (e.g. a cell's row). The others read
+    entries by index, which must exist and must not be a one-hot code.
+    """
+    if pred.kind == "state":
+        return None if one_hot or size == 1 else "a state predicate reads a scalar state index or a one-hot state"
+    if one_hot:
+        return f"a {pred.kind} predicate reads entries by position, not a one-hot code,"
+    beyond = [d for d in pred.dims() if d >= size]
+    return f"reads entry {beyond[0]}" if beyond else None
+
+
 class SubgoalTables:
     """Subgoal series of a batch of learners, compiled for one vectorised test.
 
@@ -837,16 +852,17 @@ class SubgoalTables:
         succ = torch.zeros(P, J + 1, J, dtype=torch.bool)
         for p, series in enumerate(patterns):
             for j, pred in enumerate(series.predicates):
-                bad = [d for d in pred.dims() if d >= D] if not (one_hot and pred.kind == "state") else []
+                problem = _misfit(pred, D, one_hot)
                 try:
-                    if bad:
-                        raise IndexError(f"reads entry {bad[0]}")
+                    if problem:
+                        raise IndexError(problem)
                     region = pred.region(D, one_hot=one_hot)
                 except IndexError as exc:
                     label = series.names[j] if series.names else f"subgoals[{j}]"
                     raise SubgoalFileError(
                         f"{_where(series.source, series.name, f'{label}.{pred.kind}')}: {exc} but the "
-                        f"observation {observation_key!r} has {D} entries (wrong observation size?)"
+                        f"observation {observation_key!r} has {D} entries"
+                        f"{' (one-hot)' if one_hot else ''} (wrong observation_key?)"
                     ) from None
                 lo[p, j], hi[p, j] = region.lo, region.hi
                 centre[p, j], weight[p, j] = region.centre, region.weight

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -66,6 +67,11 @@ class SubgoalPotentialTransform(Transform):
     sees only ``s`` (as in the paper) may learn a greedy policy that cycles
     across a subgoal; give the agent ``z`` too (e.g. ``SoftmaxSarsa(...,
     abstract_states=n)``) for the exact guarantee once ``Φ`` is fixed.
+
+    A NaN or infinite reward, or a NaN in the observation, raises ``ValueError``
+    naming the entry and the env (it would make the potential NaN for good);
+    ``±inf`` in an observation compares as a number. Both the compiled and the
+    torch path behave so.
 
     Append it to the *outer* env (``TransformedEnv(ParallelEnv(...), t)``) so
     that the potential being trained is the one used for shaping.
@@ -394,7 +400,13 @@ class SubgoalPotentialTransform(Transform):
         terminated: torch.Tensor,
         batch_shape: torch.Size,
     ) -> dict[str, Any]:
-        """One step of aggregation and shaping; returns the entries of the next TensorDict."""
+        """One step of aggregation and shaping; returns the entries of the next TensorDict.
+
+        Raises:
+            ValueError: a reward is NaN or infinite, or the observation holds a NaN
+                (either would make the potential NaN for good); nothing is updated.
+        """
+        _check_finite(reward, obs, self.reward_key, self.observation_key)
         if self._fused_potential is not None and obs.device.type == "cpu":
             return self._shape_fused(abstraction, current, obs, reward, done, terminated, batch_shape)
         z_next = abstraction.advance(current[INDEX], obs)
@@ -565,6 +577,25 @@ class SubgoalPotentialTransform(Transform):
 
 _NO_TABLE = np.zeros((0, 1), dtype=np.float32)
 _NO_TRANSITION = tuple(np.zeros((0, 1), dtype=d) for d in (np.float32, np.int64, np.bool_))
+
+
+def _check_finite(reward: torch.Tensor, obs: torch.Tensor, reward_key: NestedKey, obs_key: NestedKey) -> None:
+    """Refuse a NaN or infinite reward and a NaN observation, naming the entry and the env.
+
+    One reduction per tensor when all is well (a NaN or inf anywhere makes the sum
+    non-finite); the search for the culprit runs only then.
+    """
+    for tensor, key, bad in ((reward, reward_key, "NaN or infinite"), (obs, obs_key, "NaN")):
+        if not tensor.is_floating_point() or math.isfinite(float(tensor.sum(dtype=torch.float64))):
+            continue
+        wrong = ~torch.isfinite(tensor) if tensor is reward else torch.isnan(tensor)
+        if bool(wrong.any()):
+            first = tuple(int(i) for i in wrong.nonzero()[0])
+            raise ValueError(
+                f"SubgoalPotentialTransform: {key!r} is {bad} at index {first} (value "
+                f"{tensor[first].item()}): it would make the potential NaN for good; fix the env, or "
+                "replace such values before this transform"
+            )
 
 
 def _col(t: torch.Tensor) -> np.ndarray:

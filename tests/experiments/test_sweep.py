@@ -111,7 +111,9 @@ def test_sigkill_then_resume_recomputes_nothing_finished(
     tmp_path: Path, reference: pd.DataFrame, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     results, log = tmp_path / "results", tmp_path / "log.txt"
-    env = {**os.environ, "TOY_SLEEP": "0.6", "TOY_LOG": str(log), "TOY_TAG": "first"}
+    # three chunks finish, the others wait for a gate that never opens: killed at a known point
+    env = {**os.environ, "TOY_LOG": str(log), "TOY_TAG": "first", "TOY_GATE": str(tmp_path / "never"),
+           "TOY_FREE": "HRS/00000,HRS/00001,HRS/00002"}
     process = subprocess.Popen(
         [sys.executable, "-m", "tests.experiments.toy_domain", "sweep", str(results), "--workers", "2"],
         cwd=REPO,
@@ -125,11 +127,10 @@ def test_sigkill_then_resume_recomputes_nothing_finished(
     os.kill(process.pid, signal.SIGKILL)
     process.wait()
     before = chunk_files(results)
-    assert 3 <= len(before) < 12
+    assert len(before) == 3
     (results / "chunks" / "HRS" / ".00005.parquet.half.tmp").write_bytes(b"PAR1 half a file")
 
     monkeypatch.setenv("TOY_TAG", "resume")
-    monkeypatch.setenv("TOY_SLEEP", "0")
     monkeypatch.setenv("TOY_LOG", str(log))
     resumed = make_sweep(results).run(workers=0, progress=False)  # the pool ran above; keep it light
 
@@ -147,11 +148,13 @@ def test_sigkill_then_resume_recomputes_nothing_finished(
 def test_ctrl_c_stops_the_workers_and_resume_completes(
     tmp_path: Path, reference: pd.DataFrame, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setenv("TOY_SLEEP", "0.6")
+    # two chunks finish; the others wait for a gate that only opens after the test, so the
+    # sweep cannot end before the interrupt however slow or busy the machine is
+    monkeypatch.setenv("TOY_GATE", str(tmp_path / "never"))
+    monkeypatch.setenv("TOY_FREE", "HRS/00000,HRS/00001")
 
     def interrupt_after_two_chunks() -> None:
-        deadline = time.monotonic() + 120
-        while len(chunk_files(tmp_path)) < 2 and time.monotonic() < deadline:
+        while len(chunk_files(tmp_path)) < 2:
             time.sleep(0.05)
         os.kill(os.getpid(), signal.SIGINT)
 
@@ -160,8 +163,8 @@ def test_ctrl_c_stops_the_workers_and_resume_completes(
         make_sweep(tmp_path).run(workers=2, progress=False)
     assert not multiprocessing.active_children()  # the pool's workers were stopped
     before = chunk_files(tmp_path)
-    assert 2 <= len(before) < 12
-    monkeypatch.setenv("TOY_SLEEP", "0")
+    assert len(before) == 2
+    monkeypatch.delenv("TOY_GATE")
     resumed = make_sweep(tmp_path).run(workers=0, progress=False)
     assert {k: chunk_files(tmp_path)[k] for k in before} == before
     pd.testing.assert_frame_equal(resumed.to_frame(), reference)

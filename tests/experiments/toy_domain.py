@@ -7,7 +7,10 @@ the order chunks run in. Environment variables steer it from outside the process
 
 * ``TOY_SLEEP``: seconds each chunk sleeps (default 0);
 * ``TOY_LOG``: a file each chunk appends ``<TOY_TAG> <chunk name>`` to when it starts;
-* ``TOY_FAIL``: a chunk name (``HRS/00001``) that raises instead of finishing.
+* ``TOY_FAIL``: a chunk name (``HRS/00001``) that raises instead of finishing;
+* ``TOY_GATE`` and ``TOY_FREE``: a file path and comma-separated chunk names; every
+  chunk not named waits until the file exists (at most 10 minutes), so a test can
+  interrupt a sweep at a known point without depending on timing.
 
 Run as a module it runs a sweep (``sweep DIR``) or writes a synthetic paper-scale
 results directory (``paper-scale DIR``: 5 methods x 1000 learners x 1000 episodes).
@@ -66,6 +69,11 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Any) -> Episode
             log.write(f"{os.environ.get('TOY_TAG', '')} {chunk.name}\n")
     if os.environ.get("TOY_FAIL") == chunk.name:
         raise RuntimeError(f"toy failure in {chunk.name}")
+    gate = os.environ.get("TOY_GATE")
+    if gate and chunk.name not in os.environ.get("TOY_FREE", "").split(","):
+        deadline = time.monotonic() + 600
+        while not os.path.exists(gate) and time.monotonic() < deadline:
+            time.sleep(0.05)
     n, e = chunk.n_learners, int(config["n_episodes"])
     rng = np.random.default_rng(chunk.seed)
     episode = np.arange(e)

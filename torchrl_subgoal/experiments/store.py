@@ -427,7 +427,9 @@ class ResultsStore:
         except FileNotFoundError:
             return None
         except (OSError, UnicodeDecodeError) as exc:
-            raise ResultsError(f"{self.config_path} cannot be read ({_reason(exc)})") from exc
+            raise ResultsError(
+                f"cannot read {self.config_path} ({_reason(exc)}); choose another results directory"
+            ) from exc
         fix = "repair it, or delete the directory to start afresh"
         try:
             data = json.loads(text)
