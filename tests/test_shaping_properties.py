@@ -1,0 +1,200 @@
+"""Property tests: the compiled (numba) and the reference (torch) paths agree on every input.
+
+Random observations, rewards and dones, including NaN, ±inf, float64 values one ulp
+either side of a region's bound or a circle's rim, float32 and integer observations,
+chains and partial orders, and random batch shapes. Hypothesis runs derandomized, so
+CI sees the same examples every time (no timing: ``deadline=None``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from torchrl_subgoal import Box, Cell, Circle, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
+from torchrl_subgoal.potentials import ACHIEVED, INDEX
+from torchrl_subgoal.subgoals import Predicate, StateAggregation, SubgoalTables, _in_regions
+from torchrl_subgoal.transform import RETURN, STEPS
+
+D = 3  # observation entries
+PROPERTY = settings(max_examples=150, deadline=None, derandomize=True, database=None,
+                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+
+coords = st.sampled_from([-1.0, 0.0, 0.1, 0.3, 1 / 3, 0.5, 2.0, 7.0])
+predicates: st.SearchStrategy[Predicate] = st.one_of(
+    st.builds(lambda r, c: Cell(r, c, (0, 2)), st.integers(0, 3), st.integers(0, 3)),
+    st.builds(lambda c, r, d: Circle(tuple(c), r, d), st.lists(coords, min_size=2, max_size=2),
+              st.sampled_from([0.04, 0.1, 0.5, 1.0]), st.sampled_from([(0, 1), (1, 2), (2, 0)])),
+    st.builds(lambda c, m, d: Box((c,), (m,), (d,)), coords, st.sampled_from([0.0, 0.04, 1 / 6, 1.0]),
+              st.integers(0, D - 1)),
+)
+
+
+@st.composite
+def patterns(draw: st.DrawFn) -> list[SubgoalSeries]:
+    out = []
+    for p in range(draw(st.integers(1, 3))):
+        preds = draw(st.lists(predicates, min_size=1, max_size=4))
+        n = len(preds)
+        pairs = [(a, b) for a in range(n) for b in range(a + 1, n)]
+        order = draw(st.none() | st.lists(st.sampled_from(pairs), unique=True)) if pairs else None
+        out.append(SubgoalSeries(preds, order=order, name=f"p{p}"))
+    return out
+
+
+def near(values: list[float]) -> list[float]:
+    """Each value, as float32 and float64, and one float64 ulp either side of it."""
+    out = []
+    for v in values:
+        v32 = float(np.float32(v)) if abs(v) < 3e38 else v
+        out += [v, v32, math.nextafter(v32, math.inf), math.nextafter(v32, -math.inf)]
+    return out
+
+
+def interesting_values(series: list[SubgoalSeries]) -> list[float]:
+    """Region bounds, circle rims and the values that break comparisons."""
+    values: list[float] = [math.nan, math.inf, -math.inf, 0.0, -0.0, 1e300]
+    for s in series:
+        for pred in s.predicates:
+            if isinstance(pred, Cell):
+                values += [pred.row, pred.col]
+            elif isinstance(pred, Circle):
+                values += [c + sign * pred.radius for c in pred.centre for sign in (-1, 0, 1)]
+                values += [c + pred.radius / math.sqrt(2) for c in pred.centre]
+            elif isinstance(pred, Box):
+                values += [c + sign * m for c, m in zip(pred.centre, pred.margin, strict=True) for sign in (-1, 0, 1)]
+    return near(values)
+
+
+@st.composite
+def batch(draw: st.DrawFn) -> tuple[list[SubgoalSeries], torch.Size, torch.Tensor, torch.Tensor, torch.Tensor]:
+    series = draw(patterns())
+    shape = torch.Size(draw(st.lists(st.integers(1, 4), min_size=1, max_size=2)))
+    n = shape.numel()
+    index = torch.tensor(draw(st.lists(st.integers(0, len(series) - 1), min_size=n, max_size=n))).reshape(shape)
+    z = torch.tensor([draw(st.integers(0, len(series[int(i)]))) for i in index.reshape(-1)]).reshape(*shape, 1)
+    dtype = draw(st.sampled_from([torch.float64, torch.float32, torch.int64]))
+    pool = interesting_values(series)
+    if dtype == torch.int64:
+        pool = [float(int(v)) for v in pool if math.isfinite(v) and abs(v) < 1e9]
+    values = draw(st.lists(st.sampled_from(pool) | st.floats(-3, 8), min_size=n * D, max_size=n * D))
+    obs = torch.tensor(values, dtype=torch.float64).to(dtype).reshape(*shape, D)
+    return series, shape, index, z, obs
+
+
+@PROPERTY
+@given(batch())
+def test_region_tests_agree(case: tuple) -> None:
+    series, shape, index, z, obs = case
+    tables = SubgoalTables(series, index, D)
+    assert torch.equal(tables.advance(z, obs), tables.advance_eager(z, obs))
+
+
+@PROPERTY
+@given(batch())
+def test_first_region_agrees_with_torch(case: tuple) -> None:
+    """``StateAggregation.from_regions`` (kernel only) against the torch region test."""
+    series, shape, _, z, obs = case
+    regions = [pred for s in series for pred in s.predicates]
+    agg = StateAggregation.from_regions(regions, D)
+    compiled = [p.region(D) for p in regions]
+    stack = {k: torch.stack([getattr(r, k) for r in compiled]) for k in ("lo", "hi", "centre", "weight")}
+    radius2 = torch.tensor([r.radius2 for r in compiled], dtype=torch.float32)
+    flat = obs.reshape(-1, 1, D).to(torch.float64)
+    inside = _in_regions(flat, stack["lo"], stack["hi"], stack["centre"], stack["weight"], radius2, True)
+    first = torch.where(inside.any(-1), inside.long().argmax(-1), z.reshape(-1))
+    assert torch.equal(agg.advance(z, obs).reshape(-1), first)
+
+
+rewards = st.sampled_from([0.0, 1.0, -1.0, 0.5, 1e-3, math.nan, math.inf, -math.inf]) | st.floats(-10, 10)
+
+
+@PROPERTY
+@given(batch(), st.data())
+def test_shaping_paths_agree(case: tuple, data: st.DataObject) -> None:
+    """One transform step through the fused kernel and through the eager torch code:
+    the same abstract states, accumulators, shaped rewards and trained tables, or the
+    same error for a NaN/inf reward or a NaN observation."""
+    series, shape, index, z, obs = case
+    n = shape.numel()
+    r = torch.tensor(data.draw(st.lists(rewards, min_size=n, max_size=n)), dtype=torch.float32).reshape(*shape, 1)
+    done = torch.tensor(data.draw(st.lists(st.booleans(), min_size=n, max_size=n))).reshape(*shape, 1)
+    terminated = done & torch.tensor(data.draw(st.lists(st.booleans(), min_size=n, max_size=n))).reshape(*shape, 1)
+    k = torch.tensor(data.draw(st.lists(st.integers(0, 50), min_size=n, max_size=n))).reshape(*shape, 1)
+    r_h = torch.tensor(data.draw(st.lists(st.floats(-5, 5), min_size=n, max_size=n)),
+                       dtype=torch.float32).reshape(*shape, 1)
+    states = max(len(s) for s in series) + 1
+    table = torch.randn(*shape, states, generator=torch.Generator().manual_seed(data.draw(st.integers(0, 99))))
+    outcomes = []
+    for fused in (True, False):
+        potential = TabularPotential(states, batch_shape=shape)
+        with torch.no_grad():
+            potential.table.copy_(table)
+        t = SubgoalPotentialTransform(series, potential, gamma=0.9, pattern_index=index, value_lr=0.5,
+                                      write_transitions=True)
+        if not fused:
+            t._fused_potential = None
+        tables = SubgoalTables(series, index, D)
+        if not fused:
+            tables.advance = tables.advance_eager  # type: ignore[method-assign]
+        current = {INDEX: z.clone(), RETURN: r_h.clone(), STEPS: k.clone(), ACHIEVED: torch.zeros_like(done)}
+        try:
+            out = t.shape(tables, current, obs, r.clone(), done, terminated, shape)
+        except ValueError as exc:
+            outcomes.append(("error", str(exc), potential.table.detach().clone()))
+            continue
+        outcomes.append(("ok", out, potential.table.detach().clone()))
+    (kind_f, out_f, table_f), (kind_e, out_e, table_e) = outcomes
+    assert kind_f == kind_e
+    bad_reward = not bool(torch.isfinite(r).all())
+    bad_obs = obs.is_floating_point() and bool(torch.isnan(obs).any())
+    assert (kind_f == "error") == (bad_reward or bad_obs)
+    if kind_f == "error":
+        assert out_f == out_e
+        assert torch.equal(table_f, table) and torch.equal(table_e, table)  # nothing was updated
+        return
+    assert torch.equal(out_f[INDEX], out_e[INDEX])
+    assert torch.equal(out_f[STEPS], out_e[STEPS])
+    assert torch.equal(out_f["smdp"]["mask"], out_e["smdp"]["mask"])
+    for key in (RETURN, "reward"):
+        torch.testing.assert_close(out_f[key], out_e[key], rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(table_f, table_e, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("eager", [False, True])
+@pytest.mark.parametrize(("reward", "obs", "message"), [
+    (math.nan, 0.5, r"'reward' is NaN or infinite at index \(1, 0\) \(value nan\)"),
+    (math.inf, 0.5, "'reward' is NaN or infinite"),
+    (1.0, math.nan, r"'observation' is NaN at index \(1, 1\)"),
+])
+def test_nan_is_an_error_on_both_paths(eager: bool, reward: float, obs: float, message: str) -> None:
+    """A NaN reward would make the table NaN for good; the transform refuses it."""
+    series = [SubgoalSeries([Circle((0.5, 0.5), 0.1)])]
+    potential = TabularPotential(2, batch_shape=(2,))
+    t = SubgoalPotentialTransform(series, potential, gamma=0.9, value_lr=0.5)
+    if eager:
+        t._fused_potential = None
+    tables = SubgoalTables(series, torch.zeros(2, dtype=torch.long), 2)
+    observation = torch.tensor([[0.5, 0.5], [0.5, obs]])
+    rewards = torch.tensor([[0.0], [reward]])
+    current = {INDEX: torch.zeros(2, 1, dtype=torch.long), RETURN: torch.zeros(2, 1),
+               STEPS: torch.zeros(2, 1, dtype=torch.long)}
+    false = torch.zeros(2, 1, dtype=torch.bool)
+    with pytest.raises(ValueError, match=message):
+        t.shape(tables, current, observation, rewards, false, false, torch.Size([2]))
+    assert torch.equal(potential.table.detach(), torch.zeros(2, 2))
+
+
+def test_infinite_observations_compare_as_numbers() -> None:
+    """``inf`` is outside every bounded region and harmless in an entry a region does not read."""
+    series = [SubgoalSeries([Circle((0.5, 0.5), 0.1)])]
+    tables = SubgoalTables(series, torch.zeros(3, dtype=torch.long), 3)
+    obs = torch.tensor([[0.5, 0.5, math.inf], [math.inf, 0.5, 0.0], [0.5, 0.5, -math.inf]], dtype=torch.float64)
+    z = torch.zeros(3, 1, dtype=torch.long)
+    assert tables.advance(z, obs).reshape(-1).tolist() == [1, 0, 1]
+    assert torch.equal(tables.advance(z, obs), tables.advance_eager(z, obs))
