@@ -1,12 +1,13 @@
 # Two entry points for a fresh machine; each installs what it needs.
 #   make demo   small four-rooms reproduction: prints a table, writes plots
 #   make test   lint, type-check and the test suite (what CI runs)
+#   make test-fast   the suite without the tests marked slow
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint install clean
+.PHONY: demo test test-fast lint install clean
 
 # The studio's browser tests drive Debian's Chromium through Playwright (a dev
 # dependency); nothing downloads a browser build. Installed once, with apt.
@@ -34,8 +35,16 @@ $(CHROMIUM):
 	$(SUDO) apt-get update -qq
 	$(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium
 
+# two processes (pytest-xdist); the Ray tests share one (xdist_group) so two Ray
+# instances never start at once
+PYTEST := $(PY) -m pytest -q -n 2 --dist loadgroup
+
 test: lint $(CHROMIUM)
-	$(PY) -m pytest -q
+	$(PYTEST)
+
+# skip the longest end-to-end tests (marked slow) while developing; CI runs them all
+test-fast: $(STAMP) $(CHROMIUM)
+	$(PYTEST) -m "not slow"
 
 clean:
 	rm -rf $(VENV) results .pytest_cache .mypy_cache .ruff_cache

@@ -16,7 +16,14 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from torchrl_subgoal import Box, Cell, Circle, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
+from torchrl_subgoal import (
+    Box,
+    Cell,
+    Circle,
+    SubgoalPotentialTransform,
+    SubgoalSeries,
+    TabularPotential,
+)
 from torchrl_subgoal.potentials import ACHIEVED, INDEX
 from torchrl_subgoal.subgoals import Predicate, StateAggregation, SubgoalTables, _in_regions
 from torchrl_subgoal.transform import RETURN, STEPS
@@ -90,7 +97,7 @@ def batch(draw: st.DrawFn) -> tuple[list[SubgoalSeries], torch.Size, torch.Tenso
 @PROPERTY
 @given(batch())
 def test_region_tests_agree(case: tuple) -> None:
-    series, shape, index, z, obs = case
+    series, _, index, z, obs = case
     tables = SubgoalTables(series, index, D)
     assert torch.equal(tables.advance(z, obs), tables.advance_eager(z, obs))
 
@@ -99,7 +106,7 @@ def test_region_tests_agree(case: tuple) -> None:
 @given(batch())
 def test_first_region_agrees_with_torch(case: tuple) -> None:
     """``StateAggregation.from_regions`` (kernel only) against the torch region test."""
-    series, shape, _, z, obs = case
+    series, _, _, z, obs = case
     regions = [pred for s in series for pred in s.predicates]
     agg = StateAggregation.from_regions(regions, D)
     compiled = [p.region(D) for p in regions]

@@ -75,7 +75,7 @@ def _where(source: str | None, pattern: str | None, field_: str) -> str:
 # --------------------------------------------------------------------------- reading files
 
 
-class _Mapping(dict):  # type: ignore[type-arg]
+class _Mapping(dict):
     """A parsed mapping that remembers the keys it held more than once (and their lines)."""
 
     duplicates: list[tuple[Any, int | None]]
@@ -179,8 +179,8 @@ def parse_text(text: str | bytes, source: str = "<subgoals>") -> Any:
         return _load_yaml(text)
     except _AliasError as exc:
         raise SubgoalFileError(
-            f"{source}: line {exc.line}: YAML aliases (*name) are not supported in subgoal files; "
-            "write the value out"
+            f"{source}: line {exc.line}: this value is used again through a YAML alias (*name); "
+            "aliases are not supported in subgoal files, write the value out"
         ) from None
     except yaml.YAMLError as exc:
         message = " ".join(str(exc).split())

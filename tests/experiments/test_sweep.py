@@ -256,6 +256,7 @@ def test_another_process_holding_the_dir_is_an_error(tmp_path: Path) -> None:
 # -- Ray --------------------------------------------------------------------------------------
 
 
+@pytest.mark.xdist_group("ray")  # one Ray instance at a time under pytest-xdist
 def test_ray_backend_matches_local(tmp_path: Path) -> None:
     ray = pytest.importorskip("ray")
     ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)

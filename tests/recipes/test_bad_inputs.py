@@ -189,7 +189,7 @@ SUBGOAL_FILES: list[tuple[str, bytes, str]] = [
     ("state.yaml", b"patterns:\n  p: {subgoals: [{state: 5}]}\n",
      "pattern 'p': subgoals[0].state: a state predicate reads a scalar state index or a one-hot state but "
      "the observation 'cell' has 2 entries"),
-    ("alias.yaml", b"x: &a {cell: [3, 6]}\npatterns:\n  p: {subgoals: [*a]}\n", "YAML aliases"),
+    ("alias.yaml", b"x: &a {cell: [3, 6]}\npatterns:\n  p: {subgoals: [*a]}\n", "used again through a YAML alias"),
     ("huge.yaml", b"#" * (2 << 20), "larger than 1048576 bytes"),
 ]
 

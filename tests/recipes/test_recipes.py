@@ -84,6 +84,7 @@ def test_pinball_recipe(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert summary["window"] == 10 and set(summary["methods"]) == {"HRS", "RRS", "AC", "NRS", "SARSA-RS"}
 
 
+@pytest.mark.xdist_group("ray")  # one Ray instance at a time under pytest-xdist
 def test_four_rooms_on_ray_equals_local(tmp_path: Path) -> None:
     """The command line with --backend ray (a local Ray instance) gives the local backend's results."""
     from torchrl_subgoal.experiments import load_frame

@@ -12,12 +12,17 @@ from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
 import torch
-
 from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal.experiments.cli import ConfigError
 from torchrl_subgoal.experiments.store import Chunk, ResultsError, UnknownMethodError
-from torchrl_subgoal.experiments.sweep import ChunkFailedError, MethodSpec, RunChunk, Sweep, select_methods
+from torchrl_subgoal.experiments.sweep import (
+    ChunkFailedError,
+    MethodSpec,
+    RunChunk,
+    Sweep,
+    select_methods,
+)
 from torchrl_subgoal.methods import Method, random_patterns
 from torchrl_subgoal.potentials import NaivePotential
 from torchrl_subgoal.subgoals import Predicate, SubgoalFileError, SubgoalSeries
