@@ -386,6 +386,9 @@ def _connect_ray(workers: int) -> tuple[Any, bool]:
         ) from exc
     if ray.is_initialized():
         return ray, False
+    if os.environ.get("RAY_ADDRESS") == "local":  # a fresh instance, whatever else runs here
+        ray.init(address="local", num_cpus=max(workers, 1), include_dashboard=False)
+        return ray, True
     try:
         # RAY_ADDRESS when set, else a cluster already running on this machine.
         ray.init(address="auto")
