@@ -754,7 +754,7 @@ def patterns_from_data(
         domain: as for :func:`load_patterns`.
 
     Examples:
-        >>> text = "domain: four_rooms\npatterns:\n  p: {subgoals: [{cell: [3, 6]}]}\n"
+        >>> text = '{"domain": "four_rooms", "patterns": {"p": {"subgoals": [{"cell": [3, 6]}]}}}'
         >>> patterns_from_data(parse_text(text, "mine.yaml"), "mine.yaml")["p"].predicates
         (Cell(row=3, col=6, cell_dims=(0, 1)),)
     """

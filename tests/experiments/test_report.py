@@ -145,6 +145,7 @@ def test_console_entry_point_prints_tables(four_rooms_dir: Path, tmp_path: Path,
     assert "config.json not found" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_module_entry_point_runs(four_rooms_dir: Path, tmp_path: Path) -> None:
     done = subprocess.run(
         [sys.executable, "-m", "torchrl_subgoal.experiments.report", str(four_rooms_dir),

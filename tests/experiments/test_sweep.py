@@ -107,6 +107,7 @@ def test_method_spec_validation_and_selection() -> None:
 # -- resume ---------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_sigkill_then_resume_recomputes_nothing_finished(
     tmp_path: Path, reference: pd.DataFrame, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -145,6 +146,7 @@ def test_sigkill_then_resume_recomputes_nothing_finished(
     pd.testing.assert_frame_equal(resumed.to_frame(), reference)
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_the_workers_and_resume_completes(
     tmp_path: Path, reference: pd.DataFrame, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -159,8 +161,13 @@ def test_ctrl_c_stops_the_workers_and_resume_completes(
         os.kill(os.getpid(), signal.SIGINT)
 
     threading.Thread(target=interrupt_after_two_chunks, daemon=True).start()
-    with pytest.raises(KeyboardInterrupt):
-        make_sweep(tmp_path).run(workers=2, progress=False)
+    # Ctrl-C raises KeyboardInterrupt, whatever a test runner (pytest-xdist's workers) set
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            make_sweep(tmp_path).run(workers=2, progress=False)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert not multiprocessing.active_children()  # the pool's workers were stopped
     before = chunk_files(tmp_path)
     assert len(before) == 2
@@ -256,6 +263,7 @@ def test_another_process_holding_the_dir_is_an_error(tmp_path: Path) -> None:
 # -- Ray --------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("ray")  # one Ray instance at a time under pytest-xdist
 def test_ray_backend_matches_local(tmp_path: Path) -> None:
     ray = pytest.importorskip("ray")

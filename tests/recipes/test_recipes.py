@@ -41,6 +41,7 @@ def test_four_rooms_recipe(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert [c.stat().st_mtime_ns for c in chunks] == mtimes
 
 
+@pytest.mark.slow
 def test_four_rooms_engines_agree(tmp_path: Path) -> None:
     four_rooms = recipe("four_rooms")
     frames = []
@@ -84,6 +85,7 @@ def test_pinball_recipe(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert summary["window"] == 10 and set(summary["methods"]) == {"HRS", "RRS", "AC", "NRS", "SARSA-RS"}
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("ray")  # one Ray instance at a time under pytest-xdist
 def test_four_rooms_on_ray_equals_local(tmp_path: Path) -> None:
     """The command line with --backend ray (a local Ray instance) gives the local backend's results."""
