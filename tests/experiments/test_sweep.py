@@ -275,3 +275,36 @@ def test_ray_backend_matches_local(tmp_path: Path) -> None:
     local = make_sweep(tmp_path / "local", chunk_size=4).run(workers=0, progress=False)
     pd.testing.assert_frame_equal(results.to_frame(), local.to_frame())
     assert len(chunk_files(tmp_path)) == 4
+
+
+# -- what a sweep may touch ------------------------------------------------------------------
+
+
+def test_a_directory_that_is_not_ours_is_refused_before_anything_is_written(tmp_path: Path) -> None:
+    (tmp_path / "notes.txt").write_text("mine\n")
+    with pytest.raises(ResultsError, match=r"is not empty \(notes\.txt\) and is not a results directory"):
+        make_sweep(tmp_path, overwrite=True).run(workers=0, progress=False)
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]
+
+
+def test_overwrite_removes_only_files_the_store_can_identify(tmp_path: Path) -> None:
+    make_sweep(tmp_path).run(workers=0, progress=False)
+    mine = [tmp_path / "chunks" / "HRS" / "keep.txt", tmp_path / "chunks" / "other" / "data.csv",
+            tmp_path / "chunks" / "HRS" / "00000.parquet.bak", tmp_path / "notes.md"]
+    for path in mine:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("mine\n")
+    removed = ResultsStore(tmp_path).clear()
+    assert len(removed) == 1 + 12 and all(p.exists() for p in mine)
+    assert not (tmp_path / "chunks" / "SARSA").exists()  # emptied, so removed
+
+
+def test_an_experiment_without_finished_chunks_is_replaced_without_overwrite(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("TOY_FAIL", "HRS/00000")
+    with pytest.raises(ChunkFailedError, match=r"toy failure in HRS/00000\. No chunk was finished; fix the cause"):
+        make_sweep(tmp_path).run(workers=0, progress=False)
+    monkeypatch.delenv("TOY_FAIL")
+    results = make_sweep(tmp_path, seed=8).run(workers=0, progress=False)  # a different experiment
+    assert results.manifest["seed"] == 8
