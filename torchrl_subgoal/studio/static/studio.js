@@ -468,6 +468,8 @@ async function refreshFiles(selected) {
 }
 
 async function save() {
+  clearTimeout(S.validateTimer);
+  S.validateSeq += 1; // a validation still in flight must not overwrite "Saved" (the server validates the save)
   const d = doc();
   d.file = $("file-name").value.trim();
   try {
