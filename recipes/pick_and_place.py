@@ -67,7 +67,14 @@ from torchrl_subgoal.experiments.checkpoint import (
     rng_states,
 )
 from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
-from torchrl_subgoal.experiments.recipe import chunk_patterns, pattern_config, sweep_and_report
+from torchrl_subgoal.experiments.recipe import (
+    RECIPE_ERRORS,
+    chunk_patterns,
+    fail,
+    pattern_config,
+    pattern_sources,
+    sweep_and_report,
+)
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 
 METHODS = paper_methods(baseline="DDPG")
@@ -282,12 +289,17 @@ def main(argv: list[str] | None = None) -> int:
         "epochs": epochs, "ddpg": ddpg, "shaping": json.loads(cfg.shaping),
         "checkpoints": str((Path(cfg.results) / "checkpoints").resolve()),
         "subgoal_file": cfg.subgoals, "patterns": pattern_config(patterns),
+        "pattern_sources": pattern_sources(patterns),
         "learning_offsets": {name: k for k, name in enumerate(patterns["random"])},
         "report": {"metric": "success", "lower_is_better": False, "thresholds": [0.6], "window": 1,
                    "asymptotic_window": [max(0, epochs - 10), epochs], "log_scale": False, "unit": "epoch"},
     }
-    return sweep_and_report("fetch", cfg.results, specs, run_chunk, config, seed=cfg.seed, chunk_size=1,
-                            episodes=epochs, overwrite=cfg.overwrite, backend=cfg.backend, workers=cfg.workers)
+    try:
+        return sweep_and_report("fetch", cfg.results, specs, run_chunk, config, seed=cfg.seed, chunk_size=1,
+                                episodes=epochs, overwrite=cfg.overwrite, backend=cfg.backend,
+                                workers=cfg.workers)
+    except RECIPE_ERRORS as exc:  # results dir not usable, a failed chunk: one line, no traceback
+        return fail(exc)
 
 
 if __name__ == "__main__":
