@@ -39,7 +39,7 @@ from torchrl_subgoal import SubgoalPotentialTransform, TabularPotential, load_pa
 from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.potentials import INDEX
-from torchrl_subgoal.transform import RETURN, STEPS, _write
+from torchrl_subgoal.transform import RETURN, STEPS
 
 PATTERNS = list(load_patterns(str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")).values())
 
@@ -72,12 +72,12 @@ class KeysOnly(Transform):
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         reward = next_tensordict.get("reward")
-        _write(next_tensordict, {**self._zeros(next_tensordict.batch_size), "env_reward": reward,
+        next_tensordict.update({**self._zeros(next_tensordict.batch_size), "env_reward": reward,
                                  "reward": reward.clone()})
         return next_tensordict
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
-        _write(tensordict_reset, self._zeros(tensordict_reset.batch_size))
+        tensordict_reset.update(self._zeros(tensordict_reset.batch_size))
         return tensordict_reset
 
 

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 from tensordict import TensorDict
+from torchrl.objectives.utils import ValueEstimators
 from torchrl.objectives.value import TD0Estimator
 
 from torchrl_subgoal import NeuralPotential, SubgoalValueLoss, TabularPotential
@@ -63,15 +65,15 @@ def test_target_equals_torchrl_td0_estimator() -> None:
     with torch.no_grad():
         v.table.copy_(torch.randn(n, num_states))
     data = transitions(n, num_states, seed=1)
+    data["mask"] = torch.ones(n, 1, dtype=torch.bool)
+    # an estimator built independently, reading the potential as its value network
     estimator = TD0Estimator(gamma=0.9, value_network=v.as_value_operator())
     with torch.no_grad():
         reference = estimator.value_estimate(data.clone())
-    _, td_error = SubgoalValueLoss(v, gamma=0.9).smdp_loss(
-        [data["subgoal_index"]], [data["next", "subgoal_index"]], data["next", "reward"],
-        data["steps_to_next_obs"], data["next", "terminated"], torch.ones(n, 1, dtype=torch.bool),
-    )
+    assert (data["steps_to_next_obs"] > 1).any() and not torch.allclose(reference, data["next", "reward"])
+    out = SubgoalValueLoss(v, gamma=0.9)(data)
     value = v(data["subgoal_index"]).detach()
-    assert torch.allclose(td_error + value, reference, atol=1e-6)
+    assert torch.allclose(out["td_error"] + value, reference, atol=1e-6)
 
 
 def test_mask_excludes_non_transitions_and_mean_reduction() -> None:
@@ -107,3 +109,51 @@ def test_neural_potential_learns_a_constant_target() -> None:
         loss(data)["loss_value"].backward()
         opt.step()
     assert torch.allclose(v(data["subgoal_anchor"]), torch.full((n, 1), 2.0), atol=0.1)
+
+
+def test_configurable_keys_and_reduction_none() -> None:
+    v = TabularPotential(3)
+    data = transitions(6, 3, seed=4)
+    renamed = data.rename_key_("mask", "real")
+    renamed.rename_key_(("next", "reward"), ("next", "r_h"))
+    loss = SubgoalValueLoss(v, gamma=0.9, reduction="none")
+    loss.set_keys(mask="real", reward="r_h")
+    out = loss(renamed)
+    assert out["loss_value"].shape == (6, 1)
+    assert torch.equal(out["loss_value"] == 0, ~renamed["real"] | (out["td_error"] == 0))
+    with pytest.raises(ValueError, match="reduction"):
+        SubgoalValueLoss(v, gamma=0.9, reduction="max")  # type: ignore[arg-type]
+
+
+def test_misuse_gives_clear_errors() -> None:
+    v = TabularPotential(3)
+    collected = TensorDict({"observation": torch.zeros(4, 1), "next": {"reward": torch.zeros(4, 1)}}, [4])
+    with pytest.raises(ValueError, match=r"SubgoalValueLoss reads SMDP transitions .*missing \['subgoal_index'"):
+        SubgoalValueLoss(v, gamma=0.9)(collected)
+    with pytest.raises(TypeError, match="TensorDict module"):
+        SubgoalValueLoss(torch.nn.Linear(2, 1), gamma=0.9)  # type: ignore[arg-type]
+    wide = NeuralPotential(torch.nn.Linear(2, 3))
+    data = TensorDict({"subgoal_anchor": torch.zeros(4, 2), "steps_to_next_obs": torch.ones(4, 1, dtype=torch.long),
+                       "next": {"subgoal_anchor": torch.zeros(4, 2), "reward": torch.zeros(4, 1),
+                                "terminated": torch.zeros(4, 1, dtype=torch.bool)}}, [4])
+    with pytest.raises(ValueError, match=r"returned values of shape \(4, 3\)"):
+        SubgoalValueLoss(wide, gamma=0.9)(data)
+
+
+def test_any_tensordict_module_with_a_make_value_estimator_hook() -> None:
+    from tensordict.nn import TensorDictModule
+
+    net = TensorDictModule(torch.nn.Embedding(3, 1), in_keys=["z"], out_keys=["v"])
+    data = transitions(8, 3, seed=5)
+    data.rename_key_("subgoal_index", "z")
+    data.rename_key_(("next", "subgoal_index"), ("next", "z"))
+    data["z"], data["next", "z"] = data["z"].squeeze(-1), data["next", "z"].squeeze(-1)
+    loss = SubgoalValueLoss(net, gamma=0.8)
+    assert loss.tensor_keys.value == "v"
+    out = loss(data)
+    out["loss_value"].backward()
+    assert net.module.weight.grad is not None
+    loss.make_value_estimator(gamma=0.5)  # the TD(0) estimator, another discount
+    assert float(loss.value_estimator.gamma) == 0.5
+    with pytest.raises(NotImplementedError, match="TD"):
+        loss.make_value_estimator(ValueEstimators.GAE)

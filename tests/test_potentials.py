@@ -37,7 +37,7 @@ def test_neural_reads_the_anchor() -> None:
     v = NeuralPotential(net)
     anchor = torch.randn(5, 3)
     assert torch.allclose(v(anchor), net(anchor))
-    assert v.in_keys == ("subgoal_anchor",)
+    assert v.in_keys == ["subgoal_anchor"]
 
 
 def test_naive_is_eta_on_achievement() -> None:
@@ -52,3 +52,35 @@ def test_value_operator_writes_state_value() -> None:
     v = TabularPotential(3, batch_shape=(2,), init=1.0)
     td = TensorDict({"subgoal_index": torch.tensor([[0], [2]])}, batch_size=[2])
     assert v.as_value_operator()(td)["state_value"].tolist() == [[1.0], [1.0]]
+
+
+def test_potentials_are_tensordict_modules() -> None:
+    from tensordict import TensorDict
+    from tensordict.nn import TensorDictModuleBase
+
+    v = TabularPotential(4, batch_shape=(2,))
+    with torch.no_grad():
+        v.table.copy_(torch.arange(8.0).reshape(2, 4))
+    assert isinstance(v, TensorDictModuleBase)
+    assert v.in_keys == ["subgoal_index", "subgoal_learner"] and v.out_keys == ["subgoal_value"]
+    td = TensorDict({"subgoal_index": torch.tensor([[3], [1], [0]]), "subgoal_learner": torch.tensor([[0], [1], [1]])},
+                    [3])
+    assert v(td)["subgoal_value"].squeeze(-1).tolist() == [3.0, 5.0, 4.0]  # rows by the learner key
+    shared = TabularPotential(4)
+    assert shared.in_keys == ["subgoal_index"]
+    naive = NaivePotential(2.0, achieved_key="hit")
+    assert naive(TensorDict({"hit": torch.tensor([[True]])}, [1]))["subgoal_value"].item() == 2.0
+
+
+def test_learner_key_errors() -> None:
+    v = TabularPotential(3, batch_shape=(2,))
+    with pytest.raises(ValueError, match=r"subgoal_learner values must lie in \[0, 2\)"):
+        v(torch.zeros(2, 1, dtype=torch.long), torch.tensor([[0], [2]]))
+    with pytest.raises(ValueError, match=r"subgoal_index values must lie in \[0, 3\)"):
+        v(torch.tensor([[0], [3]]))
+    with pytest.raises(ValueError, match="must be an integer tensor"):
+        v(torch.zeros(2, 1))
+    with pytest.raises(KeyError, match="reads 'subgoal_index'"):
+        from tensordict import TensorDict
+
+        v(TensorDict({}, [2]))

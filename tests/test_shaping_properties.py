@@ -145,7 +145,7 @@ def test_shaping_paths_agree(case: tuple, data: st.DataObject) -> None:
         t = SubgoalPotentialTransform(series, potential, gamma=0.9, pattern_index=index, value_lr=0.5,
                                       write_transitions=True)
         if not fused:
-            t._fused_potential = None
+            t._fused_potential = lambda setup, online: None  # type: ignore[method-assign]
         tables = SubgoalTables(series, index, D)
         if not fused:
             tables.advance = tables.advance_eager  # type: ignore[method-assign]
@@ -185,7 +185,7 @@ def test_nan_is_an_error_on_both_paths(eager: bool, reward: float, obs: float, m
     potential = TabularPotential(2, batch_shape=(2,))
     t = SubgoalPotentialTransform(series, potential, gamma=0.9, value_lr=0.5)
     if eager:
-        t._fused_potential = None
+        t._fused_potential = lambda setup, online: None  # type: ignore[method-assign]
     tables = SubgoalTables(series, torch.zeros(2, dtype=torch.long), 2)
     observation = torch.tensor([[0.5, 0.5], [0.5, obs]])
     rewards = torch.tensor([[0.0], [reward]])

@@ -8,11 +8,13 @@ from pathlib import Path
 import pytest
 import torch
 import yaml
+from tensordict import TensorDict
 
 from torchrl_subgoal import (
     Box,
     Cell,
     Circle,
+    Condition,
     State,
     StateAggregation,
     SubgoalFileError,
@@ -20,7 +22,7 @@ from torchrl_subgoal import (
     load_patterns,
     save_patterns,
 )
-from torchrl_subgoal.subgoals import SubgoalTables
+from torchrl_subgoal.subgoals import Predicate, SubgoalTables
 
 
 def write(tmp_path: Path, data: object, name: str = "subgoals.yaml") -> Path:
@@ -260,3 +262,94 @@ def test_state_aggregation_lookup_and_function() -> None:
     assert halves.advance(torch.zeros(2, 1, dtype=torch.long), torch.tensor([[0.2], [0.7]])).tolist() == [[0], [1]]
     with pytest.raises(ValueError, match="must lie in"):
         StateAggregation(torch.tensor([0, 3]), num_states=3)
+
+
+# --------------------------------------------------------------------------- conditions
+
+
+def _carrying(td: TensorDict) -> torch.Tensor:
+    return td["inventory"] > 0
+
+
+def test_a_plain_function_is_a_subgoal() -> None:
+    series = SubgoalSeries([_carrying, Cell(2, 2)])
+    assert isinstance(series.predicates[0], Condition)
+    assert series.predicates[0].to_dict() == {"call": "tests.test_subgoals:_carrying"}
+    tables = SubgoalTables([series], torch.zeros(3, dtype=torch.long), 2, observation_key="cell")
+    td = TensorDict({"inventory": torch.tensor([0, 1, 1]), "cell": torch.tensor([[2, 2], [0, 0], [2, 2]])}, [3])
+    z = tables.advance(torch.zeros(3, 1, dtype=torch.long), td["cell"], td)
+    assert z.tolist() == [[0], [1], [1]]  # the region of the second subgoal does not count before the first
+    assert tables.advance(z, td["cell"], td).tolist() == [[0], [1], [2]]
+
+
+def test_condition_reads_any_entry_and_checks_its_mask() -> None:
+    series = SubgoalSeries([lambda td: td["flag"]])
+    tables = SubgoalTables([series], torch.zeros(2, dtype=torch.long), 0)
+    td = TensorDict({"flag": torch.tensor([[True], [False]])}, [2])
+    assert tables.advance(torch.zeros(2, 1, dtype=torch.long), None, td).tolist() == [[1], [0]]
+    wrong = SubgoalTables([SubgoalSeries([lambda td: td["flag"][:1]], name="short")], torch.zeros(2, dtype=torch.long), 0)
+    with pytest.raises(ValueError, match=r"returned \(1, 1\); expected a boolean mask of shape \(2,\)"):
+        wrong.advance(torch.zeros(2, 1, dtype=torch.long), None, td)
+    with pytest.raises(KeyError, match="failed on the step"):
+        tables.advance(torch.zeros(2, 1, dtype=torch.long), None, TensorDict({}, [2]))
+
+
+def test_condition_subclass_without_region() -> None:
+    class Carrying(Predicate):
+        kind = "carrying"
+
+        def __call__(self, tensordict: TensorDict) -> torch.Tensor:
+            return tensordict["inventory"] > 0
+
+    series = SubgoalSeries([Carrying()])
+    tables = SubgoalTables([series], torch.zeros(2, dtype=torch.long), 0)
+    td = TensorDict({"inventory": torch.tensor([3, 0])}, [2])
+    assert tables.advance(torch.zeros(2, 1, dtype=torch.long), None, td).tolist() == [[1], [0]]
+
+
+def test_condition_by_import_path_in_a_file(tmp_path: Path) -> None:
+    path = tmp_path / "conditions.yaml"
+    path.write_text(
+        "patterns:\n"
+        "  carry_then_cell:\n"
+        "    subgoals:\n"
+        "      - {call: 'tests.test_subgoals:_carrying'}\n"
+        "      - {call: 'tests.dict_env.at_door'}\n"
+        "      - {cell: [3, 4]}\n"
+    )
+    series = SubgoalSeries.from_file(path)
+    first, second = series.predicates[0], series.predicates[1]
+    assert isinstance(first, Condition) and first.fn is _carrying
+    assert isinstance(second, Condition) and second.path == "tests.dict_env:at_door"
+    save_patterns(tmp_path / "round.yaml", {"carry_then_cell": series})
+    assert load_patterns(tmp_path / "round.yaml")["carry_then_cell"] == series
+
+
+def test_condition_factory_with_args(tmp_path: Path) -> None:
+    path = tmp_path / "factory.yaml"
+    path.write_text("patterns:\n  p:\n    subgoals:\n      - {call: 'operator:itemgetter', args: {}}\n")
+    series = SubgoalSeries.from_file(path)
+    assert isinstance(series.predicates[0], Condition)
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ("{call: 'no_such_module_xyz:f'}", r"subgoals\[0\]\.call: cannot import module 'no_such_module_xyz'"),
+        ("{call: 'operator:no_such'}", r"subgoals\[0\]\.call: module 'operator' has no attribute 'no_such'"),
+        ("{call: 3}", r"subgoals\[0\]\.call: expected an import path"),
+        ("{call: 'operator:truth', args: [1]}", r"args: expected a mapping"),
+        ("{call: 'operator:truth', where: 1}", r"unknown field\(s\) \['where'\]"),
+    ],
+)
+def test_condition_file_errors_name_the_field(tmp_path: Path, body: str, message: str) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(f"patterns:\n  p:\n    subgoals:\n      - {body}\n")
+    with pytest.raises(SubgoalFileError, match=message):
+        load_patterns(path)
+
+
+def test_a_lambda_cannot_be_written_to_a_file(tmp_path: Path) -> None:
+    series = SubgoalSeries([lambda td: td["x"] > 0], name="anon")
+    with pytest.raises(SubgoalFileError, match="has no import path"):
+        save_patterns(tmp_path / "x.yaml", {"anon": series})

@@ -13,9 +13,11 @@ from torchrl.envs.utils import check_env_specs
 from torchrl_subgoal import (
     Box,
     Cell,
+    Circle,
     NaivePotential,
     NeuralPotential,
     State,
+    StateAggregation,
     SubgoalFileError,
     SubgoalPotentialTransform,
     SubgoalSeries,
@@ -33,9 +35,9 @@ HALLWAYS = SubgoalSeries([Cell(3, 6), Cell(7, 9)], name="hallways")
 def path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
     """Run a test through the fused CPU kernels and through the eager torch code."""
     if request.param == "eager":
-        monkeypatch.setattr(SubgoalPotentialTransform, "_fused_constants", lambda self: None)
+        monkeypatch.setattr(SubgoalPotentialTransform, "_fused_potential", lambda self, setup, online: None)
         monkeypatch.setattr("torchrl_subgoal.subgoals.SubgoalTables.advance",
-                            lambda self, z, obs: self.advance_eager(z, obs))
+                            lambda self, z, obs, td=None: self.advance_eager(z, obs, td))
     yield request.param
 
 
@@ -135,8 +137,9 @@ def test_shaped_reward_is_r_plus_gamma_v_next_minus_v(path: str, zero_terminal: 
     expected = data["next", "env_reward"] + 0.95 * phi_next - phi
     assert torch.allclose(data["next", "reward"], expected, atol=1e-6)
     assert (z_next > 0).any() and (data["next", "done"]).any()  # subgoals achieved, episodes ended
-    # the stored transitions are consistent with the state
-    assert torch.equal(data["next", "smdp", "next", "subgoal_index"], z_next)
+    # the transitions are consistent with the state
+    emitted = (z_next != z) | data["next", "done"]
+    assert torch.equal(t.transitions(data)["next", "subgoal_index"], z_next[emitted].unsqueeze(-1))
 
 
 def test_naive_potential_pulse(path: str) -> None:
@@ -154,7 +157,7 @@ def test_fused_and_eager_paths_agree(monkeypatch: pytest.MonkeyPatch) -> None:
     def run(eager: bool) -> tuple[TensorDict, torch.Tensor]:
         with monkeypatch.context() as m:
             if eager:
-                m.setattr(SubgoalPotentialTransform, "_fused_constants", lambda self: None)
+                m.setattr(SubgoalPotentialTransform, "_fused_potential", lambda self, setup, online: None)
             n = 16
             v = TabularPotential(3, batch_shape=(n,))
             with torch.no_grad():
@@ -327,7 +330,7 @@ def test_observation_too_small_for_the_predicate() -> None:
 
 def test_potential_batch_mismatch() -> None:
     env = TransformedEnv(FourRoomsEnv(3), transform_for((4,)))
-    with pytest.raises(ValueError, match=r"batch_shape \(4,\) but the env batch is \(3,\)"):
+    with pytest.raises(ValueError, match=r"batch_shape \(4,\) but the env batch has 3 envs"):
         env.reset()
 
 
@@ -341,3 +344,234 @@ def test_wrong_number_of_patterns() -> None:
 def test_bad_hyper_parameters(kwargs: dict) -> None:
     with pytest.raises(ValueError):
         SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), **kwargs)
+
+
+# ----------------------------------------------------------------- stored data (forward)
+
+
+def fixed_table(v: TabularPotential, seed: int = 0) -> TabularPotential:
+    with torch.no_grad():
+        v.table.copy_(torch.randn(v.table.shape, generator=torch.Generator().manual_seed(seed)))
+    return v
+
+
+def assert_forward_matches(t: SubgoalPotentialTransform, data: TensorDict) -> None:
+    """forward() on the stored data (shaped reward dropped) recomputes the online pass."""
+    stored = data.exclude(("next", "reward"), *[("next", k) for k in t.state_keys])
+    offline = t(stored.clone())
+    assert torch.allclose(offline["next", "reward"], data["next", "reward"], atol=1e-6)
+    for key in t.state_keys:
+        assert torch.equal(offline["next", key], data["next", key]), key
+
+
+def test_forward_equals_online_on_categorical_observations(path: str) -> None:
+    t = SubgoalPotentialTransform(SubgoalSeries([State(1), State(3)]), fixed_table(TabularPotential(3, (3,))),
+                                  gamma=0.9)
+    env = TransformedEnv(LineEnv(3, length=4), t)
+    torch.manual_seed(0)
+    data = env.rollout(60, break_when_any_done=False)
+    assert (data["next", "subgoal_index"] == 2).any() and data["next", "done"].any()
+    assert_forward_matches(t, data)
+
+
+def test_forward_equals_online_on_one_hot_observations() -> None:
+    from torchrl.envs import GymEnv
+
+    v = fixed_table(TabularPotential(3))
+    t = SubgoalPotentialTransform(SubgoalSeries([State(1), State(2)]), v, gamma=0.9)
+    env = TransformedEnv(GymEnv("FrozenLake-v1", is_slippery=False), t)
+    env.set_seed(0)
+    actions = torch.nn.functional.one_hot(torch.tensor([2, 2, 1, 0, 2, 2, 1, 1, 2, 2]), 4)
+    td = env.reset()
+    steps = []
+    for a in actions:
+        td["action"] = a
+        step_data, td = env.step_and_maybe_reset(td)
+        steps.append(step_data)
+    data = torch.stack(steps, 0)
+    assert int(data["next", "subgoal_index"].max()) == 2  # z advanced on one-hot states 1 then 2
+    assert_forward_matches(t, data)
+    # a transform that never saw the env (no spec) reads the one-hot layout from the data
+    alone = SubgoalPotentialTransform(SubgoalSeries([State(1), State(2)]), v, gamma=0.9)
+    assert_forward_matches(alone, data)
+
+
+def test_forward_equals_online_on_continuous_observations(path: str) -> None:
+    from torchrl_subgoal.envs import PinBallEnv
+
+    series = SubgoalSeries([Circle((0.2, 0.85), 0.06), Circle((0.3, 0.8), 0.06)])
+    t = SubgoalPotentialTransform(series, fixed_table(TabularPotential(3, (4,))), gamma=0.99)
+    env = TransformedEnv(PinBallEnv(4, max_steps=40, seed=0), t)
+    torch.manual_seed(0)
+    data = env.rollout(120, break_when_any_done=False)
+    assert (data["next", "subgoal_index"] > 0).any()
+    assert_forward_matches(t, data)
+
+
+@pytest.mark.parametrize("batch", [64, 1])
+def test_forward_on_a_replay_sample_of_another_batch_shape(path: str, batch: int) -> None:
+    """Regression: a [64, T] (or [1, T]) sample after a 2-env rollout once crashed the interpreter."""
+    from torchrl.data import LazyTensorStorage, ReplayBuffer
+
+    v = fixed_table(TabularPotential(3, (2,)))
+    patterns = [HALLWAYS, SubgoalSeries([Cell(6, 2), Cell(10, 6)])]
+    t = SubgoalPotentialTransform(patterns, v, gamma=0.95, observation_key="cell")
+    env = TransformedEnv(FourRoomsEnv(2, max_steps=80), t)
+    torch.manual_seed(3)
+    data = env.rollout(200, break_when_any_done=False)
+    assert (data["next", "subgoal_index"] > 0).any() and data["next", "done"].any()
+    buffer = ReplayBuffer(storage=LazyTensorStorage(10), batch_size=batch)
+    buffer.extend(data.exclude(("next", "reward")))
+    sample, info = buffer.sample(return_info=True)
+    assert sample.shape == (batch, 200)
+    before = v.table.detach().clone()
+    offline = t(sample.clone())
+    rows = torch.as_tensor(info["index"])
+    assert torch.allclose(offline["next", "reward"], data["next", "reward"][rows], atol=1e-6)
+    assert torch.equal(offline["next", "subgoal_index"], data["next", "subgoal_index"][rows])
+    assert torch.equal(v.table.detach(), before)
+
+
+def test_forward_never_changes_parameters(path: str) -> None:
+    v = fixed_table(TabularPotential(3, (4,)))
+    start = v.table.detach().clone()
+    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.99, observation_key="cell", value_lr=0.5)
+    env = TransformedEnv(FourRoomsEnv(4, max_steps=50), t)
+    data = env.rollout(150, break_when_any_done=False)
+    assert not torch.equal(v.table.detach(), start)  # the online pass trained it
+    before = v.table.detach().clone()
+    t(data.clone())
+    t(data[:1].clone())
+    assert torch.equal(v.table.detach(), before)
+
+
+def test_forward_without_the_learner_entry_of_per_env_tables_is_a_clear_error() -> None:
+    t = SubgoalPotentialTransform(HALLWAYS, TabularPotential(3, (4,)), gamma=0.99, observation_key="cell")
+    data = TransformedEnv(FourRoomsEnv(4), t).rollout(5)
+    with pytest.raises(ValueError, match="subgoal_learner"):
+        t(data[:3].exclude("subgoal_learner", ("next", "subgoal_learner")).clone())
+
+
+def test_kernel_boundaries_check_shapes() -> None:
+    """Inputs that do not fit the compiled tables are a ValueError, never a wrong read."""
+    from torchrl_subgoal.subgoals import SubgoalTables
+
+    tables = SubgoalTables([HALLWAYS], torch.zeros(4, dtype=torch.long), 2)
+    with pytest.raises(ValueError, match="does not fit the subgoal tables compiled for 4 learners x 2"):
+        tables.advance(torch.zeros(4, 1, dtype=torch.long), torch.zeros(64, 2))
+    with pytest.raises(ValueError, match="3 abstract states for subgoal tables compiled for 4"):
+        tables.advance(torch.zeros(3, 1, dtype=torch.long), torch.zeros(4, 2))
+    with pytest.raises(ValueError, match="does not fit"):
+        tables.advance(torch.zeros(4, 1, dtype=torch.long), torch.zeros(4, 1))
+
+
+def test_transitions_rebuilt_equal_the_written_ones(path: str) -> None:
+    v = fixed_table(TabularPotential(3, (6,)))
+    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.97, observation_key="cell", write_transitions=True)
+    data = TransformedEnv(FourRoomsEnv(6, max_steps=60), t).rollout(200, break_when_any_done=False)
+    written = data["next", "smdp"].reshape(-1)
+    written = written[written["mask"].reshape(-1)]
+    rebuilt = t.transitions(data)
+    assert rebuilt.numel() == written.numel() > 10
+    for key in ("subgoal_index", "subgoal_learner", "steps_to_next_obs", ("next", "subgoal_index"),
+                ("next", "subgoal_learner"), ("next", "terminated"), ("next", "done")):
+        assert torch.equal(rebuilt[key], written[key]), key
+    assert torch.allclose(rebuilt["next", "reward"], written["next", "reward"], atol=1e-6)
+
+
+# ----------------------------------------------------------------- TorchRL pipelines
+
+
+def test_two_transforms_on_one_env(path: str) -> None:
+    halves = StateAggregation(torch.tensor([0, 0, 1, 1, 2]), num_states=3)
+    first = SubgoalPotentialTransform(SubgoalSeries([State(1), State(3)]), fixed_table(TabularPotential(3), 1),
+                                      gamma=0.9)
+    second_potential = fixed_table(TabularPotential(3, index_key="half_index"), 2)
+    second = SubgoalPotentialTransform(halves, second_potential, gamma=0.9, prefix="half")
+    env = TransformedEnv(LineEnv(3, length=4), Compose(first, second))
+    check_env_specs(env)
+    torch.manual_seed(0)
+    data = env.rollout(100, break_when_any_done=False)
+    nxt = data["next"]
+    table_1, table_2 = first.potential.table.detach(), second_potential.table.detach()
+    terminated = nxt["terminated"]
+    f_1 = 0.9 * table_1[nxt["subgoal_index"]].masked_fill(terminated, 0) - table_1[data["subgoal_index"]]
+    f_2 = 0.9 * table_2[nxt["half_index"]].masked_fill(terminated, 0) - table_2[data["half_index"]]
+    assert torch.allclose(nxt["reward"], nxt["env_reward"] + f_1 + f_2, atol=1e-5)
+    # each keeps its own abstract state, and both accumulate the env reward (1 per step, 10 at the goal)
+    assert torch.equal(nxt["half_index"].squeeze(-1), halves.mapping[nxt["observation"]])
+    assert (nxt["subgoal_index"] == 2).any() and terminated.any()
+    for t in (first, second):
+        real = t.transitions(data)
+        k = real["steps_to_next_obs"]
+        goal = real["next", "terminated"]
+        expected = torch.where(goal, (1 - 0.9 ** (k - 1)) / 0.1 + 10 * 0.9 ** (k - 1), (1 - 0.9**k) / 0.1)
+        assert goal.any() and torch.allclose(real["next", "reward"], expected, atol=1e-4)
+
+
+def test_condition_predicates_on_a_dict_observation_in_a_collector_over_parallel_env() -> None:
+    from torchrl.collectors import Collector
+
+    from .dict_env import at_door, carrying_key, make_key_door
+
+    series = SubgoalSeries([carrying_key, at_door], name="key_then_door")  # plain functions of the TensorDict
+    v = fixed_table(TabularPotential(3))
+    t = SubgoalPotentialTransform(series, v, gamma=0.9, observation_key="position")
+    env = TransformedEnv(ParallelEnv(2, make_key_door, mp_start_method="spawn"), t)
+    collector = Collector(env, None, frames_per_batch=200, total_frames=400)
+    try:
+        for data in collector:
+            nxt = data["next"]
+            z, z_next = data["subgoal_index"], nxt["subgoal_index"]
+            has_key = nxt["has_key"].bool()
+            # z moves 0 -> 1 exactly when the key is first held, 1 -> 2 at the door
+            assert torch.equal((z == 0) & (z_next == 1), (z == 0) & has_key)
+            assert torch.equal((z == 1) & (z_next == 2), (z == 1) & (nxt["position"] >= 5))
+            table = v.table.detach()
+            expected = nxt["env_reward"] + 0.9 * table[z_next].masked_fill(nxt["terminated"], 0) - table[z]
+            assert torch.allclose(nxt["reward"], expected, atol=1e-6)
+        assert (z_next == 2).any()
+    finally:
+        collector.shutdown()
+
+
+def test_arbitrary_tensordict_module_as_the_potential() -> None:
+    from tensordict.nn import TensorDictModule, TensorDictSequential
+
+    torch.manual_seed(0)
+    embed = TensorDictModule(torch.nn.Linear(2, 8), in_keys=["subgoal_anchor"], out_keys=["hidden"])
+    head = TensorDictModule(torch.nn.Sequential(torch.nn.Tanh(), torch.nn.Linear(8, 1)), in_keys=["hidden"],
+                            out_keys=["subgoal_value"])
+    potential = TensorDictSequential(embed, head)
+    before = [p.detach().clone() for p in potential.parameters()]
+    t = SubgoalPotentialTransform(HALLWAYS, potential, gamma=0.9, observation_key="cell", value_lr=0.01)
+    env = TransformedEnv(FourRoomsEnv(4, max_steps=40), t)
+    check_env_specs(env)
+    data = env.rollout(100, break_when_any_done=False)
+    assert any(not torch.equal(a, b) for a, b in zip(before, potential.parameters(), strict=True))  # trained
+    # forward() with the trained module reproduces F = γΦ(anchor') − Φ(anchor) and trains nothing
+    frozen = [p.detach().clone() for p in potential.parameters()]
+    offline = t(data.clone())
+    nxt = offline["next"]
+    with torch.no_grad():
+        phi = potential(offline.select("subgoal_anchor").clone())["subgoal_value"]
+        phi_next = potential(nxt.select("subgoal_anchor").clone())["subgoal_value"]
+    expected = nxt["env_reward"] + 0.9 * phi_next.masked_fill(nxt["terminated"], 0) - phi
+    assert torch.allclose(nxt["reward"], expected, atol=1e-5)
+    assert all(torch.equal(a, b) for a, b in zip(frozen, potential.parameters(), strict=True))
+
+
+def test_potential_reading_entries_the_transform_does_not_keep() -> None:
+    from tensordict.nn import TensorDictModule
+
+    bad = TensorDictModule(torch.nn.Linear(2, 1), in_keys=["cell"], out_keys=["subgoal_value"])
+    with pytest.raises(ValueError, match=r"reads \['cell'\], which this transform does not keep"):
+        SubgoalPotentialTransform(HALLWAYS, bad, gamma=0.9, observation_key="cell")
+
+
+def test_neural_potential_with_the_wrong_output_shape() -> None:
+    t = SubgoalPotentialTransform(HALLWAYS, NeuralPotential(torch.nn.Linear(2, 3)), gamma=0.9,
+                                  observation_key="cell")
+    env = TransformedEnv(FourRoomsEnv(2), t)
+    with pytest.raises(ValueError, match=r"returned values of shape \(2, 3\).*output size is 1"):
+        env.rollout(3)

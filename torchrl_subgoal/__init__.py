@@ -12,6 +12,7 @@ from torchrl_subgoal.subgoals import (
     Box,
     Cell,
     Circle,
+    Condition,
     State,
     StateAggregation,
     SubgoalFileError,
@@ -19,7 +20,7 @@ from torchrl_subgoal.subgoals import (
     load_patterns,
     save_patterns,
 )
-from torchrl_subgoal.transform import SubgoalPotentialTransform
+from torchrl_subgoal.transform import SubgoalKeys, SubgoalPotentialTransform
 
 __version__ = "0.1.0"
 
@@ -27,12 +28,14 @@ __all__ = [
     "Box",
     "Cell",
     "Circle",
+    "Condition",
     "NaivePotential",
     "NeuralPotential",
     "Potential",
     "State",
     "StateAggregation",
     "SubgoalFileError",
+    "SubgoalKeys",
     "SubgoalPotentialTransform",
     "SubgoalSeries",
     "SubgoalValueLoss",

@@ -18,16 +18,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import torch
 from tensordict.utils import NestedKey
 
-from torchrl_subgoal.potentials import NaivePotential, TabularPotential
+from torchrl_subgoal.potentials import NaivePotential, Potential, TabularPotential
 from torchrl_subgoal.subgoals import Predicate, StateAggregation, SubgoalSeries
 from torchrl_subgoal.transform import SubgoalPotentialTransform
 
-__all__ = ["Method", "paper_methods", "random_patterns", "shaping_transform"]
+__all__ = ["Method", "paper_methods", "random_patterns", "shaping_parts", "shaping_transform"]
 
 Shaping = Literal["none", "subgoals", "naive", "aggregation"]
 
@@ -72,12 +72,48 @@ def random_patterns(
     ]
 
 
+def shaping_parts(
+    method: Method,
+    batch_shape: torch.Size | tuple[int, ...],
+    *,
+    patterns: Sequence[SubgoalSeries] | None = None,
+    pattern_index: torch.Tensor | None = None,
+    aggregation: StateAggregation | None = None,
+    eta: float = 1.0,
+    observation_key: NestedKey = "observation",
+    aggregation_key: NestedKey = "observation",
+    zero_terminal_potential: bool = True,
+) -> tuple[SubgoalSeries | list[SubgoalSeries] | StateAggregation, Potential, dict[str, Any]] | None:
+    """What :class:`SubgoalPotentialTransform` needs for ``method``: the subgoals (or aggregation),
+    the potential and the other keyword arguments; ``None`` for the unshaped baseline.
+
+    ``batch_shape`` is the potential's: the env batch for one table per env (one
+    learner per env, as the SARSA recipes), ``()`` for one table shared by every
+    env (one learner stepping many envs, as A2C).
+    """
+    if method.shaping == "none":
+        return None
+    options: dict[str, Any] = {"zero_terminal_potential": zero_terminal_potential}
+    if method.shaping == "aggregation":
+        if aggregation is None:
+            raise ValueError(f"{method.name} needs an aggregation g(s)")
+        return aggregation, TabularPotential(aggregation.num_states, batch_shape), {
+            **options, "observation_key": aggregation_key}
+    if not patterns:
+        raise ValueError(f"{method.name} needs subgoal patterns")
+    options |= {"observation_key": observation_key, "pattern_index": pattern_index}
+    if method.shaping == "naive":
+        return list(patterns), NaivePotential(eta), options
+    num_states = max(len(p) for p in patterns) + 1
+    return list(patterns), TabularPotential(num_states, batch_shape), options
+
+
 def shaping_transform(
     method: Method,
     batch_shape: torch.Size,
     *,
     gamma: float,
-    value_lr: float,
+    value_lr: float | None,
     patterns: Sequence[SubgoalSeries] | None = None,
     pattern_index: torch.Tensor | None = None,
     aggregation: StateAggregation | None = None,
@@ -92,7 +128,8 @@ def shaping_transform(
         method: the method.
         batch_shape: the env batch (one learner per env; each gets its own table).
         gamma: the agent's discount.
-        value_lr: ``α_v`` of the learned potentials (updated online).
+        value_lr: ``α_v`` of the learned potentials, updated online; ``None`` to train
+            them yourself from the SMDP transitions the transform then writes.
         patterns: the subgoal series (HRS, RRS, NRS).
         pattern_index: pattern of each learner, shape ``batch_shape``.
         aggregation: ``g(s)`` for SARSA-RS.
@@ -100,27 +137,23 @@ def shaping_transform(
         observation_key: what subgoal predicates read.
         aggregation_key: what ``g`` reads.
         zero_terminal_potential: see :class:`SubgoalPotentialTransform`.
+
+    Examples:
+        >>> import torch
+        >>> from torchrl_subgoal.envs.four_rooms import room_aggregation
+        >>> methods = paper_methods("SARSA")
+        >>> t = shaping_transform(methods["SARSA-RS"], torch.Size([4]), gamma=0.99, value_lr=0.25,
+        ...                       aggregation=room_aggregation())
+        >>> type(t.potential).__name__, t.potential.batch_shape
+        ('TabularPotential', torch.Size([4]))
     """
-    if method.shaping == "none":
-        return None
-    if method.shaping == "aggregation":
-        if aggregation is None:
-            raise ValueError(f"{method.name} needs an aggregation g(s)")
-        table = TabularPotential(aggregation.num_states, batch_shape)
-        return SubgoalPotentialTransform(
-            aggregation, table, gamma=gamma, observation_key=aggregation_key, value_lr=value_lr,
-            zero_terminal_potential=zero_terminal_potential,
-        )
-    if not patterns:
-        raise ValueError(f"{method.name} needs subgoal patterns")
-    if method.shaping == "naive":
-        return SubgoalPotentialTransform(
-            list(patterns), NaivePotential(eta), gamma=gamma, observation_key=observation_key,
-            pattern_index=pattern_index, zero_terminal_potential=zero_terminal_potential,
-        )
-    num_states = max(len(p) for p in patterns) + 1
-    return SubgoalPotentialTransform(
-        list(patterns), TabularPotential(num_states, batch_shape), gamma=gamma,
-        observation_key=observation_key, pattern_index=pattern_index, value_lr=value_lr,
+    parts = shaping_parts(
+        method, batch_shape, patterns=patterns, pattern_index=pattern_index, aggregation=aggregation, eta=eta,
+        observation_key=observation_key, aggregation_key=aggregation_key,
         zero_terminal_potential=zero_terminal_potential,
     )
+    if parts is None:
+        return None
+    subgoals, potential, options = parts
+    learned = value_lr if isinstance(potential, TabularPotential) else None
+    return SubgoalPotentialTransform(subgoals, potential, gamma=gamma, value_lr=learned, **options)

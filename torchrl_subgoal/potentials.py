@@ -1,62 +1,139 @@
 """Potential functions ``Φ`` over the abstract state kept by the transform.
 
-The shaping reward is ``F = γ Φ(next) − Φ(current)``. A potential reads some of
-the abstract-state entries the transform keeps in the TensorDict:
+The shaping reward is ``F = γ Φ(next) − Φ(current)``. A potential is a
+TensorDict module: it reads some of the abstract-state entries the transform
+keeps in the TensorDict and writes ``"subgoal_value"`` (``[*B, 1]``, as
+TorchRL value networks do). The entries (with the transform's default prefix):
 
 * ``"subgoal_index"`` — ``z``, the node of the subgoal series reached;
 * ``"subgoal_anchor"`` — the observation at the moment ``z`` was entered;
-* ``"subgoal_achieved"`` — whether ``z`` was entered on this very step.
+* ``"subgoal_achieved"`` — whether ``z`` was entered on this very step;
+* ``"subgoal_learner"`` — which env of the batch (which learner) the row came
+  from, so a per-learner table picks its row by key, also in a shuffled
+  replay-buffer sample.
 
-:class:`TabularPotential` (``V[z]``, one table per learner of a batch) and
-:class:`NeuralPotential` (``V(o_z; θ)``) are learned by
+:class:`TabularPotential` (``V[z]``, one table per learner of a batch or one
+shared table) and :class:`NeuralPotential` (``V(o_z; θ)``) are learned by
 :class:`~torchrl_subgoal.SubgoalValueLoss`; :class:`NaivePotential` is the
-fixed ``η`` of the naive subgoal shaping baseline (NRS).
+fixed ``η`` of the naive subgoal shaping baseline (NRS). Any other
+:class:`~tensordict.nn.TensorDictModuleBase` whose ``in_keys`` are entries the
+transform keeps and whose single ``out_keys`` entry is the value can be ``Φ``
+too (an MLP over the anchor, a ``TensorDictSequential``…).
 
-Every potential returns values shaped like its inputs' batch with a trailing
-singleton, ``[*B, 1]``, as TorchRL value networks do.
+The built-in potentials also take their inputs as tensors, in ``in_keys``
+order: ``potential(z)`` returns the values.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import torch
-from tensordict.nn import TensorDictModule
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModule, TensorDictModuleBase
+from tensordict.utils import NestedKey
 from torch import nn
 
-__all__ = ["NaivePotential", "NeuralPotential", "Potential", "TabularPotential"]
+__all__ = ["NaivePotential", "NeuralPotential", "Potential", "TabularPotential", "check_value"]
 
 INDEX = "subgoal_index"
 ANCHOR = "subgoal_anchor"
 ACHIEVED = "subgoal_achieved"
+LEARNER = "subgoal_learner"
+VALUE = "subgoal_value"
 
 
-class Potential(nn.Module):
-    """Base class: a module mapping abstract-state entries to ``Φ`` of shape ``[*B, 1]``.
+def check_value(value: torch.Tensor, batch_shape: torch.Size, who: str) -> torch.Tensor:
+    """``value`` if it is ``[*batch_shape, 1]`` (or ``[*batch_shape]``, viewed so); else a clear error.
 
-    Subclasses set :attr:`in_keys` (a subset of ``"subgoal_index"``,
-    ``"subgoal_anchor"``, ``"subgoal_achieved"``) and take those tensors, in
-    that order, as positional arguments.
+    Examples:
+        >>> check_value(torch.zeros(3), torch.Size([3]), "V").shape
+        torch.Size([3, 1])
+    """
+    if not isinstance(value, torch.Tensor):
+        raise TypeError(f"{who} returned {type(value).__name__}, expected a tensor of shape "
+                        f"{(*batch_shape, 1)}")
+    if value.shape == (*batch_shape, 1):
+        return value
+    if value.shape == batch_shape:
+        return value.unsqueeze(-1)
+    raise ValueError(
+        f"{who} returned values of shape {tuple(value.shape)} for a batch of shape {tuple(batch_shape)}: "
+        f"a potential must return one value per row, shape {(*batch_shape, 1)} (check the network's "
+        "output size is 1 and its input entry is the one it expects)"
+    )
+
+
+class Potential(TensorDictModuleBase):
+    """Base class: a TensorDict module from abstract-state entries to ``Φ`` (``[*B, 1]``).
+
+    Subclasses implement :meth:`value`, which takes the ``in_keys`` entries as
+    tensors in that order. Called on a TensorDict the module writes the value
+    under ``out_keys[0]`` (``"subgoal_value"``); called on tensors it returns it.
+
+    Args:
+        in_keys: the entries read.
+        out_key: where the value is written.
     """
 
-    in_keys: tuple[str, ...] = ()
+    #: entries of ``in_keys`` that may be absent from a TensorDict (passed as ``None``)
+    optional_in_keys: tuple[NestedKey, ...] = ()
 
-    def as_value_operator(self, out_key: str = "state_value") -> TensorDictModule:
-        """This potential as a TensorDict module, the value network of TorchRL estimators."""
-        return TensorDictModule(self, in_keys=list(self.in_keys), out_keys=[out_key])
+    def __init__(self, in_keys: Sequence[NestedKey], out_key: NestedKey = VALUE) -> None:
+        super().__init__()
+        self.in_keys = list(in_keys)
+        self.out_keys = [out_key]
+
+    def value(self, *inputs: torch.Tensor | None) -> torch.Tensor:
+        """``Φ`` of the inputs (the ``in_keys`` entries, in order), shape ``[*B, 1]``."""
+        raise NotImplementedError
+
+    def forward(self, *args: torch.Tensor | TensorDictBase, **kwargs: torch.Tensor) -> torch.Tensor | TensorDictBase:
+        if args and isinstance(args[0], TensorDictBase):
+            tensordict = args[0]
+            inputs = []
+            for key in self.in_keys:
+                entry = tensordict.get(key, None)
+                if entry is None and key not in self.optional_in_keys:
+                    raise KeyError(f"{type(self).__name__} reads {key!r}, which the TensorDict does not hold; "
+                                   f"it has {sorted(map(str, tensordict.keys(True, True)))}")
+                inputs.append(entry)
+            value = check_value(self.value(*inputs), tensordict.batch_size, type(self).__name__)
+            tensordict.set(self.out_keys[0], value)
+            return tensordict
+        if kwargs:
+            raise TypeError(f"{type(self).__name__} takes a TensorDict or its inputs as positional tensors")
+        return self.value(*args)
+
+    def as_value_operator(self, out_key: NestedKey = "state_value") -> TensorDictModule:
+        """This potential writing ``out_key`` instead (e.g. as a TorchRL estimator's value network)."""
+        return TensorDictModule(self.value, in_keys=list(self.in_keys), out_keys=[out_key])
 
 
 class TabularPotential(Potential):
-    """``V[z]``: one table of abstract-state values per learner.
+    """``V[z]``: one table of abstract-state values per learner, or one shared table.
+
+    With a learner batch, each row of a TensorDict picks its table by its
+    ``"subgoal_learner"`` entry (the transform writes it), so flattened or
+    shuffled samples (a replay buffer) read the right table. Without that entry
+    (or called on tensors without learner indices), ``z`` must start with the
+    learner batch shape and rows follow their position.
 
     Args:
         num_states: number of abstract states (``SubgoalSeries.num_abstract_states``
             or the aggregation's ``num_states``).
         batch_shape: shape of the learner batch (the env's batch size);
-            ``()`` for a single learner. Inputs have this shape as leading
-            dimensions, optionally followed by more (e.g. time) dims.
+            ``()`` for one table shared by every env.
         init: initial value of every entry.
+
+    Keyword Args:
+        index_key: the abstract state entry read.
+        learner_key: the learner entry read (with a batch of tables).
+        out_key: where the value is written.
 
     Examples:
         >>> import torch
+        >>> from tensordict import TensorDict
         >>> from torchrl_subgoal import TabularPotential
         >>> v = TabularPotential(3, batch_shape=(2,))
         >>> with torch.no_grad():
@@ -64,30 +141,61 @@ class TabularPotential(Potential):
         >>> v(torch.tensor([[2], [2]]))
         tensor([[0.0000],
                 [0.5000]], grad_fn=<ViewBackward0>)
+        >>> sample = TensorDict({"subgoal_index": torch.tensor([[2], [2], [1]]),
+        ...                      "subgoal_learner": torch.tensor([[1], [0], [1]])}, [3])
+        >>> v(sample)["subgoal_value"].squeeze(-1)
+        tensor([0.5000, 0.0000, 0.0000], grad_fn=<SqueezeBackward1>)
     """
 
-    in_keys = (INDEX,)
-
-    def __init__(self, num_states: int, batch_shape: tuple[int, ...] | torch.Size = (), init: float = 0.0):
-        super().__init__()
+    def __init__(
+        self,
+        num_states: int,
+        batch_shape: tuple[int, ...] | torch.Size = (),
+        init: float = 0.0,
+        *,
+        index_key: NestedKey = INDEX,
+        learner_key: NestedKey = LEARNER,
+        out_key: NestedKey = VALUE,
+    ) -> None:
         self.batch_shape = torch.Size(batch_shape)
+        super().__init__([index_key, learner_key] if self.batch_shape else [index_key], out_key)
+        self.optional_in_keys = (learner_key,)
         self.num_states = int(num_states)
+        if self.num_states < 1:
+            raise ValueError(f"num_states must be >= 1, got {num_states}")
         self.table = nn.Parameter(torch.full((*self.batch_shape, self.num_states), float(init)))
 
-    def forward(self, z: torch.Tensor) -> torch.Tensor:
+    @property
+    def learners(self) -> int:
+        """Number of tables (1 when shared)."""
+        return self.batch_shape.numel()
+
+    def value(self, z: torch.Tensor, learner: torch.Tensor | None = None) -> torch.Tensor:  # type: ignore[override]
         if z.shape[-1:] != (1,):
             raise ValueError(f"subgoal_index must end with a singleton dim, got shape {tuple(z.shape)}")
+        if z.dtype.is_floating_point or z.dtype == torch.bool:
+            raise ValueError(f"subgoal_index must be an integer tensor, got {z.dtype}")
+        if z.numel() and (int(z.min()) < 0 or int(z.max()) >= self.num_states):
+            raise ValueError(f"subgoal_index values must lie in [0, {self.num_states}), got "
+                             f"[{int(z.min())}, {int(z.max())}]")
+        if not self.batch_shape:
+            return self.table[z]
+        table = self.table.reshape(self.learners, self.num_states)
+        if learner is not None:
+            if learner.shape != z.shape:
+                raise ValueError(f"subgoal_learner has shape {tuple(learner.shape)}, subgoal_index "
+                                 f"{tuple(z.shape)}: they must match")
+            if learner.numel() and (int(learner.min()) < 0 or int(learner.max()) >= self.learners):
+                raise ValueError(f"subgoal_learner values must lie in [0, {self.learners}) for a table batch "
+                                 f"of shape {tuple(self.batch_shape)}")
+            return table[learner.long(), z]
         nb = len(self.batch_shape)
         if z.shape[:nb] != self.batch_shape:
             raise ValueError(
                 f"subgoal_index of shape {tuple(z.shape)} does not start with the learner batch "
-                f"shape {tuple(self.batch_shape)}"
+                f"shape {tuple(self.batch_shape)}; pass the learner indices (the 'subgoal_learner' entry)"
             )
-        if nb == 0:
-            return self.table[z]
-        learners = self.batch_shape.numel()
-        table = self.table.reshape(learners, self.num_states)
-        return table.gather(1, z.reshape(learners, -1)).view(z.shape)
+        return table.gather(1, z.reshape(self.learners, -1)).view(z.shape)
 
 
 class NeuralPotential(Potential):
@@ -96,6 +204,10 @@ class NeuralPotential(Potential):
     Args:
         network: maps ``[*B, D]`` anchor observations to ``[*B, 1]`` values
             (for pick-and-place, the critic's hidden layers without the action).
+
+    Keyword Args:
+        anchor_key: the anchor entry read.
+        out_key: where the value is written.
 
     Examples:
         >>> import torch
@@ -106,14 +218,13 @@ class NeuralPotential(Potential):
         torch.Size([5, 1])
     """
 
-    in_keys = (ANCHOR,)
-
-    def __init__(self, network: nn.Module):
-        super().__init__()
+    def __init__(self, network: nn.Module, *, anchor_key: NestedKey = ANCHOR, out_key: NestedKey = VALUE) -> None:
+        super().__init__([anchor_key], out_key)
         self.network = network
 
-    def forward(self, anchor: torch.Tensor) -> torch.Tensor:
-        return self.network(anchor.float())
+    def value(self, anchor: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
+        out = self.network(anchor.float())
+        return check_value(out, anchor.shape[:-1], f"NeuralPotential's network {type(self.network).__name__}")
 
 
 class NaivePotential(Potential):
@@ -126,6 +237,10 @@ class NaivePotential(Potential):
         eta: the potential of a subgoal state (the paper uses 1 in four-rooms,
             10,000 in PinBall).
 
+    Keyword Args:
+        achieved_key: the entry read.
+        out_key: where the value is written.
+
     Examples:
         >>> import torch
         >>> from torchrl_subgoal import NaivePotential
@@ -134,11 +249,9 @@ class NaivePotential(Potential):
                 [ 0.]])
     """
 
-    in_keys = (ACHIEVED,)
-
-    def __init__(self, eta: float):
-        super().__init__()
+    def __init__(self, eta: float, *, achieved_key: NestedKey = ACHIEVED, out_key: NestedKey = VALUE) -> None:
+        super().__init__([achieved_key], out_key)
         self.eta = float(eta)
 
-    def forward(self, achieved: torch.Tensor) -> torch.Tensor:
+    def value(self, achieved: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
         return achieved.to(torch.get_default_dtype()) * self.eta

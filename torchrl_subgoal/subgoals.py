@@ -5,16 +5,22 @@ subgoals and the order in which they should be achieved. The order is total
 (a chain, ``sg_0 ≺ sg_1 ≺ …``) or partial (a DAG). Each subgoal has an
 *achievement predicate* over the environment's observation.
 
-Predicates (all evaluated on one observation vector, batched):
+Built-in predicates (evaluated on one observation entry, batched):
 
 * :class:`State` — a discrete observation equals a given state index;
 * :class:`Cell` — chosen observation entries equal a grid cell ``(row, col)``;
 * :class:`Circle` — chosen entries lie within ``radius`` of ``centre``;
 * :class:`Box` — chosen entries lie within ``centre ± margin``.
 
-Every predicate compiles to one region ``lo ≤ o ≤ hi`` and
-``Σ w (o − c)² ≤ r²`` so that a batch of learners, each following its own
-pattern, is tested in one vectorised expression (:class:`SubgoalTables`).
+Each compiles to one region ``lo ≤ o ≤ hi`` and ``Σ w (o − c)² ≤ r²`` so
+that a batch of learners, each following its own pattern, is tested in one
+vectorised expression (:class:`SubgoalTables`).
+
+Any other condition is a :class:`Condition`: a function of the batch's
+TensorDict (every entry of the step: observations of any key, flags of a
+dict observation, …) returning a boolean mask. A plain function given as a
+subgoal is wrapped in one, and a subgoal file names one by import path
+(``{call: "package.module:function"}``).
 
 The file format (YAML, or JSON which is valid YAML) is documented in
 ``docs/subgoal_files.md``; :meth:`SubgoalSeries.from_file` loads it and every
@@ -23,6 +29,7 @@ error names the file, the pattern and the field.
 
 from __future__ import annotations
 
+import importlib
 import json
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -33,6 +40,7 @@ from typing import Any, NoReturn
 import numpy as np
 import torch
 import yaml
+from tensordict import TensorDictBase
 
 from torchrl_subgoal import _kernels
 
@@ -40,6 +48,7 @@ __all__ = [
     "Box",
     "Cell",
     "Circle",
+    "Condition",
     "Predicate",
     "State",
     "StateAggregation",
@@ -222,13 +231,28 @@ class Region:
 
 
 class Predicate:
-    """Base class of achievement predicates."""
+    """Base class of achievement predicates.
 
-    kind: str = ""
+    A predicate either compiles to a :class:`Region` of one observation entry
+    (the built-ins: override :meth:`region` and :meth:`dims`), or is a
+    *condition* on the step's TensorDict: override :meth:`__call__` to return
+    a boolean mask of the batch (see :class:`Condition`).
+    """
+
+    kind: str = "predicate"
+
+    @property
+    def compiled(self) -> bool:
+        """Whether the predicate is a region (else it is called on the TensorDict)."""
+        return type(self).region is not Predicate.region
+
+    def __call__(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """The mask ``[*B]`` (or ``[*B, 1]``) of rows of ``tensordict`` that achieve the subgoal."""
+        raise NotImplementedError(f"{type(self).__name__} is a region predicate; SubgoalTables evaluates it")
 
     def dims(self) -> tuple[int, ...]:
         """Observation entries the predicate reads."""
-        raise NotImplementedError
+        return ()
 
     def region(self, size: int, one_hot: bool = False) -> Region:
         """Compile to a :class:`Region` over an observation with ``size`` entries."""
@@ -351,6 +375,130 @@ class Box(Predicate):
         return {"box": {"centre": list(self.centre), "margin": margin, "dims": list(self.box_dims)}}
 
 
+def _import_path(fn: Any) -> str | None:
+    """``"module:qualname"`` of a module-level function or class, else ``None``."""
+    module, qualname = getattr(fn, "__module__", None), getattr(fn, "__qualname__", None)
+    if not module or not qualname or "<" in qualname or module == "__main__":
+        return None
+    return f"{module}:{qualname}"
+
+
+class Condition(Predicate):
+    """A subgoal achieved where ``fn(tensordict)`` holds: any condition on the step's entries.
+
+    ``fn`` receives the TensorDict the subgoal is tested on — the ``"next"``
+    entries of an env step, batch shape ``[*B]`` — and returns a boolean mask
+    ``[*B]`` (or ``[*B, 1]``). It may read any entry: another observation than
+    the one the built-in predicates or the potential read, a flag of a dict
+    observation, a field decoded from a packed discrete state. Conditions are
+    evaluated once per step for the whole batch (a vectorised torch
+    expression, not a per-env loop).
+
+    Args:
+        fn: the function (a plain function given as a subgoal is wrapped in a ``Condition``).
+        name: a label for messages (default: the function's name).
+
+    Keyword Args:
+        path: the ``"module:attribute"`` import path a subgoal file names it by
+            (derived for a module-level function, so :func:`save_patterns` can write it).
+        args: with ``args``, the attribute at ``path`` is a factory and ``fn`` is
+            ``factory(**args)`` (see :meth:`from_path`).
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl_subgoal import Condition
+        >>> carrying = Condition(lambda td: td["inventory"] > 0, name="carrying")
+        >>> carrying(TensorDict({"inventory": torch.tensor([0, 2])}, [2]))
+        tensor([False,  True])
+    """
+
+    kind = "call"
+
+    def __init__(
+        self,
+        fn: Callable[[TensorDictBase], torch.Tensor],
+        name: str | None = None,
+        *,
+        path: str | None = None,
+        args: Mapping[str, Any] | None = None,
+    ) -> None:
+        if not callable(fn):
+            raise TypeError(f"a Condition needs a callable, got {type(fn).__name__}")
+        self.fn = fn
+        self.name = name or getattr(fn, "__name__", type(fn).__name__)
+        self.args = dict(args) if args else None
+        self.path = path if path is not None or self.args else _import_path(fn)
+
+    @classmethod
+    def from_path(cls, path: Any, args: Any = None, *, where: str = "call") -> Condition:
+        """Import ``"package.module:function"`` (or ``"package.module.function"``); with ``args``
+        (a mapping) call it with them to build the function. Errors name ``where``.
+
+        Examples:
+            >>> Condition.from_path("operator:truth").name
+            'truth'
+        """
+        if not isinstance(path, str) or not path.strip():
+            raise SubgoalFileError(f"{where}: expected an import path such as 'my_package.subgoals:carrying', "
+                                   f"got {path!r}")
+        if args is not None and not isinstance(args, Mapping):
+            raise SubgoalFileError(f"{where}: args: expected a mapping of keyword arguments, got {args!r}")
+        module_name, sep, attr = path.partition(":")
+        if not sep:
+            module_name, _, attr = path.rpartition(".")
+        if not module_name or not attr:
+            raise SubgoalFileError(f"{where}: {path!r} is not 'module:function'")
+        try:
+            obj: Any = importlib.import_module(module_name)
+        except ImportError as exc:
+            raise SubgoalFileError(f"{where}: cannot import module {module_name!r} ({exc}); is it installed "
+                                   "or on PYTHONPATH?") from None
+        for part in attr.split("."):
+            if not hasattr(obj, part):
+                raise SubgoalFileError(f"{where}: module {module_name!r} has no attribute {attr!r}")
+            obj = getattr(obj, part)
+        if args:
+            try:
+                obj = obj(**args)
+            except Exception as exc:
+                raise SubgoalFileError(f"{where}: {path}(**args) failed: {exc}") from None
+        if not callable(obj):
+            raise SubgoalFileError(f"{where}: {path!r} is not callable")
+        return cls(obj, name=attr.split(".")[-1], path=f"{module_name}:{attr}", args=args)
+
+    def __call__(self, tensordict: TensorDictBase) -> torch.Tensor:
+        return self.fn(tensordict)
+
+    def _identity(self) -> tuple[Any, ...]:
+        if self.path is not None:
+            return (self.path, tuple(sorted((self.args or {}).items(), key=lambda kv: kv[0])))
+        return (id(self.fn),)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Condition) and self._identity() == other._identity()
+
+    def __hash__(self) -> int:
+        try:
+            return hash(self._identity())
+        except TypeError:  # unhashable args
+            return hash(self.path)
+
+    def __repr__(self) -> str:
+        return f"Condition({self.path or self.name!r})"
+
+    def to_dict(self) -> dict[str, Any]:
+        if self.path is None:
+            raise SubgoalFileError(
+                f"condition {self.name!r} has no import path (a lambda or a local function): define it at "
+                "module level, or pass path='module:function', to write it to a subgoal file"
+            )
+        out: dict[str, Any] = {"call": self.path}
+        if self.args:
+            out["args"] = dict(self.args)
+        return out
+
+
 # --------------------------------------------------------------------------- parsing
 
 
@@ -390,12 +538,15 @@ def parse_predicate(spec: Any, where: str) -> Predicate:
     if not isinstance(spec, Mapping):
         raise SubgoalFileError(f"{where}: expected a mapping such as {{cell: [4, 9]}}, got {spec!r}")
     _unique(spec, where, "field")
-    kinds = [k for k in ("state", "cell", "circle", "box") if k in spec]
+    kinds = [k for k in ("state", "cell", "circle", "box", "call") if k in spec]
     if len(kinds) != 1:
         raise SubgoalFileError(
-            f"{where}: give exactly one predicate among state, cell, circle, box; got fields {sorted(spec)}"
+            f"{where}: give exactly one predicate among state, cell, circle, box, call; got fields {sorted(spec)}"
         )
     kind = kinds[0]
+    if kind == "call":
+        _check_keys(spec, {"call", "args"}, where)
+        return Condition.from_path(spec["call"], spec.get("args"), where=f"{where}.call")
     if kind == "state":
         _check_keys(spec, {"state"}, where)
         return State(int(_number(spec["state"], f"{where}.state", integer=True)))
@@ -457,6 +608,15 @@ def parse_predicate(spec: Any, where: str) -> Predicate:
 # --------------------------------------------------------------------------- series
 
 
+def _as_predicate(subgoal: Any, where: str) -> Predicate:
+    """A predicate as given, or a plain callable wrapped in a :class:`Condition`."""
+    if isinstance(subgoal, Predicate):
+        return subgoal
+    if callable(subgoal):
+        return Condition(subgoal)
+    raise TypeError(f"{where}: a subgoal is a Predicate or a function of the TensorDict, got {subgoal!r}")
+
+
 @dataclass(frozen=True)
 class SubgoalSeries:
     """An ordered set of subgoals: a chain (total order) or a DAG (partial order).
@@ -469,7 +629,9 @@ class SubgoalSeries:
     has ``n + 1`` abstract states.
 
     Args:
-        predicates: one achievement predicate per subgoal.
+        predicates: one achievement predicate per subgoal: a built-in region
+            (:class:`Cell`, :class:`Circle`…), a :class:`Condition`, or any
+            function of the step's TensorDict returning a boolean mask.
         order: pairs ``(i, j)`` meaning subgoal ``i`` comes before ``j``.
             ``None`` means the chain ``0 ≺ 1 ≺ … ≺ n-1``. Transitive pairs are
             allowed; only the covering relation decides what comes next.
@@ -495,15 +657,15 @@ class SubgoalSeries:
 
     def __init__(
         self,
-        predicates: Sequence[Predicate],
+        predicates: Sequence[Predicate | Callable[[TensorDictBase], torch.Tensor]],
         order: Iterable[tuple[int, int]] | None = None,
         names: Sequence[str] | None = None,
         name: str = "pattern",
         source: str | None = None,
     ) -> None:
-        preds = tuple(predicates)
-        n = len(preds)
         where = _where(source, name, "")
+        preds = tuple(_as_predicate(p, f"{where}: subgoals[{i}]") for i, p in enumerate(predicates))
+        n = len(preds)
         if n == 0:
             raise SubgoalFileError(f"{where}: a pattern needs at least one subgoal")
         if names is not None and len(names) != n:
@@ -822,15 +984,23 @@ class SubgoalTables:
     """Subgoal series of a batch of learners, compiled for one vectorised test.
 
     Each learner ``b`` follows pattern ``pattern_index[b]``. The tables hold,
-    per learner, every subgoal's region (padded to the longest pattern) and
-    which subgoals are achievable from each abstract state.
+    per pattern, every region predicate (padded to the longest pattern) and
+    which subgoals are achievable from each abstract state; conditions
+    (:class:`Condition`) are called once per step on the step's TensorDict.
 
     Args:
         patterns: the distinct patterns.
         pattern_index: the pattern of each learner, shape ``batch_shape``.
-        observation_size: entries of the observation the predicates read.
+        observation_size: entries of the observation the region predicates read.
         one_hot: the observation is one-hot (for :class:`State` predicates).
         observation_key: for error messages.
+
+    Examples:
+        >>> import torch
+        >>> from torchrl_subgoal import State, SubgoalSeries
+        >>> tables = SubgoalTables([SubgoalSeries([State(1), State(3)])], torch.zeros(2, dtype=torch.long), 1)
+        >>> tables.advance(torch.tensor([[0], [1]]), torch.tensor([[1], [1]])).tolist()
+        [[1], [1]]
     """
 
     def __init__(
@@ -844,14 +1014,18 @@ class SubgoalTables:
     ) -> None:
         n_nodes = max(len(p) for p in patterns)
         P, J, D = len(patterns), n_nodes, observation_size
-        lo = torch.full((P, J, D), math.inf)  # padded nodes are never achieved
+        lo = torch.full((P, J, D), math.inf)  # padded nodes (and conditions) are never inside a region
         hi = torch.full((P, J, D), -math.inf)
         centre = torch.zeros(P, J, D)
         weight = torch.zeros(P, J, D)
         radius2 = torch.full((P, J), math.inf)
         succ = torch.zeros(P, J + 1, J, dtype=torch.bool)
+        slots: dict[Predicate, torch.Tensor] = {}  # condition -> [P, J] where a pattern uses it
         for p, series in enumerate(patterns):
             for j, pred in enumerate(series.predicates):
+                if not pred.compiled:
+                    slots.setdefault(pred, torch.zeros(P, J, dtype=torch.bool))[p, j] = True
+                    continue
                 problem = _misfit(pred, D, one_hot)
                 try:
                     if problem:
@@ -871,9 +1045,14 @@ class SubgoalTables:
                 for j in series.successors(z):
                     succ[p, z, j] = True
         idx = pattern_index.long()
+        if idx.numel() and (int(idx.min()) < 0 or int(idx.max()) >= P):
+            raise ValueError(f"pattern_index values must lie in [0, {P})")
         self.batch_shape = idx.shape
         self.num_states = J + 1
+        self.observation_size = D
+        self.observation_key = observation_key
         self.chain = all(p.is_chain for p in patterns)
+        self.uses_regions = any(pred.compiled for series in patterns for pred in series.predicates)
         # per-learner tables, flattened batch first
         flat = idx.reshape(-1)
         self.lo, self.hi = lo[flat], hi[flat]
@@ -882,6 +1061,7 @@ class SubgoalTables:
         self.succ = succ[flat]
         self.uses_circle = bool(torch.isfinite(radius2).any())
         self._rows = torch.arange(flat.numel())
+        self.conditions = [(pred, where[flat]) for pred, where in slots.items()]
         # the kernels read per-pattern tables and each learner's pattern (small, stays in cache)
         self._np = {
             "pattern": flat.contiguous().numpy(),
@@ -889,25 +1069,77 @@ class SubgoalTables:
             "radius2": radius2.numpy(), "succ": succ.numpy(),
         }
 
-    def initial(self, observation: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
+    @property
+    def fusable(self) -> bool:
+        """Whether one compiled kernel can advance the batch (no conditions to call)."""
+        return not self.conditions
+
+    def initial(self, observation: torch.Tensor | None, batch_shape: torch.Size) -> torch.Tensor:
         """Abstract state at reset: 0 for every learner, shape ``[*batch_shape, 1]``."""
         return torch.zeros((*batch_shape, 1), dtype=torch.long)
 
+    def rows(self, observation: torch.Tensor) -> torch.Tensor:
+        """``observation`` as ``[B, D]`` rows of this batch; a ``ValueError`` if it does not fit."""
+        n, d = self._rows.numel(), self.observation_size
+        if observation.numel() != n * d:
+            raise ValueError(
+                f"observation {self.observation_key!r} of shape {tuple(observation.shape)} does not fit the subgoal "
+                f"tables compiled for {n} learners x {d} entries (batch shape {tuple(self.batch_shape)})"
+            )
+        return observation.reshape(n, d)
+
+    def _check_z(self, z: torch.Tensor) -> None:
+        if z.numel() != self._rows.numel():
+            raise ValueError(f"{z.numel()} abstract states for subgoal tables compiled for "
+                             f"{self._rows.numel()} learners (batch shape {tuple(self.batch_shape)})")
+
     def inside(self, observation: torch.Tensor) -> torch.Tensor:
         """Which subgoal regions contain the observation, ``[B, J]`` (flattened batch)."""
-        obs = observation.reshape(self._rows.numel(), 1, -1).to(torch.float64)
+        obs = self.rows(observation).unsqueeze(1).to(torch.float64)
         return _in_regions(obs, self.lo, self.hi, self.centre, self.weight, self.radius2, self.uses_circle)
 
-    def advance(self, z: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
-        """Next abstract state after observing ``observation`` in abstract state ``z``.
+    def achieved(self, observation: torch.Tensor | None, tensordict: TensorDictBase | None) -> torch.Tensor:
+        """Which subgoals hold, ``[B, J]``: regions on ``observation``, conditions on ``tensordict``."""
+        n = self._rows.numel()
+        if self.uses_regions:
+            if observation is None:
+                raise ValueError(f"the region subgoals read {self.observation_key!r}, which is missing")
+            hit = self.inside(observation)
+        else:
+            hit = torch.zeros(n, self.num_states - 1, dtype=torch.bool)
+        for pred, slots in self.conditions:
+            if tensordict is None:
+                raise ValueError(f"condition {pred!r} needs the step's TensorDict")
+            hit = hit | (slots & self._mask(pred, tensordict).unsqueeze(-1))
+        return hit
 
-        On the CPU this is one fused kernel; elsewhere :meth:`advance_eager`.
+    def _mask(self, pred: Predicate, tensordict: TensorDictBase) -> torch.Tensor:
+        n = self._rows.numel()
+        try:
+            mask = pred(tensordict)
+        except Exception as exc:
+            raise type(exc)(f"subgoal condition {pred!r} failed on the step's TensorDict: {exc}") from exc
+        if not isinstance(mask, torch.Tensor) or mask.numel() != n or mask.shape[:len(self.batch_shape)] != \
+                self.batch_shape:
+            shape = tuple(mask.shape) if isinstance(mask, torch.Tensor) else type(mask).__name__
+            raise ValueError(f"subgoal condition {pred!r} returned {shape}; expected a boolean mask of shape "
+                             f"{tuple(self.batch_shape)} (or with a trailing 1)")
+        return mask.reshape(n).to(device=self.lo.device, dtype=torch.bool)
+
+    def advance(
+        self, z: torch.Tensor, observation: torch.Tensor | None, tensordict: TensorDictBase | None = None
+    ) -> torch.Tensor:
+        """Next abstract state after observing ``observation`` (and ``tensordict``) in abstract state ``z``.
+
+        On the CPU without conditions this is one fused kernel; else :meth:`advance_eager`.
         """
-        if z.device.type != "cpu":
-            return self.advance_eager(z, observation)
+        self._check_z(z)
+        if z.device.type != "cpu" or not self.fusable:
+            return self.advance_eager(z, observation, tensordict)
+        assert observation is not None
         n = self._rows.numel()
         zf = z.numpy().reshape(n, 1)
-        obs = observation.numpy().reshape(n, -1)
+        obs = self.rows(observation).numpy()
         out = np.empty((n, 1), dtype=np.int64)
         t = self._np
         _kernels.advance_regions(
@@ -916,19 +1148,23 @@ class SubgoalTables:
         result = torch.from_numpy(out)
         return result if result.shape == z.shape else result.view(z.shape)
 
-    def advance_eager(self, z: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
+    def advance_eager(
+        self, z: torch.Tensor, observation: torch.Tensor | None, tensordict: TensorDictBase | None = None
+    ) -> torch.Tensor:
         """:meth:`advance` with torch operations only (any device; the reference)."""
+        self._check_z(z)
         zf = z.reshape(-1)
-        if self.chain:
+        if self.chain and self.fusable:
             # only subgoal z can be achieved next: test that one region
+            assert observation is not None
             j = zf.clamp(max=self.num_states - 2)
-            obs = observation.reshape(zf.numel(), -1).to(torch.float64)
+            obs = self.rows(observation).to(torch.float64)
             rows = self._rows
             hit = _in_regions(obs, self.lo[rows, j], self.hi[rows, j], self.centre[rows, j],
                               self.weight[rows, j], self.radius2[rows, j], self.uses_circle)
             hit = hit & self.succ[self._rows, zf, j]
             return (zf + hit.long()).view_as(z)
-        cand = self.succ[self._rows, zf] & self.inside(observation)
+        cand = self.succ[self._rows, zf] & self.achieved(observation, tensordict)
         first = cand.long().argmax(-1)  # lowest-index achievable subgoal
         return torch.where(cand.any(-1), first + 1, zf).view_as(z)
 
@@ -1025,14 +1261,25 @@ class StateAggregation:
         )
         return torch.from_numpy(out).view(z.shape).to(z.device)
 
-    def initial(self, observation: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
+    def initial(self, observation: torch.Tensor | None, batch_shape: torch.Size) -> torch.Tensor:
         """Abstract state of the reset observation, ``[*batch_shape, 1]``."""
+        if observation is None:
+            raise ValueError("a state aggregation needs the observation it reads")
         if self.regions is not None:
             return self._in_regions(torch.zeros((*batch_shape, 1), dtype=torch.long), observation)
         return self._g(observation, batch_shape).unsqueeze(-1)
 
-    def advance(self, z: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
+    @property
+    def fusable(self) -> bool:
+        """Whether the fused kernels can shape with it (always: it is evaluated before them)."""
+        return True
+
+    def advance(
+        self, z: torch.Tensor, observation: torch.Tensor | None, tensordict: TensorDictBase | None = None
+    ) -> torch.Tensor:
         """``g`` of the new observation (the previous ``z`` matters only outside every region)."""
+        if observation is None:
+            raise ValueError("a state aggregation needs the observation it reads")
         if self.regions is not None:
             return self._in_regions(z, observation)
         return self._g(observation, z.shape[:-1]).unsqueeze(-1)

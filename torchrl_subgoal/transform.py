@@ -4,69 +4,141 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModuleBase
 from tensordict.utils import NestedKey
 from torchrl.data import Binary, Bounded, Composite, OneHot, TensorSpec, Unbounded
 from torchrl.envs.transforms import Transform
 
 from torchrl_subgoal import _kernels
 from torchrl_subgoal.loss import SubgoalValueLoss
-from torchrl_subgoal.potentials import (
-    ACHIEVED,
-    ANCHOR,
-    INDEX,
-    NaivePotential,
-    Potential,
-    TabularPotential,
-)
-from torchrl_subgoal.subgoals import StateAggregation, SubgoalSeries, SubgoalTables
+from torchrl_subgoal.potentials import NaivePotential, TabularPotential, check_value
+from torchrl_subgoal.subgoals import State, StateAggregation, SubgoalSeries, SubgoalTables
 
-__all__ = ["SubgoalPotentialTransform"]
+__all__ = ["SubgoalKeys", "SubgoalPotentialTransform"]
 
 RETURN = "subgoal_return"
 STEPS = "subgoal_steps"
+
+
+@dataclass(frozen=True)
+class SubgoalKeys:
+    """Names of the abstract-state entries one transform keeps: ``f"{prefix}_{role}"``.
+
+    Give a second transform on the same env another prefix (and its potential
+    the matching keys) so that the two do not share entries.
+
+    Examples:
+        >>> SubgoalKeys("room").index
+        'room_index'
+    """
+
+    prefix: str = "subgoal"
+
+    @property
+    def index(self) -> str:
+        """``z``, the node of the subgoal series reached."""
+        return f"{self.prefix}_index"
+
+    @property
+    def ret(self) -> str:
+        """``r_h``, the discounted reward since ``z`` was entered."""
+        return f"{self.prefix}_return"
+
+    @property
+    def steps(self) -> str:
+        """``k``, the steps since ``z`` was entered."""
+        return f"{self.prefix}_steps"
+
+    @property
+    def achieved(self) -> str:
+        """Whether ``z`` was entered on this step."""
+        return f"{self.prefix}_achieved"
+
+    @property
+    def anchor(self) -> str:
+        """The observation at which ``z`` was entered."""
+        return f"{self.prefix}_anchor"
+
+    @property
+    def learner(self) -> str:
+        """Which env of the batch the row belongs to (its learner)."""
+        return f"{self.prefix}_learner"
+
+    @property
+    def optional(self) -> tuple[str, ...]:
+        """The entries kept only when the potential reads them."""
+        return (self.achieved, self.anchor, self.learner)
+
+
+@dataclass
+class _Setup:
+    """What shaping a batch of a given shape needs: the compiled abstraction, each row's learner,
+    and the potential as the fused kernels read it (``table`` rows align with the batch's rows)."""
+
+    batch_shape: torch.Size
+    abstraction: SubgoalTables | StateAggregation
+    learner: torch.Tensor  # [*B, 1] long
+    table: np.ndarray | None  # None: not fusable (neural potential, conditions, not CPU)
+    shared: bool = False
+    eta: float = 0.0
 
 
 class SubgoalPotentialTransform(Transform):
     """Adds the shaping reward ``F = γ Φ(z') − Φ(z)`` of a subgoal series to any TorchRL env.
 
     The transform keeps, per env of the batch, the abstract state of dynamic
-    trajectory aggregation (Okudo & Yamada 2021) in the TensorDict:
+    trajectory aggregation (Okudo & Yamada 2021) in the TensorDict (names with
+    the default ``prefix="subgoal"``):
 
     * ``"subgoal_index"`` ``z`` — the node of the subgoal series reached
       (``0`` at reset; advanced when the next subgoal's predicate holds);
-    * ``"subgoal_achieved"`` — ``z`` was entered on this step (only when the
-      potential reads it, e.g. :class:`~torchrl_subgoal.NaivePotential`);
     * ``"subgoal_return"`` ``r_h ← r_h + γ_v^k r`` and ``"subgoal_steps"``
       ``k ← k + 1`` since ``z`` was entered;
-    * ``"subgoal_anchor"`` — the observation at which ``z`` was entered (only
-      when the potential reads it, e.g. :class:`~torchrl_subgoal.NeuralPotential`).
+    * only when the potential reads them: ``"subgoal_achieved"`` (``z`` was
+      entered on this step, for :class:`~torchrl_subgoal.NaivePotential`),
+      ``"subgoal_anchor"`` (the observation at which ``z`` was entered, for
+      :class:`~torchrl_subgoal.NeuralPotential`) and ``"subgoal_learner"``
+      (the env's index in the batch, for a per-env
+      :class:`~torchrl_subgoal.TabularPotential`).
 
     Every step it adds ``F`` to the reward; the environment's reward stays
     under ``"env_reward"``, declared as a second reward entry (so use
-    ``env.reward_keys``: ``env.reward_key`` expects a single one). When a
-    subgoal is achieved or the episode ends it writes one SMDP transition
-    ``(z, r_h, k, z', terminated)`` under ``("next", "smdp")`` in the layout
-    :class:`~torchrl_subgoal.SubgoalValueLoss` and TorchRL's TD(0) estimator
-    read (``mask`` tells which entries are real). At truncation the transition
-    bootstraps from ``V(z')``.
+    ``env.reward_keys``). When a subgoal is achieved or the episode ends, the
+    step closes one SMDP transition ``(z, r_h, k, z', terminated)``:
+    :meth:`transitions` returns those of collected data (any batch shape) in
+    the layout :class:`~torchrl_subgoal.SubgoalValueLoss` and TorchRL's TD(0)
+    estimator read, rebuilt from the kept entries — nothing extra is written
+    per step (``write_transitions=True`` also writes every step's entry under
+    ``("next", "smdp")``, with ``mask`` telling which are real). At truncation
+    the transition bootstraps from ``V(z')``.
 
-    The potential is used *as it is now* (a dynamic potential). With
-    ``value_lr`` set, the transform also trains the potential online by SGD on
-    :class:`~torchrl_subgoal.SubgoalValueLoss` before computing ``F``, which
-    is the paper's algorithm (update ``V``, then shape with it); otherwise train
-    it yourself from ``data["next", "smdp"]`` with the same loss. Freeze a
-    trained potential with ``transform.potential.requires_grad_(False)``.
+    **Shaping and learning are separate.** The shaping step is pure: it uses
+    the potential *as it is now* (a dynamic potential) and never changes it.
+    With ``value_lr`` set, the env step also trains the potential online, one
+    SGD step of :class:`~torchrl_subgoal.SubgoalValueLoss` on this step's
+    transitions *before* shaping (the paper's algorithm: update ``V``, then
+    shape with it). Otherwise train it yourself from ``data["next", "smdp"]``
+    with the same loss. Freeze a trained potential with
+    ``transform.potential.requires_grad_(False)``.
+
+    **Stored data.** Calling the transform on a TensorDict (``transform(data)``,
+    e.g. a replay-buffer sample ``[*B, T]``) recomputes the abstract state and
+    the shaping along the time dimension from the stored observations, for
+    any batch shape, without training and without touching the env's set-up.
+    A row's learner (its table and pattern) is read from ``"subgoal_learner"``
+    when the data has it.
 
     Policy invariance (Ng et al. 1999) needs ``Φ`` to be a function of the
     *agent's* state. ``z`` depends on the episode's history, so an agent that
     sees only ``s`` (as in the paper) may learn a greedy policy that cycles
-    across a subgoal; give the agent ``z`` too (e.g. ``SoftmaxSarsa(...,
-    abstract_states=n)``) for the exact guarantee once ``Φ`` is fixed.
+    across a subgoal; give the agent ``z`` too for the exact guarantee once
+    ``Φ`` is fixed.
 
     A NaN or infinite reward, or a NaN in the observation, raises ``ValueError``
     naming the entry and the env (it would make the potential NaN for good);
@@ -74,19 +146,22 @@ class SubgoalPotentialTransform(Transform):
     torch path behave so.
 
     Append it to the *outer* env (``TransformedEnv(ParallelEnv(...), t)``) so
-    that the potential being trained is the one used for shaping.
+    that the potential being trained is the one used for shaping; for envs in
+    collector worker processes see :mod:`torchrl_subgoal.training` (shared
+    potentials).
 
     Args:
         subgoals: a :class:`SubgoalSeries` shared by every env of the batch; a
             sequence of series, one per env (flattened batch order) or indexed
             by ``pattern_index``; or a :class:`StateAggregation` ``z = g(s)``
             (the SARSA-RS baseline).
-        potential: ``Φ`` — :class:`TabularPotential`, :class:`NeuralPotential`
-            or :class:`NaivePotential`.
+        potential: ``Φ`` — :class:`TabularPotential`, :class:`NeuralPotential`,
+            :class:`NaivePotential`, or any TensorDict module reading entries
+            this transform keeps and writing one value entry.
 
     Keyword Args:
         gamma: the agent's discount ``γ`` in ``F = γ Φ(z') − Φ(z)``.
-        observation_key: the observation the predicates read.
+        observation_key: the observation the built-in (region) predicates read.
         reward_key: the reward to shape.
         pattern_index: with a sequence of series, the pattern of each env
             (shape of the env batch).
@@ -98,12 +173,21 @@ class SubgoalPotentialTransform(Transform):
             optimal policy exactly invariant in episodic tasks (Grzes 2017).
             Defaults to ``True``; ``False`` shapes with ``V(z')`` at the goal
             as the authors' released code does.
-        env_reward_key: where the unshaped reward is kept.
-        transitions_key: where the SMDP transitions are written in ``"next"``.
-        write_transitions: whether to write them. Defaults to ``True`` when
-            you train the potential yourself (``value_lr=None``) and ``False``
-            when the transform trains it online, where nothing else needs them
-            (skipping them saves a nested TensorDict per step).
+        env_reward_key: where the unshaped reward is kept. If an earlier
+            transform already keeps it there, ``r_h`` accumulates that entry
+            and it is left alone.
+        transitions_key: where the SMDP transitions are written in ``"next"``
+            with ``write_transitions``.
+        write_transitions: also write every step's SMDP transition entry (a
+            nested TensorDict, padding on most steps). Defaults to ``False``:
+            :meth:`transitions` rebuilds the real ones from the kept entries of
+            collected data at no per-step cost.
+        done_key: the env's done entry (``"next"`` of a step).
+        terminated_key: the env's terminated entry (defaults to ``done`` when absent).
+        prefix: the names of the kept entries (see :class:`SubgoalKeys`); the
+            potential must read entries with the same prefix.
+        anchor_key: the observation snapshotted as the anchor; defaults to
+            ``observation_key``.
 
     Examples:
         >>> import torch
@@ -121,12 +205,15 @@ class SubgoalPotentialTransform(Transform):
         torch.Size([4, 5, 1])
         >>> data["next", "subgoal_steps"][0, :, 0].tolist()  # k: steps since z was entered
         [1, 2, 3, 4, 5]
+        >>> shaped = env.transform(data.clone())  # stored data: the same shaping, no training
+        >>> bool((shaped["next", "subgoal_index"] == data["next", "subgoal_index"]).all())
+        True
     """
 
     def __init__(
         self,
         subgoals: SubgoalSeries | Sequence[SubgoalSeries] | StateAggregation,
-        potential: Potential,
+        potential: TensorDictModuleBase,
         *,
         gamma: float,
         observation_key: NestedKey = "observation",
@@ -138,7 +225,12 @@ class SubgoalPotentialTransform(Transform):
         env_reward_key: NestedKey = "env_reward",
         transitions_key: NestedKey = "smdp",
         write_transitions: bool | None = None,
+        done_key: NestedKey = "done",
+        terminated_key: NestedKey = "terminated",
+        prefix: str = "subgoal",
+        anchor_key: NestedKey | None = None,
     ) -> None:
+        anchor_key = observation_key if anchor_key is None else anchor_key
         super().__init__(in_keys=[observation_key, reward_key], out_keys=[reward_key, env_reward_key])
         if not 0.0 <= gamma <= 1.0:
             raise ValueError(f"gamma must lie in [0, 1], got {gamma}")
@@ -158,20 +250,31 @@ class SubgoalPotentialTransform(Transform):
                 raise TypeError("subgoals must be a SubgoalSeries, a sequence of them or a StateAggregation")
         if pattern_index is not None and patterns is None:
             raise ValueError("pattern_index needs a sequence of subgoal series")
+        if pattern_index is not None and patterns is not None and pattern_index.numel() and (
+            int(pattern_index.min()) < 0 or int(pattern_index.max()) >= len(patterns)
+        ):
+            raise ValueError(f"pattern_index values must lie in [0, {len(patterns)})")
         self.patterns = patterns
         self.pattern_index = pattern_index
+        self.keys = SubgoalKeys(prefix)
         self.potential = potential
+        self._check_potential_keys()
         self.gamma = float(gamma)
         self.value_gamma = float(value_gamma)
         self.observation_key = observation_key
+        self.anchor_key = anchor_key
         self.reward_key = reward_key
         self.env_reward_key = env_reward_key
+        self.done_key = done_key
+        self.terminated_key = terminated_key
         if write_transitions is None:
-            write_transitions = value_lr is None
+            write_transitions = False
         self.transitions_key: NestedKey | None = transitions_key if write_transitions else None
         self.zero_terminal_potential = zero_terminal_potential
-        extra = tuple(k for k in (ACHIEVED, ANCHOR) if k in potential.in_keys)
-        self._state_keys: tuple[str, ...] = (INDEX, RETURN, STEPS, *extra)
+        keys = self.keys
+        self._state_keys: tuple[str, ...] = (
+            keys.index, keys.ret, keys.steps, *(k for k in keys.optional if k in self.potential.in_keys)
+        )
         self._parameters_list = list(potential.parameters())
         self.value_loss: SubgoalValueLoss | None = None
         self.value_optimizer: torch.optim.Optimizer | None = None
@@ -180,14 +283,32 @@ class SubgoalPotentialTransform(Transform):
             self.value_optimizer = torch.optim.SGD(potential.parameters(), lr=value_lr)
         self._value_lr = float(value_lr) if value_lr is not None else 0.0
         self._has_value_lr = value_lr is not None
-        self._abstraction: SubgoalTables | StateAggregation | None = None
-        self._fused_potential = self._fused_constants()
-        # plain references for the hot path (module attributes go through nn.Module.__getattr__)
-        self._table: torch.Tensor | None = potential.table if isinstance(potential, TabularPotential) else None
-        self._table_ptr = self._table.data_ptr() if self._table is not None else 0
-        self._in_keys = potential.in_keys
+        self._online: _Setup | None = None
+        self._layout: tuple[int, bool] | None = None
+        self._table_ptr = 0
 
     # ------------------------------------------------------------------ set-up
+
+    def _check_potential_keys(self) -> None:
+        pot = self.potential
+        if not isinstance(pot, TensorDictModuleBase) or not pot.out_keys:
+            raise TypeError(
+                "the potential must be a TensorDict module whose (last) output entry is the value (a Potential, or e.g. "
+                f"TensorDictModule(net, in_keys=[{self.keys.anchor!r}], out_keys=['subgoal_value'])), "
+                f"got {type(pot).__name__}"
+            )
+        provided = (self.keys.index, *self.keys.optional)
+        unknown = [k for k in pot.in_keys if k not in provided]
+        if unknown:
+            raise ValueError(
+                f"the potential reads {unknown}, which this transform does not keep; it keeps "
+                f"{list(provided)} (prefix {self.keys.prefix!r}): build the potential with those keys"
+            )
+
+    @property
+    def value_key(self) -> NestedKey:
+        """The potential's value entry (its last output entry)."""
+        return self.potential.out_keys[-1]
 
     @property
     def learning(self) -> bool:
@@ -205,70 +326,131 @@ class SubgoalPotentialTransform(Transform):
         assert self.patterns is not None
         return max(len(p) for p in self.patterns) + 1
 
-    def _observation_layout(self, observation_spec: TensorSpec | None, obs: torch.Tensor | None,
-                            batch_shape: torch.Size) -> tuple[int, bool]:
-        """(entries per observation, one-hot?) from the spec, else from a tensor."""
-        if observation_spec is not None:
-            shape = observation_spec.shape[len(batch_shape):]
-            return (int(shape.numel()) if len(shape) else 1), isinstance(observation_spec, OneHot)
-        assert obs is not None
-        shape = obs.shape[len(batch_shape):]
-        return (int(shape.numel()) if len(shape) else 1), False
+    @property
+    def abstraction(self) -> SubgoalTables | StateAggregation | None:
+        """The abstraction compiled for the env's batch (``None`` before the first reset)."""
+        return self._online.abstraction if self._online is not None else None
 
-    def _setup(self, batch_shape: torch.Size, obs: torch.Tensor) -> SubgoalTables | StateAggregation:
-        """Compile the subgoal tables for this batch (once) and check the potential fits."""
-        if self._abstraction is not None:
-            return self._abstraction
-        self._check_potential(batch_shape)
-        if self.aggregation is not None:
-            self._abstraction = self.aggregation
-            return self._abstraction
-        spec = None
-        parent = self.parent
-        if parent is not None:
-            obs_spec = parent.full_observation_spec
-            if self.observation_key not in obs_spec.keys(True, True):
-                raise KeyError(
-                    f"{type(self).__name__}: observation_key {self.observation_key!r} is not an "
-                    f"observation of the env; available: {sorted(map(str, obs_spec.keys(True, True)))}"
-                )
-            spec = obs_spec[self.observation_key]
-        size, one_hot = self._observation_layout(spec, obs, batch_shape)
-        assert self.patterns is not None
-        n = batch_shape.numel()
-        if self.pattern_index is not None:
-            index = self.pattern_index.long().reshape(batch_shape) if self.pattern_index.numel() == n else None
-            if index is None:
-                raise ValueError(f"pattern_index has {self.pattern_index.numel()} entries for {n} envs")
-            if int(index.min()) < 0 or int(index.max()) >= len(self.patterns):
-                raise ValueError(f"pattern_index values must lie in [0, {len(self.patterns)})")
-        elif len(self.patterns) == 1:
-            index = torch.zeros(batch_shape, dtype=torch.long)
-        elif len(self.patterns) == n:
-            index = torch.arange(n).reshape(batch_shape)
-        else:
-            raise ValueError(
-                f"{len(self.patterns)} subgoal series for a batch of {n} envs: give one series, "
-                "one per env, or pattern_index"
+    @property
+    def _uses_observation(self) -> bool:
+        """Whether ``observation_key`` is read (an aggregation or a region predicate); cached."""
+        uses = self.__dict__.get("_uses_observation_cache")
+        if uses is None:
+            uses = self.aggregation is not None or any(
+                pred.compiled for p in self.patterns or () for pred in p.predicates
             )
-        self._abstraction = SubgoalTables(
-            self.patterns, index, size, one_hot=one_hot, observation_key=str(self.observation_key)
-        )
-        return self._abstraction
+            self.__dict__["_uses_observation_cache"] = uses
+        return uses
 
-    def _check_potential(self, batch_shape: torch.Size) -> None:
+    def _observation_spec(self, key: NestedKey) -> TensorSpec | None:
+        parent = self.parent
+        if parent is None:
+            return None
+        obs_spec = parent.full_observation_spec
+        if key not in obs_spec.keys(True, True):
+            raise KeyError(
+                f"{type(self).__name__}: {key!r} is not an observation of the env (observation_key or "
+                f"anchor_key); available: {sorted(map(str, obs_spec.keys(True, True)))}"
+            )
+        return obs_spec[key]
+
+    def _observation_layout(self, obs: torch.Tensor | None, batch_shape: torch.Size) -> tuple[int, bool]:
+        """(entries per observation, one-hot?): from the env's spec once known, else from the data.
+
+        Without a spec a :class:`State` predicate reads an observation of more
+        than one entry as one-hot (a categorical state is a single entry).
+        """
+        if self._layout is not None:
+            return self._layout
+        spec = self._observation_spec(self.observation_key)
+        if spec is not None:
+            shape = spec.shape[len(batch_shape):]
+            self._layout = (int(shape.numel()) if len(shape) else 1), isinstance(spec, OneHot)
+            return self._layout
+        if obs is None:
+            return 0, False
+        shape = obs.shape[len(batch_shape):]
+        size = int(shape.numel()) if len(shape) else 1
+        states = self.patterns is not None and any(
+            isinstance(pred, State) for p in self.patterns for pred in p.predicates
+        )
+        return size, states and size > 1
+
+    def _patterns_of_learners(self, n_learners: int) -> torch.Tensor:
+        """The pattern each learner (env of the online batch, flattened) follows."""
+        assert self.patterns is not None
+        if self.pattern_index is not None:
+            if self.pattern_index.numel() != n_learners:
+                raise ValueError(f"pattern_index has {self.pattern_index.numel()} entries for {n_learners} envs")
+            return self.pattern_index.reshape(-1).long()
+        if len(self.patterns) == 1:
+            return torch.zeros(n_learners, dtype=torch.long)
+        if len(self.patterns) == n_learners:
+            return torch.arange(n_learners)
+        raise ValueError(
+            f"{len(self.patterns)} subgoal series for a batch of {n_learners} envs: give one series, "
+            "one per env, or pattern_index"
+        )
+
+    def _check_potential(self, n_learners: int) -> None:
         pot = self.potential
         if isinstance(pot, TabularPotential):
-            if pot.batch_shape and pot.batch_shape != batch_shape:
+            if pot.batch_shape and pot.learners != n_learners:
                 raise ValueError(
-                    f"TabularPotential has batch_shape {tuple(pot.batch_shape)} but the env batch is "
-                    f"{tuple(batch_shape)}: use one table per env or a shared one (batch_shape=())"
+                    f"TabularPotential has batch_shape {tuple(pot.batch_shape)} but the env batch has "
+                    f"{n_learners} envs: use one table per env or a shared one (batch_shape=())"
                 )
             if pot.num_states < self.num_abstract_states:
                 raise ValueError(
                     f"TabularPotential has {pot.num_states} states; the abstraction has "
                     f"{self.num_abstract_states}"
                 )
+
+    def _compile(
+        self, batch_shape: torch.Size, learner: torch.Tensor, obs: torch.Tensor | None, n_learners: int
+    ) -> _Setup:
+        """Compile the abstraction for a batch whose rows belong to ``learner`` (``[*B, 1]``)."""
+        self._check_potential(n_learners)
+        abstraction: SubgoalTables | StateAggregation
+        if self.aggregation is not None:
+            abstraction = self.aggregation
+        else:
+            size, one_hot = self._observation_layout(obs, batch_shape)
+            patterns = self._patterns_of_learners(n_learners)[learner.reshape(-1)].reshape(batch_shape)
+            assert self.patterns is not None
+            abstraction = SubgoalTables(
+                self.patterns, patterns, size, one_hot=one_hot, observation_key=str(self.observation_key)
+            )
+        return _Setup(batch_shape, abstraction, learner, None)
+
+    def _fused_potential(self, setup: _Setup, online: bool) -> None:
+        """Fill ``setup.table`` with the potential as the kernels read it, when they can."""
+        pot = self.potential
+        setup.table = None
+        if not setup.abstraction.fusable:
+            return
+        if isinstance(pot, NaivePotential):
+            setup.table, setup.eta = _NO_TABLE, pot.eta
+        elif isinstance(pot, TabularPotential) and pot.table.device.type == "cpu":
+            table = pot.table.detach().numpy().reshape(pot.learners, pot.num_states)
+            setup.shared = not pot.batch_shape
+            if not setup.shared and not online:  # rows of stored data: each row's learner's table (a copy)
+                table = np.ascontiguousarray(table[setup.learner.reshape(-1).numpy()])
+            setup.table = table
+            if online:
+                self._table_ptr = pot.table.data_ptr()
+
+    def _online_setup(self, batch_shape: torch.Size, obs: torch.Tensor | None) -> _Setup:
+        """The env batch's set-up: compiled at the first reset, kept for every step."""
+        setup = self._online
+        if setup is None or setup.batch_shape != batch_shape:
+            n = batch_shape.numel()
+            learner = torch.arange(n).reshape(*batch_shape, 1)
+            setup = self._online = self._compile(batch_shape, learner, obs, n)
+            self._fused_potential(setup, online=True)
+        elif isinstance(self.potential, TabularPotential) and self.potential.table.data_ptr() != self._table_ptr:
+            self._fused_potential(setup, online=True)  # the table moved (to shared memory, a device…)
+        return setup
 
     # ------------------------------------------------------------------ specs
 
@@ -277,32 +459,38 @@ class SubgoalPotentialTransform(Transform):
         """Abstract-state entries kept in the TensorDict (``"subgoal_*"``)."""
         return self._state_keys
 
-    def _state_specs(self, batch_shape: torch.Size, anchor_size: int) -> dict[str, TensorSpec]:
+    def _state_specs(self, batch_shape: torch.Size, observation_spec: Composite) -> dict[str, TensorSpec]:
         shape = (*batch_shape, 1)
+        keys = self.keys
         specs: dict[str, TensorSpec] = {
-            INDEX: Bounded(0, self.num_abstract_states - 1, shape=shape, dtype=torch.long),
-            RETURN: Unbounded(shape=shape, dtype=torch.float32),
-            STEPS: Unbounded(shape=shape, dtype=torch.long),
-            ACHIEVED: Binary(n=1, shape=shape, dtype=torch.bool),
-            ANCHOR: Unbounded(shape=(*batch_shape, anchor_size), dtype=torch.float32),
+            keys.index: Bounded(0, self.num_abstract_states - 1, shape=shape, dtype=torch.long),
+            keys.ret: Unbounded(shape=shape, dtype=torch.float32),
+            keys.steps: Unbounded(shape=shape, dtype=torch.long),
         }
-        return {k: specs[k] for k in self.state_keys}
-
-    def _anchor_size(self, observation_spec: Composite) -> int:
-        if self.observation_key not in observation_spec.keys(True, True):
-            raise KeyError(
-                f"{type(self).__name__}: observation_key {self.observation_key!r} is not an observation "
-                f"of the env; available: {sorted(map(str, observation_spec.keys(True, True)))}"
-            )
-        size, _ = self._observation_layout(
-            observation_spec[self.observation_key], None, observation_spec.shape
-        )
-        return size
+        if keys.achieved in self.state_keys:
+            specs[keys.achieved] = Binary(n=1, shape=shape, dtype=torch.bool)
+        if keys.learner in self.state_keys:
+            specs[keys.learner] = Bounded(0, max(batch_shape.numel() - 1, 0), shape=shape, dtype=torch.long)
+        if keys.anchor in self.state_keys:
+            if self.anchor_key not in observation_spec.keys(True, True):
+                raise KeyError(
+                    f"{type(self).__name__}: anchor_key {self.anchor_key!r} is not an observation of the env; "
+                    f"available: {sorted(map(str, observation_spec.keys(True, True)))}"
+                )
+            anchor = observation_spec[self.anchor_key].shape[len(batch_shape):]
+            size = int(anchor.numel()) if len(anchor) else 1
+            specs[keys.anchor] = Unbounded(shape=(*batch_shape, size), dtype=torch.float32)
+        return specs
 
     def transform_observation_spec(self, observation_spec: TensorSpec) -> TensorSpec:
         assert isinstance(observation_spec, Composite)
         batch_shape = observation_spec.shape
-        states = self._state_specs(batch_shape, self._anchor_size(observation_spec))
+        if self._uses_observation and self.observation_key not in observation_spec.keys(True, True):
+            raise KeyError(
+                f"{type(self).__name__}: observation_key {self.observation_key!r} is not an observation "
+                f"of the env; available: {sorted(map(str, observation_spec.keys(True, True)))}"
+            )
+        states = self._state_specs(batch_shape, observation_spec)
         for key, spec in states.items():
             observation_spec[key] = spec
         if self.transitions_key is not None:
@@ -318,7 +506,8 @@ class SubgoalPotentialTransform(Transform):
                 f"{type(self).__name__}: reward_key {self.reward_key!r} is not a reward of the env; "
                 f"available: {sorted(map(str, reward_spec.keys(True, True)))}"
             )
-        reward_spec[self.env_reward_key] = reward_spec[self.reward_key].clone()
+        if self.env_reward_key not in reward_spec.keys(True, True):
+            reward_spec[self.env_reward_key] = reward_spec[self.reward_key].clone()
         return reward_spec
 
     def _transition_spec(self, states: dict[str, TensorSpec], batch_shape: torch.Size) -> Composite:
@@ -345,49 +534,55 @@ class SubgoalPotentialTransform(Transform):
     def _flat_obs(self, obs: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
         return obs.reshape(*batch_shape, -1).to(torch.float32)
 
-    def _initial_state(self, obs: torch.Tensor, batch_shape: torch.Size) -> dict[str, torch.Tensor]:
-        abstraction = self._setup(batch_shape, obs)
+    def _initial_state(self, setup: _Setup, root: TensorDictBase) -> dict[str, torch.Tensor]:
+        """The abstract state at a reset observation (``root`` holds the reset entries)."""
+        batch_shape = setup.batch_shape
         shape = (*batch_shape, 1)
+        keys = self.keys
+        obs = root.get(self.observation_key, None) if self._uses_observation else None
         state = {
-            INDEX: abstraction.initial(obs, batch_shape),
-            RETURN: torch.zeros(shape),
-            STEPS: torch.zeros(shape, dtype=torch.long),
-            ACHIEVED: torch.zeros(shape, dtype=torch.bool),
+            keys.index: setup.abstraction.initial(obs, batch_shape),
+            keys.ret: torch.zeros(shape),
+            keys.steps: torch.zeros(shape, dtype=torch.long),
         }
-        if ANCHOR in self.state_keys:
-            state[ANCHOR] = self._flat_obs(obs, batch_shape)
-        return {k: state[k] for k in self.state_keys}
+        if keys.achieved in self.state_keys:
+            state[keys.achieved] = torch.zeros(shape, dtype=torch.bool)
+        if keys.anchor in self.state_keys:
+            state[keys.anchor] = self._flat_obs(root.get(self.anchor_key), batch_shape)
+        if keys.learner in self.state_keys:
+            state[keys.learner] = setup.learner
+        return state
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
         # Values for every env; TorchRL keeps the old ones where "_reset" is False.
         batch_shape = tensordict_reset.batch_size
-        state = self._initial_state(tensordict_reset.get(self.observation_key), batch_shape)
+        obs = tensordict_reset.get(self.observation_key, None) if self._uses_observation else None
+        setup = self._online_setup(batch_shape, obs)
+        state = self._initial_state(setup, tensordict_reset)
         outputs: dict[str, Any] = dict(state)
         if self.transitions_key is not None:
             zero = torch.zeros((*batch_shape, 1))
             false = torch.zeros((*batch_shape, 1), dtype=torch.bool)
             inputs = {k: state[k] for k in self.potential.in_keys}
             outputs[self.transitions_key] = _transition(
-                batch_shape, inputs, inputs, zero, state[STEPS], false, false, false
+                batch_shape, inputs, inputs, zero, state[self.keys.steps], false, false, false
             )
-        _write(tensordict_reset, outputs)
+        tensordict_reset.update(outputs)
         return tensordict_reset
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         batch_shape = next_tensordict.batch_size
-        obs = next_tensordict.get(self.observation_key)
-        done = next_tensordict.get("done")
-        current = {k: tensordict.get(k) for k in self.state_keys}
-        out = self.shape(
-            self._setup(batch_shape, obs),
-            current,
-            obs,
-            next_tensordict.get(self.reward_key),
-            done,
-            next_tensordict.get("terminated", done),
-            batch_shape,
-        )
-        _write(next_tensordict, out)
+        obs = next_tensordict.get(self.observation_key, None) if self._uses_observation else None
+        setup = self._online_setup(batch_shape, obs)
+        current = {}
+        for key in self.state_keys:
+            value = tensordict.get(key, None)
+            if value is None:
+                raise KeyError(f"{type(self).__name__}: {key!r} is missing from the step's input: reset the env "
+                               "through the transform (env.reset()) before stepping")
+            current[key] = value
+        out = self._advance(setup, current, next_tensordict, learn=self.learning)
+        next_tensordict.update(out)
         return next_tensordict
 
     def shape(
@@ -400,46 +595,66 @@ class SubgoalPotentialTransform(Transform):
         terminated: torch.Tensor,
         batch_shape: torch.Size,
     ) -> dict[str, Any]:
-        """One step of aggregation and shaping; returns the entries of the next TensorDict.
+        """One env step of aggregation and shaping on tensors (what ``_step`` does on TensorDicts).
+
+        ``current`` holds the abstract-state entries before the step; ``abstraction``
+        is compiled for ``batch_shape`` (rows in env order). With ``value_lr`` the
+        online update runs first. Returns the entries of the next TensorDict.
 
         Raises:
             ValueError: a reward is NaN or infinite, or the observation holds a NaN
                 (either would make the potential NaN for good); nothing is updated.
         """
+        n = batch_shape.numel()
+        setup = _Setup(batch_shape, abstraction, torch.arange(n).reshape(*batch_shape, 1), None)
+        self._fused_potential(setup, online=True)
+        nxt = TensorDict({self.observation_key: obs, self.reward_key: reward, self.done_key: done,
+                          self.terminated_key: terminated}, batch_size=batch_shape)
+        return self._advance(setup, dict(current), nxt, learn=self.learning)
+
+    def _rewards(self, nxt: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
+        """(the reward to shape, the env reward that ``r_h`` accumulates)."""
+        reward = nxt.get(self.reward_key)
+        env_reward = nxt.get(self.env_reward_key, None)
+        return reward, (reward if env_reward is None else env_reward)
+
+    def _advance(
+        self, setup: _Setup, current: dict[str, torch.Tensor], nxt: TensorDictBase, *, learn: bool
+    ) -> dict[str, Any]:
+        """One step of aggregation and shaping from ``current`` with the step's ``nxt`` entries;
+        with ``learn``, the online update of the potential first. Returns the next entries."""
+        obs = nxt.get(self.observation_key, None) if self._uses_observation else None
+        if self._uses_observation and obs is None:
+            raise KeyError(f"{type(self).__name__}: the step has no {self.observation_key!r} entry")
+        reward, env_reward = self._rewards(nxt)
         _check_finite(reward, obs, self.reward_key, self.observation_key)
-        if self._fused_potential is not None and obs.device.type == "cpu":
-            return self._shape_fused(abstraction, current, obs, reward, done, terminated, batch_shape)
-        z_next = abstraction.advance(current[INDEX], obs)
-        return self._shape_eager(current, z_next, obs, reward, done, terminated, batch_shape)
+        done = nxt.get(self.done_key)
+        terminated = nxt.get(self.terminated_key, done)
+        z = current[self.keys.index]
+        if self.keys.learner in self.state_keys:
+            current.setdefault(self.keys.learner, setup.learner)
+        if setup.table is not None and (obs is None or obs.device.type == "cpu") and z.device.type == "cpu":
+            return self._advance_fused(setup, current, obs, reward, env_reward, done, terminated, learn)
+        z_next = setup.abstraction.advance(z, obs, nxt)
+        return self._shape_eager(setup, current, z_next, nxt, reward, env_reward, done, terminated, learn)
 
-    def _fused_constants(self) -> tuple[np.ndarray, bool, float] | None:
-        """The potential as the fused kernel reads it, or ``None`` if it cannot (neural, not CPU)."""
-        pot = self.potential
-        if isinstance(pot, NaivePotential):
-            return _NO_TABLE, False, pot.eta
-        if isinstance(pot, TabularPotential) and pot.table.device.type == "cpu":
-            table = pot.table.detach().numpy().reshape(-1, pot.num_states)
-            return table, table.shape[0] == 1 and not pot.batch_shape, 0.0
-        return None
-
-    def _shape_fused(
+    def _advance_fused(
         self,
-        abstraction: SubgoalTables | StateAggregation,
+        setup: _Setup,
         current: dict[str, torch.Tensor],
-        obs: torch.Tensor,
+        obs: torch.Tensor | None,
         reward: torch.Tensor,
+        env_reward: torch.Tensor,
         done: torch.Tensor,
         terminated: torch.Tensor,
-        batch_shape: torch.Size,
+        learn: bool,
     ) -> dict[str, Any]:
-        assert self._fused_potential is not None
-        table, shared, eta = self._fused_potential
-        if self._table is not None and self._table.data_ptr() != self._table_ptr:
-            self._fused_potential = self._fused_constants()  # the table was replaced (e.g. moved)
-            self._table_ptr = self._table.data_ptr()
-            assert self._fused_potential is not None
-            table, shared, eta = self._fused_potential
-        z, r_h, k = current[INDEX], current[RETURN], current[STEPS]
+        assert setup.table is not None
+        keys = self.keys
+        n = setup.batch_shape.numel()
+        if not setup.shared and setup.table.shape[0] not in (0, n):
+            raise ValueError(f"the potential has {setup.table.shape[0]} tables for a batch of {n} rows")
+        z, r_h, k = current[keys.index], current[keys.ret], current[keys.steps]
         key = self.transitions_key
         z_next, rh_out, k_out, shaped = _empty_like(z), _empty_like(r_h), _empty_like(k), _empty_like(reward)
         extra: tuple[np.ndarray, ...]
@@ -448,127 +663,244 @@ class SubgoalPotentialTransform(Transform):
             extra = (rh_acc[1], k_acc[1], emit[1])
         else:
             extra = _NO_TRANSITION
-        lr = self._value_lr if self.learning else 0.0
-        shaping = (_col(current.get(ACHIEVED, z)), _col(r_h), _col(k), _col(reward), _col(done), _col(terminated),
-                   table, shared, eta, self.gamma, self.value_gamma, lr, self.zero_terminal_potential)
+        lr = self._value_lr if learn else 0.0
+        cols = [_col(t, n, name) for t, name in ((z, keys.index), (current.get(keys.achieved, z), keys.achieved),
+                                                  (r_h, keys.ret), (k, keys.steps), (env_reward, "env reward"),
+                                                  (done, "done"), (terminated, "terminated"))]
+        if reward is not env_reward:  # a second transform: shape the (already shaped) reward, accumulate r
+            base = _col(reward, n, "reward")
+        shaping = (*cols[1:], setup.table, setup.shared, setup.eta, self.gamma, self.value_gamma, lr,
+                   self.zero_terminal_potential)
+        abstraction = setup.abstraction
         if isinstance(abstraction, SubgoalTables):
             t = abstraction._np
+            assert obs is not None
             _kernels.advance_and_shape(
-                _col(z), obs.numpy().reshape(z_next[1].shape[0], -1), t["pattern"], t["lo"], t["hi"], t["centre"],
-                t["weight"],
+                cols[0], abstraction.rows(obs).numpy(), t["pattern"], t["lo"], t["hi"], t["centre"], t["weight"],
                 t["radius2"], t["succ"], *shaping, z_next[1], rh_out[1], k_out[1], shaped[1], *extra,
             )
         else:
+            assert obs is not None
             z_next = (abstraction.advance(z, obs), np.empty(0))
-            _kernels.shape_step(_col(z), _col(z_next[0]), *shaping, rh_out[1], k_out[1], shaped[1], *extra)
+            _kernels.shape_step(cols[0], _col(z_next[0], n, "z'"), *shaping, rh_out[1], k_out[1], shaped[1], *extra)
+        if reward is not env_reward:
+            shaped[1][:] += base - cols[4]
         out: dict[str, Any] = {
-            INDEX: z_next[0], RETURN: rh_out[0], STEPS: k_out[0],
-            self.env_reward_key: reward, self.reward_key: shaped[0],
+            keys.index: z_next[0], keys.ret: rh_out[0], keys.steps: k_out[0], self.reward_key: shaped[0],
         }
-        if ACHIEVED in self._state_keys:
-            out[ACHIEVED] = z_next[0] != z
+        if reward is env_reward:
+            out[self.env_reward_key] = reward
+        if keys.achieved in self.state_keys:
+            out[keys.achieved] = z_next[0] != z
+        if keys.learner in self.state_keys:
+            out[keys.learner] = current[keys.learner]
         if key is not None:
-            inputs = {name: current[name] for name in self._in_keys}
-            next_inputs = {name: out[name] for name in self._in_keys}
-            out[key] = _transition(batch_shape, inputs, next_inputs, rh_acc[0], k_acc[0], emit[0], done, terminated)
+            in_keys = self.potential.in_keys
+            inputs = {name: current[name] for name in in_keys}
+            next_inputs = {name: out[name] for name in in_keys}
+            out[key] = _transition(setup.batch_shape, inputs, next_inputs, rh_acc[0], k_acc[0], emit[0], done,
+                                   terminated)
         return out
+
+    def _value(self, entries: dict[str, torch.Tensor], batch_shape: torch.Size) -> torch.Tensor:
+        """``Φ`` of abstract-state entries, ``[*B, 1]``."""
+        td = TensorDict({k: entries[k] for k in self.potential.in_keys}, batch_size=batch_shape)
+        value = self.potential(td).get(self.value_key)
+        return check_value(value, batch_shape, f"the potential {type(self.potential).__name__}")
 
     def _shape_eager(
         self,
+        setup: _Setup,
         current: dict[str, torch.Tensor],
         z_next: torch.Tensor,
-        obs: torch.Tensor,
+        nxt: TensorDictBase,
         reward: torch.Tensor,
+        env_reward: torch.Tensor,
         done: torch.Tensor,
         terminated: torch.Tensor,
-        batch_shape: torch.Size,
+        learn: bool,
     ) -> dict[str, Any]:
-        z, r_h, k = current[INDEX], current[RETURN], current[STEPS]
+        keys = self.keys
+        batch_shape = setup.batch_shape
+        z, r_h, k = current[keys.index], current[keys.ret], current[keys.steps]
         achieved = z_next != z
-        r_h = r_h + reward * self.value_gamma**k
+        r_h = r_h + env_reward * self.value_gamma**k
         k = k + 1
         emit = achieved | done
-        nxt = {INDEX: z_next, ACHIEVED: achieved}
-        if ANCHOR in current:
-            nxt[ANCHOR] = torch.where(achieved, self._flat_obs(obs, batch_shape), current[ANCHOR])
-        inputs = [current[key] for key in self.potential.in_keys]
-        next_inputs = [nxt[key] for key in self.potential.in_keys]
-        if self.learning and bool(emit.any()):
-            self.update_potential(inputs, next_inputs, r_h, k, terminated, emit)
+        nxt_state: dict[str, torch.Tensor] = {keys.index: z_next}
+        if keys.achieved in self.state_keys:
+            nxt_state[keys.achieved] = achieved
+        if keys.anchor in self.state_keys:
+            anchor = self._flat_obs(nxt.get(self.anchor_key), batch_shape)
+            nxt_state[keys.anchor] = torch.where(achieved, anchor, current[keys.anchor])
+        if keys.learner in self.state_keys:
+            nxt_state[keys.learner] = current[keys.learner]
+        in_keys = self.potential.in_keys
+        transition = None
+        if learn or self.transitions_key is not None:
+            transition = _transition(
+                batch_shape, {key: current[key] for key in in_keys}, {key: nxt_state[key] for key in in_keys},
+                r_h, k, emit, done, terminated,
+            )
+        if learn and bool(emit.any()):
+            assert transition is not None
+            self.update_potential(transition)
         with torch.no_grad():
-            phi = self.potential(*inputs)
-            phi_next = self.potential(*next_inputs)
+            phi = self._value(current, batch_shape)
+            phi_next = self._value(nxt_state, batch_shape)
         if self.zero_terminal_potential:
             phi_next = phi_next.masked_fill(terminated, 0.0)
         shaping = self.gamma * phi_next - phi
-        out: dict[str, Any] = {k: nxt[k] for k in self.state_keys if k in nxt}
-        out[RETURN] = r_h.masked_fill(emit, 0.0)
-        out[STEPS] = k.masked_fill(emit, 0)
-        out[self.env_reward_key] = reward
+        out: dict[str, Any] = dict(nxt_state)
+        out[keys.ret] = r_h.masked_fill(emit, 0.0)
+        out[keys.steps] = k.masked_fill(emit, 0)
+        if reward is env_reward:
+            out[self.env_reward_key] = reward
         out[self.reward_key] = reward + shaping.to(reward.dtype)
         if self.transitions_key is not None:
-            out[self.transitions_key] = _transition(
-                batch_shape,
-                dict(zip(self.potential.in_keys, inputs, strict=True)),
-                dict(zip(self.potential.in_keys, next_inputs, strict=True)),
-                r_h, k, emit, done, terminated,
-            )
+            out[self.transitions_key] = transition
         return out
 
-    def update_potential(
-        self,
-        inputs: list[torch.Tensor],
-        next_inputs: list[torch.Tensor],
-        r_h: torch.Tensor,
-        k: torch.Tensor,
-        terminated: torch.Tensor,
-        mask: torch.Tensor,
-    ) -> None:
-        """One SGD step of the potential on this step's SMDP transitions (the online update)."""
+    def update_potential(self, transitions: TensorDictBase) -> None:
+        """The online update: one SGD step of the potential on ``transitions`` (SMDP layout, masked)."""
         assert self.value_loss is not None and self.value_optimizer is not None
         with torch.enable_grad():
             self.value_optimizer.zero_grad(set_to_none=True)
-            loss, _ = self.value_loss.smdp_loss(inputs, next_inputs, r_h, k, terminated, mask)
-            loss.backward()
+            self.value_loss(transitions)["loss_value"].backward()
             self.value_optimizer.step()
 
-    # ------------------------------------------------------------------ offline use
+    def transitions(self, data: TensorDictBase) -> TensorDictBase:
+        """The real SMDP transitions closed in collected ``data`` (any batch shape), as ``[N]``.
+
+        Rebuilt from the entries the transform keeps: a step closes a
+        transition when ``z`` changed or the episode ended; its ``r_h`` and
+        ``k`` are the root ``"subgoal_return"``/``"subgoal_steps"`` plus this
+        step's env reward (``r_h + γ_v^k r``, ``k + 1``). Rows keep the
+        potential's inputs (with ``"subgoal_learner"``, a per-env table finds
+        its row in a shuffled replay buffer), in the layout
+        :class:`~torchrl_subgoal.SubgoalValueLoss` reads.
+
+        Examples:
+            >>> from torchrl.envs import TransformedEnv
+            >>> from torchrl_subgoal import Cell, SubgoalSeries, TabularPotential
+            >>> from torchrl_subgoal.envs import FourRoomsEnv
+            >>> t = SubgoalPotentialTransform(SubgoalSeries([Cell(1, 2)]), TabularPotential(2), gamma=0.9,
+            ...                               observation_key="cell")
+            >>> data = TransformedEnv(FourRoomsEnv(4, max_steps=10), t).rollout(30, break_when_any_done=False)
+            >>> real = t.transitions(data)
+            >>> real.batch_dims, int(real["steps_to_next_obs"].max()) <= 10
+            (1, True)
+        """
+        keys = self.keys
+        missing: list[NestedKey] = [k for k in (keys.index, keys.ret, keys.steps) if k not in data]
+        missing += [("next", k) for k in (keys.index, self.done_key) if ("next", k) not in data.keys(True)]
+        if missing:
+            raise KeyError(f"{type(self).__name__}.transitions: the data has no {missing}; pass data collected "
+                           "through the transform (or shaped by it)")
+        in_keys = self.potential.in_keys
+        root_keys = {keys.index, keys.ret, keys.steps, *in_keys}
+        next_keys = {keys.index, *in_keys, self.done_key, self.terminated_key, self.env_reward_key, self.reward_key}
+        flat = data.select(*root_keys, *[("next", k) for k in next_keys], strict=False).reshape(-1)
+        nxt = flat.get("next")
+        z, z_next = flat.get(keys.index), nxt.get(keys.index)
+        done = nxt.get(self.done_key)
+        terminated = nxt.get(self.terminated_key, done)
+        emit = ((z_next != z) | done).reshape(-1)
+        rows = flat[emit]
+        nxt = rows.get("next")
+        reward = nxt.get(self.env_reward_key, None)
+        reward = nxt.get(self.reward_key) if reward is None else reward
+        k = rows.get(keys.steps)
+        r_h = rows.get(keys.ret) + reward.to(torch.float32) * self.value_gamma**k
+        return _transition(
+            rows.batch_size, {key: rows.get(key) for key in in_keys if key in rows},
+            {key: nxt.get(key) for key in in_keys if key in nxt}, r_h, k + 1,
+            torch.ones_like(z[emit]).bool(), done[emit], terminated[emit],
+        )
+
+    # ------------------------------------------------------------------ stored data
+
+    def _learners_of(self, data: TensorDictBase, batch_shape: torch.Size, time_dim: int) -> tuple[torch.Tensor, int]:
+        """Each row's learner (``[*B, 1]``) and the number of learners, for stored data."""
+        pot = self.potential
+        n_learners = (
+            self._online.batch_shape.numel() if self._online is not None
+            else pot.learners if isinstance(pot, TabularPotential) and pot.batch_shape
+            else self.pattern_index.numel() if self.pattern_index is not None
+            else len(self.patterns) if self.patterns is not None and len(self.patterns) > 1
+            else 1
+        )
+        stored = data.get(self.keys.learner, None)
+        if stored is not None:
+            learner = stored.long().select(time_dim, 0)
+            if not (stored.long() == learner.unsqueeze(time_dim)).all():
+                raise ValueError(f"rows of the data mix learners along time ({self.keys.learner!r} changes)")
+            if learner.shape != (*batch_shape, 1):
+                raise ValueError(f"{self.keys.learner!r} has shape {tuple(stored.shape)}; expected "
+                                 f"{(*data.batch_size, 1)}")
+            if learner.numel() and (int(learner.min()) < 0 or int(learner.max()) >= n_learners):
+                raise ValueError(f"{self.keys.learner!r} values must lie in [0, {n_learners})")
+            return learner, n_learners
+        if n_learners == 1:
+            return torch.zeros((*batch_shape, 1), dtype=torch.long), 1
+        if batch_shape.numel() == n_learners:
+            return torch.arange(n_learners).reshape(*batch_shape, 1), n_learners
+        raise ValueError(
+            f"data of batch shape {tuple(batch_shape)} (time excluded) from {n_learners} learners with their own "
+            f"patterns or tables: each row's learner is unknown. Keep the {self.keys.learner!r} entry in the "
+            "stored data (the transform writes it when the potential reads it), or pass rows in env order"
+        )
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
-        """Shape a stored trajectory (e.g. from a replay buffer) along its time dimension.
+        """Shape stored data (e.g. a replay-buffer sample) along its time dimension, without training.
 
         ``tensordict`` has shape ``[*B, T]`` with the time dimension named
         ``"time"`` (as :meth:`~torchrl.envs.EnvBase.rollout` returns) or last,
         and holds the root observation and the ``("next", ...)`` observation,
-        reward, done and terminated entries. The abstract state starts from the
-        first root observation and restarts after every ``done``. The potential
-        is used but not trained here.
+        reward, done and terminated entries. ``[*B]`` may be any shape: the
+        abstraction is compiled for this call. The abstract state starts from
+        the stored root entries of the first step when the data has them (a
+        slice from the middle of an episode), else from the first observation
+        as at a reset, and restarts from the next root observation after every
+        ``done``. The reward shaped is the env reward (``env_reward_key`` when
+        stored, else ``reward_key``). The potential is used as it is now and
+        never changed, whatever ``value_lr``.
         """
+        if tensordict.batch_dims == 0:
+            raise ValueError("forward() shapes stored trajectories [*B, T]; got a TensorDict without batch dims")
         names = tensordict.names
         time_dim = names.index("time") if "time" in names else tensordict.batch_dims - 1
         steps = tensordict.unbind(time_dim)
         batch_shape = steps[0].batch_size
-        current = self._initial_state(steps[0].get(self.observation_key), batch_shape)
-        abstraction = self._setup(batch_shape, steps[0].get(self.observation_key))
-        loss, self.value_loss = self.value_loss, None
+        first = steps[0]
+        obs = first.get(self.observation_key, None) if self._uses_observation else None
+        learner, n_learners = self._learners_of(tensordict, batch_shape, time_dim)
+        setup = self._compile(batch_shape, learner, obs, n_learners)
+        self._fused_potential(setup, online=False)
+        if all(key in first for key in self.state_keys):
+            current = {key: first.get(key) for key in self.state_keys}
+            if self.keys.learner in current:
+                current[self.keys.learner] = learner
+        else:
+            current = self._initial_state(setup, first)
         outs = []
-        try:
-            for step in steps:
-                nxt = step.get("next")
-                obs, done = nxt.get(self.observation_key), nxt.get("done")
-                out = self.shape(
-                    abstraction, current, obs, nxt.get(self.reward_key), done,
-                    nxt.get("terminated", done), batch_shape,
-                )
-                outs.append(out)
-                restart = self._initial_state(obs, batch_shape)
+        for t, step in enumerate(steps):
+            nxt = step.get("next")
+            reward = nxt.get(self.env_reward_key, None)
+            if reward is None:
+                reward = nxt.get(self.reward_key)
+            view = nxt.exclude(self.env_reward_key)  # shallow: the step's entries with the env reward to shape
+            view.set(self.reward_key, reward)
+            out = self._advance(setup, current, view, learn=False)
+            outs.append(out)
+            if t + 1 < len(steps):
+                done = view.get(self.done_key)
+                restart = self._initial_state(setup, steps[t + 1])
                 current = {k: torch.where(_expand(done, out[k]), restart[k], out[k]) for k in current}
-        finally:
-            self.value_loss = loss
-        for key, first in outs[0].items():
+        for key, first_out in outs[0].items():
             values = [o[key] for o in outs]
             stacked = (
-                torch.stack(values, time_dim) if isinstance(first, torch.Tensor)
+                torch.stack(values, time_dim) if isinstance(first_out, torch.Tensor)
                 else TensorDict.stack(values, time_dim)
             )
             tensordict.set(("next", key), stacked)
@@ -579,14 +911,16 @@ _NO_TABLE = np.zeros((0, 1), dtype=np.float32)
 _NO_TRANSITION = tuple(np.zeros((0, 1), dtype=d) for d in (np.float32, np.int64, np.bool_))
 
 
-def _check_finite(reward: torch.Tensor, obs: torch.Tensor, reward_key: NestedKey, obs_key: NestedKey) -> None:
+def _check_finite(
+    reward: torch.Tensor, obs: torch.Tensor | None, reward_key: NestedKey, obs_key: NestedKey
+) -> None:
     """Refuse a NaN or infinite reward and a NaN observation, naming the entry and the env.
 
     One reduction per tensor when all is well (a NaN or inf anywhere makes the sum
     non-finite); the search for the culprit runs only then.
     """
     for tensor, key, bad in ((reward, reward_key, "NaN or infinite"), (obs, obs_key, "NaN")):
-        if not tensor.is_floating_point():
+        if tensor is None or not tensor.is_floating_point():
             continue
         fast = tensor.device.type == "cpu" and tensor.dtype in (torch.float32, torch.float64)
         total = tensor.detach().numpy().sum() if fast else tensor.sum()  # numpy: fewer µs
@@ -602,10 +936,13 @@ def _check_finite(reward: torch.Tensor, obs: torch.Tensor, reward_key: NestedKey
             )
 
 
-def _col(t: torch.Tensor) -> np.ndarray:
-    """A ``[*B, 1]`` CPU tensor as an ``[n, 1]`` numpy view (a copy if not contiguous)."""
+def _col(t: torch.Tensor, n: int, name: str) -> np.ndarray:
+    """A ``[*B, 1]`` CPU tensor as an ``[n, 1]`` numpy view (a copy if not contiguous); a clear
+    ``ValueError`` if it does not hold one entry per row (the kernels index it unchecked)."""
+    if t.numel() != n:
+        raise ValueError(f"{name!r} has shape {tuple(t.shape)}, expected one entry per row of a batch of {n}")
     a = t.numpy()
-    return a if a.ndim == 2 else a.reshape(-1, 1)
+    return a if a.ndim == 2 and a.shape[1] == 1 else a.reshape(n, 1)
 
 
 def _empty_like(t: torch.Tensor) -> tuple[torch.Tensor, np.ndarray]:
@@ -616,21 +953,6 @@ def _empty_like(t: torch.Tensor) -> tuple[torch.Tensor, np.ndarray]:
 
 
 _NUMPY_DTYPES = {torch.float32: np.float32, torch.float64: np.float64, torch.int64: np.int64, torch.bool: np.bool_}
-
-
-def _write(tensordict: TensorDictBase, entries: dict[str, Any]) -> None:
-    """``tensordict.update(entries)`` for entries this transform built itself.
-
-    Every tensor here was made by the transform with the batch's shape on the
-    CPU (or comes from the same TensorDict), so TensorDict's per-key validation
-    is redundant; at 10^3 learners it costs more than the shaping arithmetic.
-    Plain TensorDicts skip it (``_set_str`` of tensordict 0.14); others update.
-    """
-    if type(tensordict) is TensorDict and not tensordict.is_locked:
-        for key, value in entries.items():
-            tensordict._set_str(key, value, inplace=False, validated=True)
-    else:
-        tensordict.update(entries)
 
 
 def _transition(

@@ -106,7 +106,7 @@ def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase
     }
     if shaping is None:
         return state
-    abstraction = shaping._abstraction
+    abstraction = shaping.abstraction
     if isinstance(abstraction, SubgoalTables):
         t = abstraction._np
         state["kind"] = _kernels.SUBGOAL_SHAPING
@@ -305,10 +305,10 @@ def run_pinball_fused(
     region["radius2"] = np.zeros(1, np.float32)
     state = _shaping_state(shaping, td, n)
     kind = state["kind"]
-    if shaping is not None and isinstance(shaping._abstraction, StateAggregation):
-        if shaping._abstraction.regions is None:
+    if shaping is not None and isinstance(shaping.abstraction, StateAggregation):
+        if shaping.abstraction.regions is None:
             raise TypeError("the fused PinBall engine needs a region aggregation (StateAggregation.from_regions)")
-        region = shaping._abstraction.regions
+        region = shaping.abstraction.regions
         kind = _kernels.LOOKUP_SHAPING
     if state["shared"]:
         raise TypeError("the fused PinBall engine skips finished learners, so each needs its own potential table")

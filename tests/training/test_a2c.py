@@ -1,0 +1,122 @@
+"""A2C building blocks: networks, the shaped env, the training loop."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from torchrl_subgoal import Cell, NaivePotential, State, SubgoalSeries, TabularPotential, _kernels
+from torchrl_subgoal.envs import PinBallEnv
+from torchrl_subgoal.training import (
+    A2CConfig,
+    FourierFeatures,
+    Shaping,
+    a2c_domain,
+    actor_critic,
+    experiment_logger,
+    shaped_env,
+    train_a2c,
+)
+from torchrl_subgoal.training.domains import four_rooms_env
+
+from ..line_env import LineEnv
+
+HALLWAYS = SubgoalSeries([Cell(3, 6), Cell(7, 9)])
+
+
+def test_fourier_features_equal_the_fused_kernels() -> None:
+    low, high = torch.tensor([0.0, 0.0, -2.0, -2.0]), torch.tensor([1.0, 1.0, 2.0, 2.0])
+    basis = FourierFeatures(low, high, order=3)
+    obs = torch.rand(5, 4) * (high - low) + low
+    ours = basis(obs)
+    first, second = np.empty((16, 2)), np.empty((16, 2))
+    for b in range(5):
+        ref = np.empty(256)
+        _kernels.fourier_features(obs[b].double().numpy(), low.double().numpy(), (1 / (high - low)).double().numpy(),
+                                  3, 2, first, second, ref)
+        assert np.allclose(ours[b].numpy(), ref, atol=1e-5)
+
+
+@pytest.mark.parametrize("domain", ["four_rooms", "pinball"])
+def test_actor_critic_for_each_domain(domain: str) -> None:
+    d = a2c_domain(domain)
+    env = d.make_env(3)
+    actor, critic = actor_critic(env, d.observation_key, features=d.a2c.features, hidden=(8,))
+    td = critic(actor(env.reset()))
+    assert td["action"].shape == (3,) and td["state_value"].shape == (3, 1)
+    assert torch.allclose(td["logits"], torch.zeros_like(td["logits"]))  # a uniform policy at the start
+
+
+def test_shaped_env_in_env_workers_keeps_the_potential_in_this_process() -> None:
+    potential = TabularPotential(3)
+    with torch.no_grad():
+        potential.table.copy_(torch.tensor([0.0, 1.0, 2.0]))
+    shaping = Shaping(SubgoalSeries([Cell(1, 2)]), potential, {"observation_key": "cell"})
+    env = shaped_env(four_rooms_env, 4, env_workers=2, shaping=shaping, gamma=0.9)
+    try:
+        data = env.rollout(40, break_when_any_done=False)
+    finally:
+        env.close()
+    assert data.batch_size == (2, 2, 40)
+    nxt = data["next"]
+    table = potential.table.detach()
+    expected = nxt["env_reward"] + 0.9 * table[nxt["subgoal_index"]].masked_fill(nxt["terminated"], 0) - \
+        table[data["subgoal_index"]]
+    assert torch.allclose(nxt["reward"], expected) and (nxt["subgoal_index"] > 0).any()
+
+
+def test_a2c_learns_four_rooms_and_trains_the_potential(tmp_path: Path) -> None:
+    torch.set_num_threads(1)
+    potential = TabularPotential(3)
+    shaping = Shaping(HALLWAYS, potential, {"observation_key": "cell"})
+    config = A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=40_960)
+    logger = experiment_logger(tmp_path, "HRS_test")
+    curve = train_a2c(four_rooms_env, config, shaping=shaping, seed=0, logger=logger)
+    assert len(curve.frames) == config.iterations == 160 and curve.frames[-1] == 40_960
+    assert curve.episode_length[0] == 1000.0  # the cap until an episode finished
+    assert curve.episodes[-1] > 100 and min(curve.episode_length) < 150  # it learns
+    assert bool((potential.table.detach() > 0).all())  # V(z) learned from the goal reward
+    logged = list(tmp_path.rglob("*.csv"))
+    assert any(p.name.startswith("episode_length") for p in logged)
+    assert any(p.name.startswith("loss_potential") for p in logged)
+
+
+@pytest.mark.parametrize("online", [False, True])
+def test_a2c_with_a_multisync_collector(online: bool) -> None:
+    """Envs in a worker process; the potential trained in the main process (or online in the worker)."""
+    potential = TabularPotential(3)
+    shaping = Shaping(SubgoalSeries([State(1), State(3)]), potential)
+    config = A2CConfig(features="one_hot", hidden=(), total_frames=2048, collector_workers=1,
+                       online_potential=online, value_lr=0.1)
+    curve = train_a2c(lambda n: LineEnv(n, length=4), config, shaping=shaping, seed=1, episode_cap=100)
+    assert len(curve.frames) == 8
+    assert curve.episodes[-1] > 0 and bool((potential.table.detach() > 0.5).all())
+
+
+def test_naive_potential_is_not_trained() -> None:
+    shaping = Shaping(HALLWAYS, NaivePotential(1.0), {"observation_key": "cell"})
+    assert not shaping.trained
+    curve = train_a2c(four_rooms_env, A2CConfig(features="one_hot", hidden=(), total_frames=512), shaping=shaping)
+    assert len(curve.frames) == 2
+
+
+@pytest.mark.parametrize("bad", [{"num_envs": 0}, {"frames_per_batch": 100}, {"env_workers": 3},
+                                 {"features": "cnn"}])
+def test_bad_settings(bad: dict) -> None:
+    with pytest.raises(ValueError):
+        A2CConfig(**bad)
+
+
+def test_pinball_env_factory_is_seeded_from_torch() -> None:
+    d = a2c_domain("pinball")
+    rollouts = []
+    for _ in range(2):
+        torch.manual_seed(0)
+        env = d.make_env(2)
+        assert isinstance(env, PinBallEnv)
+        torch.manual_seed(1)
+        rollouts.append(env.rollout(30)["next", "observation"])
+    assert torch.equal(*rollouts)
