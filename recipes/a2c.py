@@ -38,10 +38,14 @@ from torchrl_subgoal import load_patterns
 from torchrl_subgoal.experiments import Chunk, EpisodeTable
 from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
 from torchrl_subgoal.experiments.recipe import (
+    RECIPE_ERRORS,
+    check_patterns,
     chunk_patterns,
+    fail,
     method_specs,
     pattern_config,
     pattern_sets,
+    pattern_sources,
     sweep_and_report,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_parts
@@ -125,31 +129,34 @@ def main(argv: list[str] | None = None) -> int:
         domain = a2c_domain(cfg.domain)
         human = load_patterns(cfg.subgoals or domain.participants, domain=cfg.domain)
         patterns = pattern_sets(human, domain.candidates(cfg.seed), cfg.random_patterns, cfg.seed)
+        check_patterns(patterns, domain.make_env(1), str(domain.subgoal_key))
         specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
-        a2c = dataclasses.replace(
-            domain.a2c, num_envs=cfg.num_envs, frames_per_batch=cfg.frames_per_batch,
-            env_workers=cfg.env_workers, collector_workers=cfg.collector_workers, value_lr=cfg.value_lr,
-            online_potential=cfg.online_potential, normalize_advantage=cfg.normalize_advantage,
-            total_frames=cfg.total_frames or domain.a2c.total_frames,
-            lr=cfg.lr or domain.a2c.lr,
-        )
-    except (ConfigError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    results = cfg.results or f"results/a2c_{cfg.domain}"
-    config = {
-        "domain": cfg.domain,
-        "a2c": dataclasses.asdict(a2c),
-        "zero_terminal_potential": cfg.zero_terminal_potential,
-        "subgoal_file": cfg.subgoals or domain.participants,
-        "patterns": pattern_config(patterns),
-        "log_dir": str(Path(results) / "logs"),
-        "report": {"metric": "steps", "thresholds": list(domain.thresholds), "unit": "update",
-                   "asymptotic_window": [max(0, a2c.iterations - 10), a2c.iterations]},
-    }
-    run = functools.partial(sweep_and_report, f"a2c_{cfg.domain}", results, specs, run_chunk, config)
-    return run(seed=cfg.seed, chunk_size=1, episodes=a2c.iterations, overwrite=cfg.overwrite,
-               backend=cfg.backend, workers=cfg.workers)
+        try:
+            a2c = dataclasses.replace(
+                domain.a2c, num_envs=cfg.num_envs, frames_per_batch=cfg.frames_per_batch,
+                env_workers=cfg.env_workers, collector_workers=cfg.collector_workers, value_lr=cfg.value_lr,
+                online_potential=cfg.online_potential, normalize_advantage=cfg.normalize_advantage,
+                total_frames=cfg.total_frames or domain.a2c.total_frames, lr=cfg.lr or domain.a2c.lr,
+            )
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+        results = cfg.results or f"results/a2c_{cfg.domain}"
+        config = {
+            "domain": cfg.domain,
+            "a2c": dataclasses.asdict(a2c),
+            "zero_terminal_potential": cfg.zero_terminal_potential,
+            "subgoal_file": cfg.subgoals or domain.participants,
+            "patterns": pattern_config(patterns),
+            "pattern_sources": pattern_sources(patterns),
+            "log_dir": str(Path(results) / "logs"),
+            "report": {"metric": "steps", "thresholds": list(domain.thresholds), "unit": "update",
+                       "asymptotic_window": [max(0, a2c.iterations - 10), a2c.iterations]},
+        }
+        run = functools.partial(sweep_and_report, f"a2c_{cfg.domain}", results, specs, run_chunk, config)
+        return run(seed=cfg.seed, chunk_size=1, episodes=a2c.iterations, overwrite=cfg.overwrite,
+                   backend=cfg.backend, workers=cfg.workers)
+    except RECIPE_ERRORS as exc:
+        return fail(exc)
 
 
 if __name__ == "__main__":
