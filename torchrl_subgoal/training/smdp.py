@@ -71,6 +71,7 @@ def extend_transitions(
     returns how many.
 
     Examples:
+        >>> import torch
         >>> from torchrl.data import LazyTensorStorage, ReplayBuffer
         >>> from tensordict import TensorDict
         >>> buffer = ReplayBuffer(storage=LazyTensorStorage(100))
