@@ -9,6 +9,10 @@ Dynamic Trajectory Aggregation" (IJCNN 2021):
 * NRS      — naive subgoal shaping with a fixed potential η,
 * SARSA-RS — a learned potential over the four rooms (Grzes & Kudenko).
 
+Shaping follows the authors' released conventions (goal step shaped with
+``γV(z_T)``, ``Φ = V``) unless ``--zero-terminal-potential`` /
+``--start-potential`` say otherwise; ``--reward step-cost`` pays -1 per step
+and 0 at the goal instead of +1 at the goal (docs/shaping_defaults.md).
 Every method runs ``learnings`` independent learnings per subgoal pattern
 (ten patterns; the unshaped methods get ten times as many learnings of one
 pseudo-pattern), all learnings of a method as one batch: the env batch *is*
@@ -73,7 +77,13 @@ class Config:
     agent_state: str = setting("s", "what SARSA's table is over for subgoal methods: s (the paper) or s,z "
                                "(z = subgoal index; makes Φ(z) a potential over the agent's state)",
                                choices=["s", "s,z"])
-    zero_terminal_potential: bool = setting(True, "Φ = 0 at the goal (exact policy invariance)")
+    zero_terminal_potential: bool = setting(False, "Φ = 0 at the goal (exact policy invariance); the authors "
+                                            "shape the goal step with γΦ(z_T)")
+    start_potential: str = setting("value", "level of Φ: value (Φ = V, the authors), zero (Φ(z_0) = 0) or "
+                                   "nonpositive (Φ(z_0) = min(V(z_0), 0), the library default)",
+                                   choices=["value", "zero", "nonpositive"])
+    reward: str = setting("goal", "goal: +1 at the goal, 0 otherwise (the paper); step-cost: -1 per step, "
+                          "0 at the goal", choices=["goal", "step-cost"])
     engine: str = setting("fused", "fused: one compiled loop; torchrl: step_and_maybe_reset (identical results)",
                           choices=["fused", "torchrl"])
     seed: int = setting(0, "sweep seed (random patterns, chunk seeds)")
@@ -109,12 +119,14 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     method = METHODS[chunk.method]
     patterns, pattern_index = chunk_patterns(chunk, config)
 
-    env = FourRoomsEnv(num_envs=chunk.n_learners)
+    goal_reward, step_reward = (1.0, 0.0) if config["reward"] == "goal" else (0.0, -1.0)
+    env = FourRoomsEnv(num_envs=chunk.n_learners, goal_reward=goal_reward, step_reward=step_reward)
     shaping = shaping_transform(
         method, env.batch_size, gamma=sarsa.gamma, value_lr=sarsa.value_lr,
         patterns=patterns, pattern_index=pattern_index, aggregation=room_aggregation(),
         eta=config["eta"], observation_key=OBSERVATION_KEY,
         zero_terminal_potential=config["zero_terminal_potential"],
+        start_potential=config["start_potential"],
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     subgoal_aware = config["agent_state"] == "s,z" and method.shaping in ("subgoals", "naive")
@@ -134,8 +146,8 @@ def main(argv: list[str] | None = None) -> int:
         specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
         settings = dataclasses.asdict(cfg)
         config = {
-            **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential", "engine",
-                                        "agent_state")},
+            **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential",
+                                        "start_potential", "reward", "engine", "agent_state")},
             "sarsa": dataclasses.asdict(SARSA_PRESETS[cfg.preset]),
             "subgoal_file": cfg.subgoals,
             "patterns": pattern_config(patterns),

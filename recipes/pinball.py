@@ -9,6 +9,10 @@ Dynamic Trajectory Aggregation" (IJCNN 2021), on the "simple" map:
 * NRS      — naive subgoal shaping with a fixed potential η (10,000),
 * SARSA-RS — a learned potential over three abstract states (thirds of the table in x).
 
+The agent is the authors' released Q-based actor-critic (``--preset released``)
+or the TD-error actor-critic of the paper's text (``--preset paper``); shaping
+follows the authors' conventions unless ``--zero-terminal-potential`` /
+``--start-potential`` say otherwise (docs/shaping_defaults.md).
 ``learnings`` learnings per pattern (ten patterns; the unshaped methods get
 ten times as many of one pseudo-pattern), each method's learnings batched.
 Results go to ``--results`` chunk by chunk (re-run to resume); the report
@@ -60,15 +64,22 @@ SUBGOAL_RADIUS = 0.04  # the target's radius, as in the paper
 class Config:
     """PinBall reproduction: actor-critic with HRS, RRS, NRS and SARSA-RS."""
 
-    preset: str = setting("released", "actor-critic hyper-parameters: the paper's text or the released "
-                          "configuration", choices=sorted(AC_PRESETS))
+    preset: str = setting("released", "agent and rates: released (the authors' Q-based actor-critic), paper "
+                          "(the text's TD-error actor-critic, rates 0.01) or released-td (TD-error, released rates)",
+                          choices=sorted(AC_PRESETS))
     episodes: int = setting(200, "episodes per learning (paper: 200)")
     learnings: int = setting(10, "learnings per subgoal pattern (paper: 10)")
     methods: str = setting(",".join(METHODS), "comma-separated methods to run")
     subgoals: str = setting(PARTICIPANTS, "subgoal file of the human patterns (HRS, NRS)")
     random_patterns: int = setting(10, "random subgoal patterns for RRS (paper: 10)")
     eta: float = setting(10_000.0, "NRS potential η (paper: 10,000)")
-    zero_terminal_potential: bool = setting(True, "Φ = 0 at the goal (exact policy invariance)")
+    zero_terminal_potential: bool = setting(False, "Φ = 0 at the goal (exact policy invariance); the authors "
+                                            "shape the goal step with γΦ(z_T)")
+    start_potential: str = setting("value", "level of Φ: value (Φ = V, the authors), zero (Φ(z_0) = 0) or "
+                                   "nonpositive (Φ(z_0) = min(V(z_0), 0), the library default)",
+                                   choices=["value", "zero", "nonpositive"])
+    step_penalty: float = setting(0.0, "reward of a step without thrust (classic PinBall: -1; the paper: 0)")
+    thrust_penalty: float = setting(0.0, "reward of a thrust (classic PinBall: -5; the paper: 0)")
     map: str = setting("simple", "PinBall configuration: simple, hard or a file")
     max_steps: int = setting(10_000, "episode cap (paper: 10,000)")
     engine: str = setting("fused", "fused: one compiled loop; torchrl: step_and_maybe_reset (same episodes)",
@@ -111,11 +122,13 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     method = METHODS[chunk.method]
     patterns, pattern_index = chunk_patterns(chunk, config)
 
-    env = PinBallEnv(chunk.n_learners, config["map"], max_steps=config["max_steps"], seed=chunk.seed)
+    env = PinBallEnv(chunk.n_learners, config["map"], max_steps=config["max_steps"], seed=chunk.seed,
+                     step_penalty=config["step_penalty"], thrust_penalty=config["thrust_penalty"])
     shaping = shaping_transform(
         method, env.batch_size, gamma=ac.gamma, value_lr=ac.value_lr, patterns=patterns,
         pattern_index=pattern_index, aggregation=thirds_of_the_table(), eta=config["eta"],
         zero_terminal_potential=config["zero_terminal_potential"], observation_key=OBSERVATION_KEY,
+        start_potential=config["start_potential"],
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     spec = env.observation_spec["observation"]
@@ -133,8 +146,9 @@ def main(argv: list[str] | None = None) -> int:
         specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
         settings = dataclasses.asdict(cfg)
         config = {
-            **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential", "map",
-                                        "max_steps", "engine")},
+            **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential",
+                                        "start_potential", "step_penalty", "thrust_penalty", "map", "max_steps",
+                                        "engine")},
             "actor_critic": dataclasses.asdict(AC_PRESETS[cfg.preset]),
             "subgoal_file": cfg.subgoals,
             "patterns": pattern_config(patterns),

@@ -49,16 +49,20 @@ def step(env: TransformedEnv, td: TensorDict, action: list[int]) -> tuple[Tensor
 # ----------------------------------------------------------------- arithmetic by hand
 
 
-def test_smdp_arithmetic_by_hand(path: str) -> None:
+@pytest.mark.parametrize("start", ["value", "nonpositive", "zero"])
+def test_smdp_arithmetic_by_hand(path: str, start: str) -> None:
     """Line 0..4, subgoals at 1 then 3, reward 1 per step and 10 at the goal.
 
-    γ = γ_v = 0.9, α_v = 0.5, V = [0.1, 0.2, 0.3] before the episode.
+    γ = γ_v = 0.9, α_v = 0.5, V = [0.1, 0.2, 0.3] before the episode. With
+    ``start_potential`` "nonpositive" or "zero", Φ = V − V(0) (V(0) > 0 here):
+    every step earns (1 − γ) V(0) more and the goal step V(0) more.
     """
     v = TabularPotential(3)
     with torch.no_grad():
         v.table.copy_(torch.tensor([0.1, 0.2, 0.3]))
     t = SubgoalPotentialTransform(
-        SubgoalSeries([State(1), State(3)]), v, gamma=0.9, value_lr=0.5, write_transitions=True
+        SubgoalSeries([State(1), State(3)]), v, gamma=0.9, value_lr=0.5, write_transitions=True,
+        start_potential=start,  # type: ignore[arg-type]
     )
     env = TransformedEnv(LineEnv(1), t)
     td = env.reset()
@@ -78,7 +82,8 @@ def test_smdp_arithmetic_by_hand(path: str) -> None:
         assert smdp["next", "reward"].item() == pytest.approx(r_h)
         assert int(smdp["steps_to_next_obs"]) == k
         assert v.table.tolist() == pytest.approx(table)
-        assert nxt["reward"].item() == pytest.approx(shaped, abs=1e-6)
+        shift = 0.0 if start == "value" else table[0] * (1.0 if int(nxt["terminated"]) else 1 - 0.9)
+        assert nxt["reward"].item() == pytest.approx(shaped + shift, abs=1e-6)
         assert nxt["env_reward"].item() == (10.0 if z_next == 2 and r_h == 10.0 else 1.0)
     # after the goal the env was reset: the accumulators start again
     assert int(td["subgoal_index"]) == 0 and int(td["subgoal_steps"]) == 0
@@ -114,8 +119,9 @@ def test_truncation_bootstraps_and_termination_does_not() -> None:
 # ----------------------------------------------------------------- shaping definition
 
 
+@pytest.mark.parametrize("start", ["value", "zero", "nonpositive"])
 @pytest.mark.parametrize("zero_terminal", [True, False])
-def test_shaped_reward_is_r_plus_gamma_v_next_minus_v(path: str, zero_terminal: bool) -> None:
+def test_shaped_reward_is_r_plus_gamma_v_next_minus_v(path: str, zero_terminal: bool, start: str) -> None:
     n = 8
     patterns = [HALLWAYS, SubgoalSeries([Cell(6, 2), Cell(10, 6)]), SubgoalSeries([Cell(1, 2)])]
     v = TabularPotential(3, batch_shape=(n,))
@@ -123,12 +129,14 @@ def test_shaped_reward_is_r_plus_gamma_v_next_minus_v(path: str, zero_terminal: 
         v.table.copy_(torch.randn(n, 3))
     t = SubgoalPotentialTransform(
         patterns, v, gamma=0.95, observation_key="cell", pattern_index=torch.arange(n) % 3,
-        zero_terminal_potential=zero_terminal,
+        zero_terminal_potential=zero_terminal, start_potential=start,  # type: ignore[arg-type]
     )
     env = TransformedEnv(FourRoomsEnv(n, max_steps=40), t)
     torch.manual_seed(0)
     data = env.rollout(120, break_when_any_done=False)
     table = v.table.detach()
+    if start != "value":  # Φ = V − V(0), or V − max(V(0), 0)
+        table = table - (table[:, :1] if start == "zero" else table[:, :1].clamp(min=0.0))
     z, z_next = data["subgoal_index"], data["next", "subgoal_index"]
     rows = torch.arange(n)[:, None, None].expand_as(z)
     phi, phi_next = table[rows, z], table[rows, z_next]
@@ -309,6 +317,73 @@ def test_offline_forward_matches_online() -> None:
     offline = t(stored.clone())
     assert torch.allclose(offline["next", "reward"], data["next", "reward"], atol=1e-6)
     assert torch.equal(offline["next", "subgoal_index"], data["next", "subgoal_index"])
+
+
+@pytest.mark.parametrize("start", ["value", "zero", "nonpositive"])
+def test_start_potential_under_a_step_cost(path: str, start: str) -> None:
+    """V < 0 (a step cost): "nonpositive" shapes as "value" does; "zero" shifts Φ by −V(0).
+
+    Line 0..4, subgoals at 1 then 3, −1 per step and 0 at the goal, γ = 0.9,
+    V = [−3, −2, −1] fixed; the terminal potential is zeroed.
+    """
+    v = TabularPotential(3)
+    with torch.no_grad():
+        v.table.copy_(torch.tensor([-3.0, -2.0, -1.0]))
+    t = SubgoalPotentialTransform(SubgoalSeries([State(1), State(3)]), v, gamma=0.9,
+                                  start_potential=start)  # type: ignore[arg-type]
+    env = TransformedEnv(LineEnv(1, step_reward=-1.0, goal_reward=0.0), t)
+    td = env.reset()
+    raw = [-1 + 0.9 * -2 + 3, -1 + 0.9 * -2 + 2, -1 + 0.9 * -1 + 2, 0 - 0 + 1]  # z: 0→1, 1→1, 1→2, 2→goal
+    shift = [0.1 * -3] * 3 + [-3.0] if start == "zero" else [0.0] * 4
+    for expected, extra in zip(raw, shift, strict=True):
+        data, td = step(env, td, [1])
+        assert data["next", "reward"].item() == pytest.approx(expected + extra, abs=1e-6)
+    assert bool(data["next", "terminated"])
+
+
+@pytest.mark.parametrize("start", ["zero", "nonpositive"])
+def test_neural_start_potential_reads_the_reset_observation(start: str) -> None:
+    torch.manual_seed(0)
+    net = torch.nn.Linear(2, 1)
+    with torch.no_grad():
+        net.bias.fill_(0.5 if start == "nonpositive" else -0.5)
+    t = SubgoalPotentialTransform(HALLWAYS, NeuralPotential(net), gamma=0.9, observation_key="cell",
+                                  start_potential=start)  # type: ignore[arg-type]
+    env = TransformedEnv(FourRoomsEnv(3, max_steps=40), t)
+    check_env_specs(env)
+    data = env.rollout(60, break_when_any_done=False)
+    assert torch.equal(data["subgoal_start"], data["cell"][:, :1].float().expand_as(data["subgoal_start"]))
+    with torch.no_grad():
+        v_start = net(data["subgoal_start"])
+        shift = v_start if start == "zero" else v_start.clamp(min=0.0)
+        phi = net(data["subgoal_anchor"]) - shift
+        phi_next = (net(data["next", "subgoal_anchor"]) - shift).masked_fill(data["next", "terminated"], 0.0)
+    expected = data["next", "env_reward"] + 0.9 * phi_next - phi
+    assert torch.allclose(data["next", "reward"], expected, atol=1e-5)
+    assert start == "zero" or bool((v_start > 0).all())  # the shift applied
+
+
+@pytest.mark.parametrize("start", ["zero", "nonpositive"])
+def test_start_potential_of_an_aggregation_is_that_of_the_reset_state(path: str, start: str) -> None:
+    """Line 0..4 with g(0) = 1 and g(s) = 0 elsewhere: episodes start in z = 1, whose potential sets the level."""
+    from torchrl_subgoal import StateAggregation
+
+    v = TabularPotential(2, (2,))
+    with torch.no_grad():
+        v.table.copy_(torch.tensor([[-1.0, 2.0], [-1.0, -3.0]]))
+    starts_in_1 = StateAggregation(torch.tensor([1, 0, 0, 0, 0]), num_states=2)
+    t = SubgoalPotentialTransform(starts_in_1, v, gamma=0.9, start_potential=start)  # type: ignore[arg-type]
+    env = TransformedEnv(LineEnv(2, step_reward=0.0), t)
+    check_env_specs(env)
+    td = env.reset()
+    assert td["subgoal_start"].tolist() == [[1], [1]]
+    data, td = step(env, td, [1, 1])  # z: 1 -> 0 for both
+    shift = torch.tensor([2.0, -3.0 if start == "zero" else 0.0])
+    expected = 0.9 * (torch.tensor([-1.0, -1.0]) - shift) - (torch.tensor([2.0, -3.0]) - shift)
+    assert torch.allclose(data["next", "reward"].squeeze(-1), expected)
+    assert data["next", "subgoal_start"].tolist() == [[1], [1]]  # kept through the episode
+    with pytest.raises(ValueError, match="start_potential must be one of"):
+        SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), gamma=0.9, start_potential="max")  # type: ignore[arg-type]
 
 
 # ----------------------------------------------------------------- bad input

@@ -63,17 +63,23 @@ def advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_ou
                 break
 
 
+START_VALUE, START_ZERO, START_NONPOSITIVE = 0, 1, 2  # SubgoalPotentialTransform's start_potential
+
+
 @numba.njit(cache=True, nogil=True)
 def shape_step(
     z, z_next, achieved_prev, r_h, k, reward, done, terminated,
-    table, shared, eta, gamma, value_gamma, lr, zero_terminal,
+    table, shared, eta, gamma, value_gamma, lr, zero_terminal, start_mode, z_start,
     rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out,
 ):
     """Accumulate ``r_h, k``, update a tabular potential online, and shape the reward.
 
     ``table`` is ``[B or 1, Z]`` (``shared`` = one table for all envs); an
     empty table means the naive potential ``Φ = eta · achieved``. ``lr = 0``
-    disables the update. ``rh_acc_out``, ``k_acc_out`` and ``emit_out`` (the
+    disables the update. ``start_mode`` shifts a table's potential by ``V(z_0)``
+    (``START_ZERO``) or ``max(V(z_0), 0)`` (``START_NONPOSITIVE``), with
+    ``z_start[b]`` the abstract state learner ``b``'s episode started in.
+    ``rh_acc_out``, ``k_acc_out`` and ``emit_out`` (the
     SMDP transition's ``r_h``, ``k`` and mask) are filled when not empty.
     The update equals one SGD step of
     :class:`~torchrl_subgoal.SubgoalValueLoss` (reduction ``"sum"``): every
@@ -113,6 +119,11 @@ def shape_step(
             row = 0 if shared else b
             phi = table[row, z[b, 0]]
             phi_next = table[row, z_next[b, 0]]
+            if start_mode != START_VALUE:  # shift Φ so that the start's potential is 0 or ≤ 0
+                v0 = table[row, z_start[b, 0]]
+                c = v0 if start_mode == START_ZERO else max(v0, 0.0)
+                phi -= c
+                phi_next -= c
         if zero_terminal and terminated[b, 0]:
             phi_next = 0.0
         reward_out[b, 0] = reward[b, 0] + gamma * phi_next - phi
@@ -170,9 +181,11 @@ def sarsa_step(
 
 @numba.njit(cache=True, nogil=True)
 def grid_step(
-    state, t, action, transitions, cells, goal, max_steps, reward, terminated, truncated, cell_out
+    state, t, action, transitions, cells, goal, max_steps, goal_reward, step_reward, reward, terminated, truncated,
+    cell_out,
 ):
-    """Deterministic grid moves for a batch: next state, step count, reward and flags."""
+    """Deterministic grid moves for a batch: next state, step count, reward (``goal_reward``
+    on reaching the goal, else ``step_reward``) and flags."""
     for b in range(state.shape[0]):
         s = transitions[state[b], action[b]]
         state[b] = s
@@ -180,7 +193,7 @@ def grid_step(
         term = s == goal
         terminated[b] = term
         truncated[b] = (not term) and t[b] >= max_steps
-        reward[b] = 1.0 if term else 0.0
+        reward[b] = goal_reward if term else step_reward
         cell_out[b, 0] = cells[s, 0]
         cell_out[b, 1] = cells[s, 1]
 
@@ -254,10 +267,11 @@ def carry_abstract_states(reset, shaping, initial_z, z, achieved, r_h, k, z_next
 @numba.njit(cache=True, nogil=True)
 def sarsa_grid_run(
     # the grid env (its state arrays are updated in place)
-    state, t_env, transitions, cells, start, goal, max_steps,
+    state, t_env, transitions, cells, start, goal, max_steps, goal_reward, step_reward,
     # the shaping transform: which abstraction, its tables, its per-learner state and the potential
     shaping, observe_cell, pattern, lo, hi, centre, weight, radius2, succ, lookup, initial_z,
-    z, achieved, r_h, k, table, shared, eta, gamma_shaping, value_gamma, value_lr, zero_terminal,
+    z, achieved, r_h, k, table, shared, eta, gamma_shaping, value_gamma, value_lr, zero_terminal, start_mode,
+    z_start,
     # the SARSA learners
     q, abstract_states, action, lr, gamma, inv_temperature, uniforms,
     # episode records
@@ -288,7 +302,7 @@ def sarsa_grid_run(
     for step in range(uniforms.shape[0]):
         for b in range(n):
             rows[b] = state[b] * abstract_states + (z[b, 0] if abstract_states > 1 else 0)
-        grid_step(state, t_env, action, transitions, cells, goal, max_steps,
+        grid_step(state, t_env, action, transitions, cells, goal, max_steps, goal_reward, step_reward,
                   reward[:, 0], terminated[:, 0], truncated[:, 0], cell)
         for b in range(n):
             done[b, 0] = terminated[b, 0] or truncated[b, 0]
@@ -304,7 +318,8 @@ def sarsa_grid_run(
             shaped[:, 0] = reward[:, 0]
         else:
             shape_step(z, z_next, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma_shaping,
-                       value_gamma, value_lr, zero_terminal, rh_out, k_out, shaped, no_f, no_i, no_b)
+                       value_gamma, value_lr, zero_terminal, start_mode, z_start, rh_out, k_out, shaped, no_f, no_i,
+                       no_b)
         for b in range(n):
             zn = z_next[b, 0] if shaping != NO_SHAPING else 0
             rows_next[b] = state[b] * abstract_states + (zn if abstract_states > 1 else 0)
@@ -369,22 +384,29 @@ def fourier_features(obs, low, inv_range, order, half, first, second, out):
 
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
-def _policy_sample(theta_b, phi, u, logits):
-    """Draw from softmax(θ φ) with the uniform ``u``; ``logits`` is filled with π."""
+def _policy(theta_b, phi, probs):
+    """``probs`` ← softmax(θ φ)."""
     n_actions, n_features = theta_b.shape
     top = -np.inf
     for a in range(n_actions):
         s = 0.0
         for f in range(n_features):
             s += theta_b[a, f] * phi[f]
-        logits[a] = s
+        probs[a] = s
         top = max(top, s)
     total = 0.0
     for a in range(n_actions):
-        logits[a] = np.exp(logits[a] - top)
-        total += logits[a]
+        probs[a] = np.exp(probs[a] - top)
+        total += probs[a]
     for a in range(n_actions):
-        logits[a] /= total
+        probs[a] /= total
+
+
+@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
+def _policy_sample(theta_b, phi, u, logits):
+    """Draw from softmax(θ φ) with the uniform ``u``; ``logits`` is filled with π."""
+    _policy(theta_b, phi, logits)
+    n_actions = theta_b.shape[0]
     acc = 0.0
     for a in range(n_actions - 1):
         acc += logits[a]
@@ -396,13 +418,25 @@ def _policy_sample(theta_b, phi, u, logits):
 @numba.njit(cache=True, nogil=True, fastmath=True)
 def ac_act(theta, phi, probs, obs, low, inv_range, order, half, u, action_out):
     """Features of ``obs`` into ``phi``, the policy into ``probs`` and a first action per learner."""
-    n_first = (order + 1) ** half
-    n_second = (order + 1) ** (obs.shape[1] - half)
-    first = np.empty((n_first, 2))
-    second = np.empty((n_second, 2))
+    first, second, _ = _feature_scratch(order, half, obs.shape[1], 0)
     for b in range(obs.shape[0]):
         fourier_features(obs[b], low, inv_range, order, half, first, second, phi[b])
         action_out[b] = _policy_sample(theta[b], phi[b], u[b], probs[b])
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _feature_scratch(order, half, dim, n_features):
+    """Scratch arrays of :func:`fourier_features` (the two halves' exponentials) and a feature vector."""
+    return np.empty(((order + 1) ** half, 2)), np.empty(((order + 1) ** (dim - half), 2)), np.empty(n_features)
+
+
+@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
+def _policy_gradient_step(theta_b, phi_b, probs_b, a_taken, lr, scale, signal):
+    """``θ += lr · scale · signal · (1[a] − π(·|s)) ⊗ φ(s)``: the actor step of both actor-critics."""
+    for a in range(theta_b.shape[0]):
+        g = ((1.0 if a == a_taken else 0.0) - probs_b[a]) * lr * scale * signal
+        for f in range(theta_b.shape[1]):
+            theta_b[a, f] += g * phi_b[f]
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
@@ -419,12 +453,8 @@ def ac_step(
     since) and are replaced by those of the next state (``s'``, or the reset
     state where the episode ended), from which the next action is drawn with ``u``.
     """
-    n_actions, n_features = theta.shape[1], theta.shape[2]
-    n_first = (order + 1) ** half
-    n_second = (order + 1) ** (obs_next.shape[1] - half)
-    first = np.empty((n_first, 2))
-    second = np.empty((n_second, 2))
-    phi_next = np.empty(n_features)
+    n_features = theta.shape[2]
+    first, second, phi_next = _feature_scratch(order, half, obs_next.shape[1], n_features)
     for b in range(w.shape[0]):
         if not active[b]:
             continue
@@ -440,11 +470,7 @@ def ac_step(
         if not terminated[b]:
             delta += gamma * value_next
         scale = 1.0 / np.sqrt(norm2) if normalize else 1.0
-        a_taken = action[b]
-        for a in range(n_actions):
-            g = ((1.0 if a == a_taken else 0.0) - probs[b, a]) * actor_lr * scale * delta
-            for f in range(n_features):
-                theta[b, a, f] += g * phi[b, f]
+        _policy_gradient_step(theta[b], phi[b], probs[b], action[b], actor_lr, scale, delta)
         c = critic_lr * scale * delta
         for f in range(n_features):
             w[b, f] += c * phi[b, f]
@@ -455,13 +481,64 @@ def ac_step(
         action_out[b] = _policy_sample(theta[b], phi[b], u[b], probs[b])
 
 
+@numba.njit(cache=True, nogil=True, fastmath=True)
+def qac_step(
+    w, theta, phi, probs, action, reward, obs_next, terminated, done, obs_root, active,
+    low, inv_range, order, half, u, actor_lr, critic_lr, gamma, normalize, action_out,
+):
+    """One step of the Q-based actor-critic (the authors' released PinBall agent) for every active learner.
+
+    ``w`` is ``[B, A·F]``: a linear critic ``Q(s, a) = w_a·φ(s)`` per action.
+    First ``a' ~ π(·|s')`` is drawn with ``u[b]`` (the policy before this
+    step's update). Then, with ``q = Q(s, a)`` before the critic's update:
+    ``θ += α_a q (1[a] − π(·|s)) ⊗ φ(s)`` (``π`` with the current ``θ``) and
+    ``w_a += α_c δ φ(s)``, ``δ = r + γ Q(s', a') (1 − terminated) − q``; with
+    ``normalize`` both rates are divided by ``‖φ(s)‖``. Where the episode
+    ended the next action is drawn at the reset state with ``u[n + b]``
+    (``u`` is ``[2n]``). ``phi`` holds each learner's ``φ(s)`` and becomes
+    that of the next state; ``probs`` is scratch.
+    """
+    n = w.shape[0]
+    n_features = theta.shape[2]
+    first, second, phi_next = _feature_scratch(order, half, obs_next.shape[1], n_features)
+    for b in range(n):
+        if not active[b]:
+            continue
+        fourier_features(obs_next[b], low, inv_range, order, half, first, second, phi_next)
+        a_next = _policy_sample(theta[b], phi_next, u[b], probs[b])
+        a_taken = action[b]
+        q = 0.0
+        q_next = 0.0
+        norm2 = 0.0
+        for f in range(n_features):
+            q += w[b, a_taken * n_features + f] * phi[b, f]
+            q_next += w[b, a_next * n_features + f] * phi_next[f]
+            norm2 += phi[b, f] * phi[b, f]
+        scale = 1.0 / np.sqrt(norm2) if normalize else 1.0
+        _policy(theta[b], phi[b], probs[b])
+        _policy_gradient_step(theta[b], phi[b], probs[b], a_taken, actor_lr, scale, q)
+        delta = reward[b] - q
+        if not terminated[b]:
+            delta += gamma * q_next
+        c = critic_lr * scale * delta
+        for f in range(n_features):
+            w[b, a_taken * n_features + f] += c * phi[b, f]
+        if done[b]:
+            fourier_features(obs_root[b], low, inv_range, order, half, first, second, phi_next)
+            a_next = _policy_sample(theta[b], phi_next, u[n + b], probs[b])
+        for f in range(n_features):
+            phi[b, f] = phi_next[f]
+        action_out[b] = a_next
+
+
 @numba.njit(cache=True, nogil=True)
 def advance_and_shape(
     z, obs, pattern, lo, hi, centre, weight, radius2, succ, achieved, r_h, k, reward, done, terminated,
-    table, shared, eta, gamma, value_gamma, value_lr, zero_terminal,
+    table, shared, eta, gamma, value_gamma, value_lr, zero_terminal, start_mode, z_start,
     z_out, rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out,
 ):
     """:func:`advance_regions` then :func:`shape_step`: one transform step in one call."""
     advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_out)
     shape_step(z, z_out, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma,
-               value_gamma, value_lr, zero_terminal, rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out)
+               value_gamma, value_lr, zero_terminal, start_mode, z_start, rh_out, k_out, reward_out, rh_acc_out,
+               k_acc_out, emit_out)

@@ -25,7 +25,7 @@ from tensordict.utils import NestedKey
 
 from torchrl_subgoal.potentials import NaivePotential, Potential, TabularPotential
 from torchrl_subgoal.subgoals import Predicate, StateAggregation, SubgoalSeries
-from torchrl_subgoal.transform import SubgoalPotentialTransform
+from torchrl_subgoal.transform import StartPotential, SubgoalPotentialTransform
 
 __all__ = ["Method", "paper_methods", "random_patterns", "shaping_parts", "shaping_transform"]
 
@@ -83,6 +83,7 @@ def shaping_parts(
     observation_key: NestedKey = "observation",
     aggregation_key: NestedKey = "observation",
     zero_terminal_potential: bool = True,
+    start_potential: StartPotential = "nonpositive",
 ) -> tuple[SubgoalSeries | list[SubgoalSeries] | StateAggregation, Potential, dict[str, Any]] | None:
     """What :class:`SubgoalPotentialTransform` needs for ``method``: the subgoals (or aggregation),
     the potential and the other keyword arguments; ``None`` for the unshaped baseline.
@@ -93,7 +94,7 @@ def shaping_parts(
     """
     if method.shaping == "none":
         return None
-    options: dict[str, Any] = {"zero_terminal_potential": zero_terminal_potential}
+    options: dict[str, Any] = {"zero_terminal_potential": zero_terminal_potential, "start_potential": start_potential}
     if method.shaping == "aggregation":
         if aggregation is None:
             raise ValueError(f"{method.name} needs an aggregation g(s)")
@@ -121,6 +122,7 @@ def shaping_transform(
     observation_key: NestedKey = "observation",
     aggregation_key: NestedKey = "observation",
     zero_terminal_potential: bool = True,
+    start_potential: StartPotential = "nonpositive",
 ) -> SubgoalPotentialTransform | None:
     """The shaping transform of ``method`` for a batch of learners, or ``None`` for the baseline.
 
@@ -137,6 +139,7 @@ def shaping_transform(
         observation_key: what subgoal predicates read.
         aggregation_key: what ``g`` reads.
         zero_terminal_potential: see :class:`SubgoalPotentialTransform`.
+        start_potential: see :class:`SubgoalPotentialTransform`.
 
     Examples:
         >>> import torch
@@ -150,7 +153,7 @@ def shaping_transform(
     parts = shaping_parts(
         method, batch_shape, patterns=patterns, pattern_index=pattern_index, aggregation=aggregation, eta=eta,
         observation_key=observation_key, aggregation_key=aggregation_key,
-        zero_terminal_potential=zero_terminal_potential,
+        zero_terminal_potential=zero_terminal_potential, start_potential=start_potential,
     )
     if parts is None:
         return None

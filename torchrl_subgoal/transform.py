@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import torch
@@ -24,6 +24,10 @@ __all__ = ["SubgoalKeys", "SubgoalPotentialTransform"]
 
 RETURN = "subgoal_return"
 STEPS = "subgoal_steps"
+
+StartPotential = Literal["value", "zero", "nonpositive"]
+_START_MODES = {"value": _kernels.START_VALUE, "zero": _kernels.START_ZERO,
+                "nonpositive": _kernels.START_NONPOSITIVE}
 
 
 @dataclass(frozen=True)
@@ -69,6 +73,11 @@ class SubgoalKeys:
     def learner(self) -> str:
         """Which env of the batch the row belongs to (its learner)."""
         return f"{self.prefix}_learner"
+
+    @property
+    def start(self) -> str:
+        """The potential's input at reset (``z_0`` of an aggregation, ``o_0`` of a neural potential)."""
+        return f"{self.prefix}_start"
 
     @property
     def optional(self) -> tuple[str, ...]:
@@ -173,6 +182,20 @@ class SubgoalPotentialTransform(Transform):
             optimal policy exactly invariant in episodic tasks (Grzes 2017).
             Defaults to ``True``; ``False`` shapes with ``V(z')`` at the goal
             as the authors' released code does.
+        start_potential: the level of ``Φ``, set by the potential of the
+            abstract state ``z_0`` the episode started in (``0`` for a subgoal
+            series; for a :class:`StateAggregation` and for a potential reading
+            the anchor the transform keeps the potential's input at reset under
+            ``"subgoal_start"``). ``"value"``: ``Φ = V``; ``"zero"``:
+            ``Φ = V − V(z_0)``; ``"nonpositive"`` (the default):
+            ``Φ = V − max(V(z_0), 0)``, so ``Φ(z_0) = min(V(z_0), 0)``. With
+            ``zero_terminal_potential`` a constant shift of ``Φ`` keeps the
+            optimal policy, but it acts like shifting the learner's initial
+            values (Wiewiora 2003): ``"nonpositive"`` keeps a zero-initialised
+            learner's start values neither optimistic under step costs nor
+            stripped of the goal's value under goal rewards (measured in
+            ``docs/shaping_defaults.md``). A :class:`NaivePotential` has
+            ``Φ(z_0) = 0`` already. ``V`` itself is trained unshifted.
         env_reward_key: where the unshaped reward is kept. If an earlier
             transform already keeps it there, ``r_h`` accumulates that entry
             and it is left alone.
@@ -222,6 +245,7 @@ class SubgoalPotentialTransform(Transform):
         value_lr: float | None = None,
         value_gamma: float | None = None,
         zero_terminal_potential: bool = True,
+        start_potential: StartPotential = "nonpositive",
         env_reward_key: NestedKey = "env_reward",
         transitions_key: NestedKey = "smdp",
         write_transitions: bool | None = None,
@@ -271,10 +295,19 @@ class SubgoalPotentialTransform(Transform):
             write_transitions = False
         self.transitions_key: NestedKey | None = transitions_key if write_transitions else None
         self.zero_terminal_potential = zero_terminal_potential
+        if start_potential not in _START_MODES:
+            raise ValueError(f"start_potential must be one of {sorted(_START_MODES)}, got {start_potential!r}")
+        self.start_potential = start_potential
+        self._start_mode = _START_MODES[start_potential]
         keys = self.keys
-        self._state_keys: tuple[str, ...] = (
-            keys.index, keys.ret, keys.steps, *(k for k in keys.optional if k in self.potential.in_keys)
-        )
+        extra = tuple(k for k in keys.optional if k in self.potential.in_keys)
+        # Φ(z_0) needs the potential's input at reset, unless it is z = 0 (every subgoal series starts there)
+        reads = self.potential.in_keys
+        if start_potential != "value" and not isinstance(self.potential, NaivePotential) and (
+            keys.anchor in reads or (self.aggregation is not None and keys.index in reads)
+        ):
+            extra = (*extra, keys.start)
+        self._state_keys: tuple[str, ...] = (keys.index, keys.ret, keys.steps, *extra)
         self._parameters_list = list(potential.parameters())
         self.value_loss: SubgoalValueLoss | None = None
         self.value_optimizer: torch.optim.Optimizer | None = None
@@ -480,6 +513,8 @@ class SubgoalPotentialTransform(Transform):
             anchor = observation_spec[self.anchor_key].shape[len(batch_shape):]
             size = int(anchor.numel()) if len(anchor) else 1
             specs[keys.anchor] = Unbounded(shape=(*batch_shape, size), dtype=torch.float32)
+        if keys.start in self.state_keys:  # what the potential reads at reset: the anchor or z_0
+            specs[keys.start] = specs[keys.anchor if keys.anchor in self.state_keys else keys.index].clone()
         return specs
 
     def transform_observation_spec(self, observation_spec: TensorSpec) -> TensorSpec:
@@ -551,6 +586,8 @@ class SubgoalPotentialTransform(Transform):
             state[keys.anchor] = self._flat_obs(root.get(self.anchor_key), batch_shape)
         if keys.learner in self.state_keys:
             state[keys.learner] = setup.learner
+        if keys.start in self.state_keys:
+            state[keys.start] = state[keys.anchor if keys.anchor in self.state_keys else keys.index]
         return state
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
@@ -669,8 +706,10 @@ class SubgoalPotentialTransform(Transform):
                                                   (done, "done"), (terminated, "terminated"))]
         if reward is not env_reward:  # a second transform: shape the (already shaped) reward, accumulate r
             base = _col(reward, n, "reward")
+        start = (_col(current[keys.start], n, keys.start) if keys.start in current
+                 else np.zeros((max(1, n), 1), np.int64))  # a subgoal series starts every episode in z = 0
         shaping = (*cols[1:], setup.table, setup.shared, setup.eta, self.gamma, self.value_gamma, lr,
-                   self.zero_terminal_potential)
+                   self.zero_terminal_potential, self._start_mode, start)
         abstraction = setup.abstraction
         if isinstance(abstraction, SubgoalTables):
             t = abstraction._np
@@ -692,8 +731,9 @@ class SubgoalPotentialTransform(Transform):
             out[self.env_reward_key] = reward
         if keys.achieved in self.state_keys:
             out[keys.achieved] = z_next[0] != z
-        if keys.learner in self.state_keys:
-            out[keys.learner] = current[keys.learner]
+        for kept in (keys.learner, keys.start):
+            if kept in self.state_keys:
+                out[kept] = current[kept]
         if key is not None:
             in_keys = self.potential.in_keys
             inputs = {name: current[name] for name in in_keys}
@@ -707,6 +747,16 @@ class SubgoalPotentialTransform(Transform):
         td = TensorDict({k: entries[k] for k in self.potential.in_keys}, batch_size=batch_shape)
         value = self.potential(td).get(self.value_key)
         return check_value(value, batch_shape, f"the potential {type(self.potential).__name__}")
+
+    def _start_entries(self, current: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """The potential's inputs at the start of the episode: ``z_0`` (0 for a subgoal series) or ``o_0``."""
+        keys = self.keys
+        start = dict(current)
+        if keys.anchor in self.state_keys:
+            start[keys.anchor] = current[keys.start]
+        else:
+            start[keys.index] = current[keys.start] if keys.start in current else torch.zeros_like(current[keys.index])
+        return start
 
     def _shape_eager(
         self,
@@ -733,8 +783,9 @@ class SubgoalPotentialTransform(Transform):
         if keys.anchor in self.state_keys:
             anchor = self._flat_obs(nxt.get(self.anchor_key), batch_shape)
             nxt_state[keys.anchor] = torch.where(achieved, anchor, current[keys.anchor])
-        if keys.learner in self.state_keys:
-            nxt_state[keys.learner] = current[keys.learner]
+        for kept in (keys.learner, keys.start):
+            if kept in self.state_keys:
+                nxt_state[kept] = current[kept]
         in_keys = self.potential.in_keys
         transition = None
         if learn or self.transitions_key is not None:
@@ -748,6 +799,10 @@ class SubgoalPotentialTransform(Transform):
         with torch.no_grad():
             phi = self._value(current, batch_shape)
             phi_next = self._value(nxt_state, batch_shape)
+            if self.start_potential != "value" and not isinstance(self.potential, NaivePotential):
+                shift = self._value(self._start_entries(current), batch_shape)
+                shift = shift if self.start_potential == "zero" else shift.clamp(min=0.0)
+                phi, phi_next = phi - shift, phi_next - shift
         if self.zero_terminal_potential:
             phi_next = phi_next.masked_fill(terminated, 0.0)
         shaping = self.gamma * phi_next - phi

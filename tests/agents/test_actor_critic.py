@@ -64,3 +64,62 @@ def test_same_seed_same_learning() -> None:
         return run_episodes(env, agent, 3).steps
 
     assert torch.equal(run(), run())
+
+
+def _inverse_cdf(probs: torch.Tensor, u: np.ndarray) -> torch.Tensor:
+    """The kernels' draw: the first action whose cumulative probability exceeds ``u``."""
+    below = (probs.cumsum(-1)[:, :-1] <= torch.from_numpy(u)[:, None]).sum(-1)
+    return below
+
+
+@pytest.mark.parametrize("normalize", [False, True])
+def test_q_actor_critic_update_matches_autograd(normalize: bool) -> None:
+    """The authors' released agent: a' ~ π(·|s') first, actor step scaled by Q(s, a), SARSA critic per action."""
+    import copy
+
+    n, cfg = 3, ActorCriticConfig(actor_lr=0.05, critic_lr=0.1, gamma=0.9, value_lr=0.0, normalize_lr=normalize,
+                                  critic="action")
+    agent = FourierActorCritic(n, LOW, HIGH, 5, cfg, seed=0)
+    assert agent.w.shape == (n, 5 * 256)
+    g = torch.Generator().manual_seed(1)
+    agent.w[:] = torch.randn(n, 5 * 256, generator=g, dtype=torch.float64).numpy() * 0.1
+    agent.theta[:] = torch.randn(n, 5, 256, generator=g, dtype=torch.float64).numpy() * 0.1
+    obs, obs_next, obs_reset = (torch.rand(n, 4, generator=g) for _ in range(3))
+    agent.act(TensorDict({"observation": obs}, [n]))
+    w0 = torch.from_numpy(agent.w.copy()).view(n, 5, 256)
+    theta0 = torch.from_numpy(agent.theta.copy()).requires_grad_(True)
+    action = torch.tensor([0, 3, 4])
+    reward = torch.tensor([[1.0], [-2.0], [5.0]])
+    terminated = torch.tensor([[False], [False], [True]])
+    truncated = torch.tensor([[False], [True], [False]])
+    transition = TensorDict(
+        {"observation": obs, "action": action,
+         "next": {"observation": obs_next, "reward": reward, "terminated": terminated,
+                  "done": terminated | truncated}},
+        [n],
+    )
+    root = TensorDict({"observation": torch.where(terminated | truncated, obs_reset, obs_next)}, [n])
+    u = copy.deepcopy(agent.rng).random(2 * n)
+    agent.step(transition, root)
+
+    phi, phi_next, phi_reset = agent.features(obs), agent.features(obs_next), agent.features(obs_reset)
+    with torch.no_grad():
+        a_next = _inverse_cdf(torch.softmax(torch.einsum("naf,nf->na", theta0, phi_next), -1), u[:n])
+    rows = torch.arange(n)
+    q = (w0[rows, action] * phi).sum(-1)
+    q_next = (w0[rows, a_next] * phi_next).sum(-1) * (~terminated.squeeze(-1))  # truncation bootstraps
+    delta = reward.squeeze(-1).double() + 0.9 * q_next - q
+    scale = 1 / phi.norm(dim=-1) if normalize else torch.ones(n, dtype=torch.float64)
+    log_pi = torch.log_softmax(torch.einsum("naf,nf->na", theta0, phi), -1)[rows, action]
+    log_pi.sum().backward()
+    expected_theta = theta0.detach() + (0.05 * scale * q)[:, None, None] * theta0.grad
+    expected_w = w0.clone()
+    expected_w[rows, action] += (0.1 * scale * delta)[:, None] * phi
+    assert np.allclose(agent.theta, expected_theta.numpy(), atol=1e-10)
+    assert np.allclose(agent.w, expected_w.reshape(n, -1).numpy(), atol=1e-10)
+    assert np.allclose(agent.q_values(obs)[rows, action].numpy(), (expected_w[rows, action] * phi).sum(-1).numpy())
+    # the next action: a' where the episode goes on, a draw at the reset state (updated θ) where it ended
+    reset_probs = torch.softmax(torch.einsum("naf,nf->na", expected_theta, phi_reset), -1)
+    expected_action = torch.where((terminated | truncated).squeeze(-1), _inverse_cdf(reset_probs, u[n:]), a_next)
+    assert torch.equal(root["action"], expected_action)
+    assert np.allclose(agent.phi, torch.where((terminated | truncated), phi_reset, phi_next).numpy())

@@ -15,26 +15,33 @@ from torchrl_subgoal.methods import paper_methods, shaping_transform
 PATTERNS = [SubgoalSeries([Cell(4, 9), Cell(11, 9)]), SubgoalSeries([Cell(1, 11), Cell(11, 1), Cell(10, 6)])]
 
 
-def setup(method: str, n: int, abstract_states: int, max_steps: int) -> tuple[object, SoftmaxSarsa]:
+def setup(method: str, n: int, abstract_states: int, max_steps: int, step_cost: bool = False,
+          start: str = "nonpositive", zero_terminal: bool = True) -> tuple[object, SoftmaxSarsa]:
     cfg = SARSA_PRESETS["released"]
-    env = FourRoomsEnv(n, max_steps=max_steps)
+    env = FourRoomsEnv(n, max_steps=max_steps, goal_reward=0.0 if step_cost else 1.0,
+                       step_reward=-1.0 if step_cost else 0.0)
     shaping = shaping_transform(
         paper_methods("SARSA")[method], env.batch_size, gamma=cfg.gamma, value_lr=cfg.value_lr,
         patterns=PATTERNS, pattern_index=torch.arange(n) % 2, aggregation=room_aggregation(),
-        eta=1.0, observation_key="cell",
+        eta=1.0, observation_key="cell", start_potential=start,  # type: ignore[arg-type]
+        zero_terminal_potential=zero_terminal,
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     return learning_env, SoftmaxSarsa(n, 104, 4, cfg, seed=7, abstract_states=abstract_states)
 
 
 @pytest.mark.parametrize(
-    ("method", "abstract_states"),
-    [("SARSA", 1), ("HRS", 1), ("HRS", 4), ("NRS", 1), ("SARSA-RS", 1)],
+    ("method", "abstract_states", "step_cost", "start", "zero_terminal"),
+    [("SARSA", 1, False, "nonpositive", True), ("HRS", 1, False, "nonpositive", True),
+     ("HRS", 4, False, "value", False), ("NRS", 1, False, "nonpositive", True),
+     ("SARSA-RS", 1, False, "zero", True), ("HRS", 1, True, "zero", True), ("SARSA-RS", 1, True, "value", False)],
 )
-def test_fused_equals_torchrl(method: str, abstract_states: int) -> None:
+def test_fused_equals_torchrl(method: str, abstract_states: int, step_cost: bool, start: str,
+                              zero_terminal: bool) -> None:
     results = {}
     for engine in ("torchrl", "fused"):
-        env, agent = setup(method, n=12, abstract_states=abstract_states, max_steps=150)
+        env, agent = setup(method, n=12, abstract_states=abstract_states, max_steps=150, step_cost=step_cost,
+                           start=start, zero_terminal=zero_terminal)
         records = run_episodes(env, agent, 25, engine=engine)
         potential = env.transform.potential if hasattr(env, "transform") else None
         table = potential.table.detach().clone() if hasattr(potential, "table") else None
@@ -46,6 +53,8 @@ def test_fused_equals_torchrl(method: str, abstract_states: int) -> None:
     if va is not None:
         assert torch.equal(va, vb) and va.abs().sum() > 0
     assert (a.steps == 150).any() and a.success.any()  # both truncations and goals happened
+    if step_cost:
+        assert torch.equal(a.returns, -(a.steps - a.success.long()).float())  # −1 per step, 0 at the goal
 
 
 def test_fused_rejects_other_setups() -> None:
@@ -59,12 +68,12 @@ def test_fused_rejects_other_setups() -> None:
         run_episodes(FourRoomsEnv(2), agent, 1, engine="jax")  # type: ignore[arg-type]
 
 
-def pinball_setup(method: str, n: int, max_steps: int) -> tuple[object, object]:
+def pinball_setup(method: str, n: int, max_steps: int, preset: str = "released") -> tuple[object, object]:
     from torchrl_subgoal import Box, Circle, StateAggregation
     from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic
     from torchrl_subgoal.envs import PinBallEnv
 
-    cfg = AC_PRESETS["released"]
+    cfg = AC_PRESETS[preset]
     env = PinBallEnv(n, seed=3, max_steps=max_steps, step_penalty=-1.0, thrust_penalty=-5.0)
     patterns = [SubgoalSeries([Circle((0.2, 0.85), 0.04), Circle((0.25, 0.8), 0.04)]),
                 SubgoalSeries([Circle((0.22, 0.9), 0.05)])]
@@ -78,11 +87,14 @@ def pinball_setup(method: str, n: int, max_steps: int) -> tuple[object, object]:
     return (TransformedEnv(env, shaping) if shaping is not None else env), agent
 
 
-@pytest.mark.parametrize("method", ["AC", "HRS", "NRS", "SARSA-RS"])
-def test_pinball_fused_equals_torchrl(method: str) -> None:
+@pytest.mark.parametrize(("method", "preset"), [("AC", "released"), ("HRS", "released"), ("NRS", "released"),
+                                                ("SARSA-RS", "released"), ("AC", "released-td"),
+                                                ("HRS", "released-td")])
+def test_pinball_fused_equals_torchrl(method: str, preset: str) -> None:
+    """The Q-based actor-critic (released) and the TD-error one (released-td), with the classic penalties."""
     results = {}
     for engine in ("torchrl", "fused"):
-        env, agent = pinball_setup(method, n=6, max_steps=120)
+        env, agent = pinball_setup(method, n=6, max_steps=120, preset=preset)
         records = run_episodes(env, agent, 4, engine=engine)
         results[engine] = (records, agent)
     (a, agent_a), (b, agent_b) = results["torchrl"], results["fused"]

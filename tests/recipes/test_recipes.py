@@ -102,3 +102,29 @@ def test_four_rooms_on_ray_equals_local(tmp_path: Path) -> None:
         assert done.returncode == 0, done.stderr[-2000:]
         frames.append(load_frame(out))
     assert len(frames[0]) == 20 * 15 and frames[0].equals(frames[1])
+
+
+def test_reproductions_default_to_the_authors_conventions() -> None:
+    """The recipes follow the authors' released code: the goal step is shaped with γV(z_T), Φ = V; PinBall's
+    default agent is their Q-based actor-critic (docs/shaping_defaults.md, docs/pinball.md)."""
+    from torchrl_subgoal.agents import AC_PRESETS
+
+    for name in ("four_rooms", "pinball"):
+        cfg = recipe(name).Config()
+        assert cfg.zero_terminal_potential is False and cfg.start_potential == "value"
+    assert AC_PRESETS[recipe("pinball").Config().preset].critic == "action"
+    assert AC_PRESETS["paper"].critic == "state"
+
+
+def test_four_rooms_step_cost_and_library_conventions(tmp_path: Path) -> None:
+    from torchrl_subgoal.experiments import load_frame
+
+    args = ["--episodes", "6", "--learnings", "1", "--methods", "HRS,SARSA", "--reward", "step-cost",
+            "--zero-terminal-potential", "--start-potential", "nonpositive", "--workers", "0",
+            "--results", str(tmp_path)]
+    assert recipe("four_rooms").main(args) == 0
+    frame = load_frame(tmp_path)
+    assert (frame["return"] == -(frame["steps"] - frame["success"].astype(int))).all()  # −1 per step, 0 at the goal
+    config = json.loads((tmp_path / "config.json").read_text())["config"]
+    assert (config["reward"], config["zero_terminal_potential"], config["start_potential"]) == (
+        "step-cost", True, "nonpositive")

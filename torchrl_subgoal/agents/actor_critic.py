@@ -1,10 +1,11 @@
-"""One-step actor-critic over a Fourier basis, batched: one critic and actor per learner."""
+"""One-step actor-critics over a Fourier basis, batched: one critic and actor per learner."""
 
 from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 import torch
@@ -27,6 +28,10 @@ class ActorCriticConfig:
         value_lr: ``α_v`` of the subgoal potential (the shaping methods).
         normalize_lr: divide both learning rates by ``‖φ(s)‖``.
         order: order of the Fourier basis (``(order + 1)^D`` features).
+        critic: ``"state"``: a critic ``V(s)`` and an actor step scaled by the
+            TD error (the paper's text); ``"action"``: a critic ``Q(s, a)`` per
+            action learned by SARSA and an actor step scaled by ``Q(s, a)``
+            (the authors' released agent).
     """
 
     actor_lr: float
@@ -35,14 +40,21 @@ class ActorCriticConfig:
     value_lr: float
     normalize_lr: bool = False
     order: int = 3
+    critic: Literal["state", "action"] = "state"
 
 
-#: ``"paper"``: the paper's text, α = 0.01 for actor and critic, γ = 0.99; it
-#: gives no α_v, so the released 0.05 is used. ``"released"``: the authors'
-#: released configuration, α = 0.001 divided by ‖φ(s)‖, α_v = 0.05.
+#: ``"paper"``: the paper's text, a TD-error actor-critic with α = 0.01 for
+#: actor and critic, γ = 0.99; it gives no α_v, so the released 0.05 is used.
+#: ``"released"``: the authors' released agent and configuration, a Q-based
+#: actor-critic (``critic="action"``) with α = 0.001 divided by ‖φ(s)‖ and
+#: α_v = 0.05. ``"released-td"``: the paper's TD-error actor-critic with the
+#: released rates (the two differ by the agent only).
 AC_PRESETS: dict[str, ActorCriticConfig] = {
     "paper": ActorCriticConfig(actor_lr=0.01, critic_lr=0.01, gamma=0.99, value_lr=0.05),
-    "released": ActorCriticConfig(actor_lr=0.001, critic_lr=0.001, gamma=0.99, value_lr=0.05, normalize_lr=True),
+    "released": ActorCriticConfig(actor_lr=0.001, critic_lr=0.001, gamma=0.99, value_lr=0.05, normalize_lr=True,
+                                  critic="action"),
+    "released-td": ActorCriticConfig(actor_lr=0.001, critic_lr=0.001, gamma=0.99, value_lr=0.05,
+                                     normalize_lr=True),
 }
 
 
@@ -56,11 +68,20 @@ class FourierActorCritic:
 
     Features ``φ_c(s) = cos(π c·s̃)`` for every ``c ∈ {0..order}^D`` on the state
     scaled to the unit cube with ``low``/``high`` (256 features for PinBall's
-    4-d state at order 3). Critic ``V(s) = w·φ(s)``; actor
-    ``π(a|s) ∝ exp(θ_a·φ(s))``. Each step:
-    ``δ = r + γ V(s') (1 − terminated) − V(s)``, ``w += α_c δ φ(s)``,
-    ``θ += α_a δ ∇ log π(a|s)``. Draws use the agent's numpy generator, one
-    uniform per learner and step. One fused kernel per step.
+    4-d state at order 3); actor ``π(a|s) ∝ exp(θ_a·φ(s))``. Two critics
+    (``config.critic``):
+
+    * ``"state"`` (the paper's text): ``V(s) = w·φ(s)``; each step
+      ``δ = r + γ V(s') (1 − terminated) − V(s)``, ``w += α_c δ φ(s)``,
+      ``θ += α_a δ ∇ log π(a|s)``; the next action is drawn after the update.
+    * ``"action"`` (the authors' released agent): ``Q(s, a) = w_a·φ(s)``; each
+      step draws ``a' ~ π(·|s')`` first, then ``θ += α_a Q(s, a) ∇ log π(a|s)``
+      and ``w_a += α_c δ φ(s)`` with ``δ = r + γ Q(s', a') (1 − terminated) − Q(s, a)``.
+
+    With ``normalize_lr`` both rates are divided by ``‖φ(s)‖``. Draws use the
+    agent's numpy generator: one uniform per learner and step (two with the
+    ``"action"`` critic, the second for the reset state when an episode
+    ends). One fused kernel per step.
 
     Args:
         num_learners: learners (env batch size).
@@ -79,6 +100,8 @@ class FourierActorCritic:
         >>> agent = FourierActorCritic(4, spec.low[0], spec.high[0], 5, AC_PRESETS["released"], seed=0)
         >>> run_episodes(env, agent, 2).steps.shape
         torch.Size([4, 2])
+        >>> agent.q_values(env.reset()["observation"]).shape  # the released agent: Q(s, ·)
+        torch.Size([4, 5])
     """
 
     def __init__(
@@ -102,13 +125,17 @@ class FourierActorCritic:
         self.half = dim // 2
         self.num_features = (config.order + 1) ** dim
         self.num_actions = num_actions
-        self.w = np.zeros((num_learners, self.num_features))
+        q_critic = config.critic == "action"
+        # the Q critic is [B, A·F]: row-major per action, one layout for both critics in the fused kernels
+        self.w = np.zeros((num_learners, self.num_features * (num_actions if q_critic else 1)))
         self.theta = np.zeros((num_learners, num_actions, self.num_features))
         self.phi = np.zeros((num_learners, self.num_features))  # φ of each learner's current state
         self.probs = np.full((num_learners, num_actions), 1.0 / num_actions)  # π(·|s) at that state
         self.rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         self.observation_key = observation_key
         self._all = np.ones(num_learners, dtype=np.bool_)
+        self._step_kernel = _kernels.qac_step if q_critic else _kernels.ac_step
+        self.uniforms_per_step = num_learners * (2 if q_critic else 1)
 
     def features(self, observation: torch.Tensor) -> torch.Tensor:
         """``φ(s)`` of a batch of observations ``[N, D]`` (the kernel's features, for inspection)."""
@@ -119,6 +146,14 @@ class FourierActorCritic:
         _kernels.ac_act(theta, out, np.empty((n, 1)), obs, self.low, self.inv_range, self.config.order, self.half,
                         np.zeros(n), np.empty(n, np.int64))
         return torch.from_numpy(out)
+
+    def q_values(self, observation: torch.Tensor) -> torch.Tensor:
+        """``Q(s, ·)`` of each learner at its observation ``[N, D]`` (the ``"action"`` critic), ``[N, A]``."""
+        if self.config.critic != "action":
+            raise ValueError("q_values needs the action-value critic (ActorCriticConfig.critic='action')")
+        phi = self.features(observation).numpy()
+        w = self.w.reshape(self.w.shape[0], self.num_actions, self.num_features)
+        return torch.from_numpy(np.einsum("baf,bf->ba", w, phi))
 
     def _obs(self, tensordict: TensorDictBase) -> np.ndarray:
         return tensordict.get(self.observation_key).numpy().astype(np.float64).reshape(self.w.shape[0], -1)
@@ -136,11 +171,12 @@ class FourierActorCritic:
         nxt = transition.get("next")
         n = self.w.shape[0]
         action = np.empty(n, np.int64)
-        _kernels.ac_step(
+        self._step_kernel(
             self.w, self.theta, self.phi, self.probs, transition.get("action").numpy().reshape(n),
             nxt.get("reward").numpy().reshape(n), self._obs(nxt), nxt.get("terminated").numpy().reshape(n),
             nxt.get("done").numpy().reshape(n), self._obs(next_root), self._all, self.low, self.inv_range,
-            cfg.order, self.half, self.rng.random(n), cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr,
+            cfg.order, self.half, self.rng.random(self.uniforms_per_step), cfg.actor_lr, cfg.critic_lr, cfg.gamma,
+            cfg.normalize_lr,
             action,
         )
         next_root.set("action", torch.from_numpy(action))

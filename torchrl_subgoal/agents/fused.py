@@ -102,7 +102,8 @@ def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase
         "z": np.zeros((n, 1), np.int64), "achieved": np.zeros((n, 1), np.bool_),
         "r_h": np.zeros((n, 1), np.float32), "k": np.zeros((n, 1), np.int64),
         "table": np.zeros((0, 1), np.float32), "shared": False, "eta": 0.0,
-        "gamma": 0.0, "value_gamma": 0.0, "value_lr": 0.0, "zero_terminal": False,
+        "gamma": 0.0, "value_gamma": 0.0, "value_lr": 0.0, "zero_terminal": False, "start_mode": _kernels.START_VALUE,
+        "z_start": np.zeros((n, 1), np.int64),
     }
     if shaping is None:
         return state
@@ -126,9 +127,11 @@ def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase
         raise TypeError(f"the fused engine shapes with tabular or naive potentials, not {type(potential).__name__}")
     for key, name in (("z", "subgoal_index"), ("r_h", "subgoal_return"), ("k", "subgoal_steps")):
         state[key] = td.get(name).reshape(n, 1).numpy().copy()
+    state["z_start"] = state["z"].copy()  # both envs start every episode in the same place
     state["gamma"], state["value_gamma"] = shaping.gamma, shaping.value_gamma
     state["value_lr"] = shaping._value_lr if shaping.learning else 0.0
     state["zero_terminal"] = shaping.zero_terminal_potential
+    state["start_mode"] = shaping._start_mode
     return state
 
 
@@ -179,11 +182,12 @@ def run_four_rooms_fused(
         uniforms = agent.rng.random((block, 2 * n))
         return _kernels.sarsa_grid_run(
             base._state.numpy(), base._t.numpy(), base._transitions_np, base._cells_np,
-            base.start_state, base.goal_state, base.max_steps,
+            base.start_state, base.goal_state, base.max_steps, base.goal_reward, base.step_reward,
             state["kind"], observe_cell, *state["regions"], state["lookup"], initial_z,
             state["z"], state["achieved"], state["r_h"], state["k"], state["table"], state["shared"],
             state["eta"], state["gamma"], state["value_gamma"], state["value_lr"], state["zero_terminal"],
-            agent._q, agent.abstract_states, action, cfg.lr, cfg.gamma, 1.0 / cfg.temperature, uniforms, *records,
+            state["start_mode"], state["z_start"], agent._q, agent.abstract_states, action, cfg.lr, cfg.gamma,
+            1.0 / cfg.temperature, uniforms, *records,
         )
 
     return _run_blocks(n, episodes, run_block, progress)
@@ -201,8 +205,10 @@ def _pinball_ac_run(
     # the shaping transform
     shaping, pattern, lo, hi, centre, weight, radius2, succ, region_lo, region_hi, region_centre, region_weight,
     region_radius2, z, achieved, r_h, k, table, shared, eta, gamma_shaping, value_gamma, value_lr, zero_terminal,
+    start_mode, z_start,
     # the actor-critic learners
     w, theta, phi, probs, action, low, inv_range, order, half, agent_uniforms, actor_lr, critic_lr, gamma, normalize,
+    q_critic,
     # records
     t_rec, ret, episode, steps_out, returns_out, success_out,
 ):
@@ -251,8 +257,8 @@ def _pinball_ac_run(
             shaped[:, 0] = reward[:, 0]
         else:
             _kernels.shape_step(z, z_next, achieved, r_h, k, reward, done, terminated, table, shared, eta,
-                                gamma_shaping, value_gamma, value_lr, zero_terminal, rh_out, k_out, shaped,
-                                no_f, no_i, no_b)
+                                gamma_shaping, value_gamma, value_lr, zero_terminal, start_mode, z_start, rh_out, k_out,
+                                shaped, no_f, no_i, no_b)
         _kernels.carry_abstract_states(done, shaping, 0, z, achieved, r_h, k, z_next, rh_out, k_out)
         for b in range(n):
             for d in range(4):
@@ -272,9 +278,14 @@ def _pinball_ac_run(
             for b in range(n):
                 if done[b, 0]:
                     z[b, 0] = z_next[b, 0]
-        _kernels.ac_step(w, theta, phi, probs, action, shaped[:, 0], obs_next, terminated[:, 0], done[:, 0], obs_root,
-                         active, low, inv_range, order, half, agent_uniforms[step], actor_lr, critic_lr, gamma,
-                         normalize, next_action)
+        if q_critic:
+            _kernels.qac_step(w, theta, phi, probs, action, shaped[:, 0], obs_next, terminated[:, 0], done[:, 0],
+                              obs_root, active, low, inv_range, order, half, agent_uniforms[step], actor_lr,
+                              critic_lr, gamma, normalize, next_action)
+        else:
+            _kernels.ac_step(w, theta, phi, probs, action, shaped[:, 0], obs_next, terminated[:, 0], done[:, 0],
+                             obs_root, active, low, inv_range, order, half, agent_uniforms[step], actor_lr, critic_lr,
+                             gamma, normalize, next_action)
         filed_total += _kernels.record_episodes(done[:, 0], terminated[:, 0], reward[:, 0], t_rec, ret, episode,
                                                 steps_out, returns_out, success_out)
         for b in range(n):
@@ -318,7 +329,7 @@ def run_pinball_fused(
 
     def run_block(records: tuple[np.ndarray, ...]) -> tuple[int, int]:
         env_uniforms = base._rng.random((block, 2 * n)) if base.random_action_prob > 0 else np.ones((block, 2 * n))
-        agent_uniforms = agent.rng.random((block, n))
+        agent_uniforms = agent.rng.random((block, agent.uniforms_per_step))
         return _pinball_ac_run(
             base._position.numpy(), base._velocity.numpy(), base._steps.numpy(), base.start[0], base.start[1],
             g.edges, g.boxes, g.first_edge, g.ball_radius, tx, ty, tr, base.physics.velocity_limit,
@@ -326,8 +337,10 @@ def run_pinball_fused(
             env_uniforms, kind, *state["regions"], region["lo"], region["hi"], region["centre"], region["weight"],
             region["radius2"], state["z"], state["achieved"], state["r_h"], state["k"], state["table"],
             state["shared"], state["eta"], state["gamma"], state["value_gamma"], state["value_lr"],
-            state["zero_terminal"], agent.w, agent.theta, agent.phi, agent.probs, action, agent.low, agent.inv_range,
-            cfg.order, agent.half, agent_uniforms, cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr, *records,
+            state["zero_terminal"], state["start_mode"], state["z_start"], agent.w, agent.theta, agent.phi,
+            agent.probs, action, agent.low, agent.inv_range,
+            cfg.order, agent.half, agent_uniforms, cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr,
+            cfg.critic == "action", *records,
         )
 
     return _run_blocks(n, episodes, run_block, progress)

@@ -66,8 +66,10 @@ class SoftmaxSarsa:
             read from ``abstract_key`` (the shaping transform's subgoal index).
             A history-dependent potential ``Φ(z)`` is then a function of the
             agent's state, which is what potential-based shaping needs to leave
-            the optimal policy unchanged; with ``Q(s)`` alone (the paper's agent)
-            the greedy policy can cycle across a subgoal (see the four-rooms docs).
+            the optimal policy unchanged. With ``Q(s)`` alone (the paper's agent)
+            there is no such guarantee; in four-rooms its greedy policy cycled
+            across subgoals only with ``Φ = V`` and a zeroed terminal potential
+            (docs/four_rooms.md, docs/shaping_defaults.md).
         abstract_key: where ``z`` is read.
 
     Examples:

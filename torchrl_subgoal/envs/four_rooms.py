@@ -93,8 +93,11 @@ class FourRoomsEnv(EnvBase):
 
     13 x 13 grid with 104 free cells, start (1, 1), goal (11, 11), four
     deterministic moves (0 down, 1 right, 2 up, 3 left; into a wall = stay),
-    reward +1 on reaching the goal (terminated), truncation after
-    ``max_steps``. The shortest path takes 20 steps.
+    reward ``goal_reward`` on reaching the goal (terminated) and
+    ``step_reward`` on every other step, truncation after ``max_steps``. The
+    defaults are the paper's (+1 at the goal, 0 otherwise); ``goal_reward=0,
+    step_reward=-1`` is the step-cost variant (−1 per step, 0 at the goal).
+    The shortest path takes 20 steps.
 
     Observations: ``"observation"`` the state number (free cells numbered
     row-major, a ``Categorical(104)``) and ``"cell"`` its ``(row, col)``.
@@ -102,6 +105,8 @@ class FourRoomsEnv(EnvBase):
     Args:
         num_envs: batch size; ``None`` for a single unbatched env.
         max_steps: episode cap (1,000 in the paper).
+        goal_reward: reward of the step that reaches the goal.
+        step_reward: reward of every other step.
         device: torch device.
 
     Examples:
@@ -111,11 +116,22 @@ class FourRoomsEnv(EnvBase):
         >>> check_env_specs(env)
         >>> env.reset()["cell"][0].tolist()
         [1, 1]
+        >>> step_cost = FourRoomsEnv(num_envs=2, goal_reward=0.0, step_reward=-1.0)
+        >>> step_cost.rollout(3)["next", "reward"][0, :, 0].tolist()
+        [-1.0, -1.0, -1.0]
     """
 
     batch_locked = True
 
-    def __init__(self, num_envs: int | None = None, *, max_steps: int = 1000, device: Any = "cpu") -> None:
+    def __init__(
+        self,
+        num_envs: int | None = None,
+        *,
+        max_steps: int = 1000,
+        goal_reward: float = 1.0,
+        step_reward: float = 0.0,
+        device: Any = "cpu",
+    ) -> None:
         batch = torch.Size([]) if num_envs is None else torch.Size([num_envs])
         if num_envs is not None and num_envs < 1:
             raise ValueError(f"num_envs must be positive, got {num_envs}")
@@ -123,6 +139,8 @@ class FourRoomsEnv(EnvBase):
             raise ValueError(f"max_steps must be positive, got {max_steps}")
         super().__init__(batch_size=batch, device=device)
         self.max_steps = int(max_steps)
+        self.goal_reward = float(goal_reward)
+        self.step_reward = float(step_reward)
         n = len(_CELLS)
         moves = [
             [_STATE.get((r + dr, c + dc), _STATE[(r, c)]) for dr, dc in ACTIONS] for r, c in _CELLS
@@ -187,7 +205,8 @@ class FourRoomsEnv(EnvBase):
         if self.device.type == "cpu":
             _kernels.grid_step(
                 self._state.numpy(), self._t.numpy(), action.numpy(), self._transitions_np, self._cells_np,
-                self.goal_state, self.max_steps, reward.numpy().reshape(n), terminated.numpy().reshape(n),
+                self.goal_state, self.max_steps, self.goal_reward, self.step_reward,
+                reward.numpy().reshape(n), terminated.numpy().reshape(n),
                 truncated.numpy().reshape(n), cell.numpy().reshape(n, 2),
             )
         else:
@@ -195,7 +214,7 @@ class FourRoomsEnv(EnvBase):
             self._t += 1
             terminated.copy_((self._state == self.goal_state).view_as(terminated))
             truncated.copy_((self._t >= self.max_steps).view_as(truncated) & ~terminated)
-            reward.copy_(terminated.to(reward.dtype))
+            reward.copy_(torch.where(terminated, self.goal_reward, self.step_reward))
             cell.copy_(self.cells[self._state].view_as(cell))
         return TensorDict(
             {
