@@ -73,6 +73,9 @@ class Config:
     online_potential: bool = setting(False, "train the potential in the transform every step instead")
     normalize_advantage: bool = setting(False, "standardise GAE advantages per batch")
     zero_terminal_potential: bool = setting(True, "Φ = 0 at the goal (exact policy invariance)")
+    start_potential: str = setting("value", "level of Φ: value (Φ = V; docs/torchrl.md's figures), zero or "
+                                   "nonpositive (the library default; docs/shaping_defaults.md)",
+                                   choices=["value", "zero", "nonpositive"])
     seed: int = setting(0, "sweep seed (random patterns, learner seeds)")
     results: str = setting("", "results directory (default results/a2c_<domain>; re-run to resume)")
     backend: Literal["local", "ray"] = setting("local", "where learners run")
@@ -110,7 +113,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
         parts = shaping_parts(
             method, (), patterns=patterns[index:index + 1] if patterns else None, aggregation=domain.aggregation(),
             eta=domain.eta, observation_key=domain.subgoal_key, aggregation_key=domain.aggregation_key,
-            zero_terminal_potential=config["zero_terminal_potential"],
+            zero_terminal_potential=config["zero_terminal_potential"], start_potential=config["start_potential"],
         )
         shaping = Shaping(*parts) if parts is not None else None
         logger = experiment_logger(Path(config["log_dir"]), f"{chunk.method}_{pattern}_{learning}")
@@ -145,6 +148,7 @@ def main(argv: list[str] | None = None) -> int:
             "domain": cfg.domain,
             "a2c": dataclasses.asdict(a2c),
             "zero_terminal_potential": cfg.zero_terminal_potential,
+            "start_potential": cfg.start_potential,
             "subgoal_file": cfg.subgoals or domain.participants,
             "patterns": pattern_config(patterns),
             "pattern_sources": pattern_sources(patterns),

@@ -559,10 +559,11 @@ def test_transitions_rebuilt_equal_the_written_ones(path: str) -> None:
 
 def test_two_transforms_on_one_env(path: str) -> None:
     halves = StateAggregation(torch.tensor([0, 0, 1, 1, 2]), num_states=3)
+    # Φ = V (start_potential="value") keeps the expected rewards below a plain table look-up
     first = SubgoalPotentialTransform(SubgoalSeries([State(1), State(3)]), fixed_table(TabularPotential(3), 1),
-                                      gamma=0.9)
+                                      gamma=0.9, start_potential="value")
     second_potential = fixed_table(TabularPotential(3, index_key="half_index"), 2)
-    second = SubgoalPotentialTransform(halves, second_potential, gamma=0.9, prefix="half")
+    second = SubgoalPotentialTransform(halves, second_potential, gamma=0.9, prefix="half", start_potential="value")
     env = TransformedEnv(LineEnv(3, length=4), Compose(first, second))
     check_env_specs(env)
     torch.manual_seed(0)
@@ -591,7 +592,7 @@ def test_condition_predicates_on_a_dict_observation_in_a_collector_over_parallel
 
     series = SubgoalSeries([carrying_key, at_door], name="key_then_door")  # plain functions of the TensorDict
     v = fixed_table(TabularPotential(3))
-    t = SubgoalPotentialTransform(series, v, gamma=0.9, observation_key="position")
+    t = SubgoalPotentialTransform(series, v, gamma=0.9, observation_key="position", start_potential="value")
     env = TransformedEnv(ParallelEnv(2, make_key_door, mp_start_method="spawn"), t)
     collector = Collector(env, None, frames_per_batch=200, total_frames=400)
     try:
