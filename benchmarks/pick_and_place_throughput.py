@@ -4,16 +4,19 @@ Measures, in one run (the machine is shared: compare the ratios, not the absolut
 
 * the raw gymnasium ``FetchPickAndPlace-v4`` env stepped in this process under
   random actions (the reference rate);
-* a TorchRL ``Collector`` over ``TransformedEnv(ParallelEnv(n), HRS shaping)`` with
-  the exploring DDPG policy, as the recipe collects (shaping and the neural potential
-  in this process), for ``n`` = 1 and 2 MuJoCo worker processes of one env each, and
-  2 workers of 5 envs each (``--envs 10 --env-processes 2`` in the recipe: the
-  policy, the shaping and the inter-process hand-over are paid once per batch);
-* DDPG gradient steps per second (critic + actor + Polyak-free, batch 256, 3 × 256
-  hidden units, ``torch.set_num_threads(1)`` unless ``--threads``);
-* from these, the projected wall time of one paper-scale learning (200 epochs of
-  2,500 env steps, 40 gradient steps per 50 env steps, 10 test episodes per epoch) on
-  one core: every part runs one after another in one process.
+* collection with the exploring DDPG policy and HRS shaping (neural potential), as the
+  recipe collects: a ``Collector`` in this process over 1 env (everything on one core);
+  the same over ``TransformedEnv(ParallelEnv(2), shaping)`` (MuJoCo in 2 processes,
+  policy and shaping here); a ``MultiSyncCollector`` of 1 and 2 worker processes of one
+  env each, and of 2 workers of 3 envs each (the paper preset's 6 envs), each worker
+  stepping its envs through the shaping transform with the shared potential
+  (``--collector-workers`` in the recipe);
+* DDPG gradient steps per second (critic + actor, batch 256 and the paper preset's
+  1,536, 3 × 256 hidden units, ``torch.set_num_threads(1)`` unless ``--threads``);
+* from these, the projected wall time of one learning on one core, every part run one
+  after another in one process: the paper preset (the authors' 6 workers' data: 3×10^6
+  env steps, 4×10^5 gradient steps of 1,536) and one worker's share of it (5×10^5 env
+  steps, 4×10^5 gradient steps of 256), with 10 test episodes per epoch.
 
 Every figure is the best of ``--repeats`` timings. The load average is printed
 before and after: it says how busy the shared cores were.
@@ -34,16 +37,15 @@ from functools import partial
 
 import torch
 from tensordict import TensorDict
-from torchrl.collectors import Collector
-from torchrl.envs import ParallelEnv, SerialEnv, TransformedEnv
+from torchrl.collectors import Collector, MultiSyncCollector
 
-from torchrl_subgoal import NeuralPotential, SubgoalPotentialTransform
+from torchrl_subgoal import NeuralPotential
 from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, mlp
 from torchrl_subgoal.envs import fetch
+from torchrl_subgoal.training import EnvFactory, Shaping, batched, shaped_env
 
-PAPER_STEPS = 500_000
-UPDATES_PER_STEP = 40 / 50
-TEST_STEPS_PER_STEP = 10 * 50 / 2_500
+GRADIENT_STEPS = 200 * 50 * 40  # epochs x cycles x gradient steps per cycle, both presets
+TEST_STEPS = 200 * 10 * 50  # epochs x test episodes x steps
 
 
 def best(run: Callable[[], float], repeats: int) -> float:
@@ -67,15 +69,20 @@ def raw_rate(steps: int) -> float:
     return rate
 
 
-def collector_rate(workers: int, per_worker: int, steps: int, repeats: int) -> float:
-    make = partial(fetch.make_fetch_env, 0)
-    base = ParallelEnv(workers, make if per_worker == 1 else partial(SerialEnv, per_worker, make))
+def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: int, repeats: int) -> float:
+    """Env steps/s of a ``MultiSyncCollector`` of ``collector_workers`` processes (0: a ``Collector`` here)
+    stepping ``envs`` envs each (in ``env_workers`` ParallelEnv processes, 0: in the collecting process)."""
     series = fetch.human_patterns()["participants"]
-    potential = NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, (256, 256, 256)))
-    env = TransformedEnv(base, SubgoalPotentialTransform(series, potential, gamma=0.98, write_transitions=True))
-    agent = DDPGAgent(fetch.OBSERVATION_SIZE, base.action_spec_unbatched, DDPGConfig(buffer_size=1000))
-    collector = Collector(env, agent.policy, frames_per_batch=50 * workers * per_worker, total_frames=-1,
-                          auto_register_policy_transforms=False)
+    shaping = Shaping([series], NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, (256, 256, 256))))
+    factory = EnvFactory(shaped_env, make_env=batched(partial(fetch.make_fetch_env, 0)), num_envs=envs,
+                         env_workers=env_workers, shaping=shaping, potential=shaping.potential, gamma=0.98)
+    spec = fetch.make_fetch_env(0).action_spec_unbatched
+    agent = DDPGAgent(fetch.OBSERVATION_SIZE, spec, DDPGConfig(buffer_size=1000))
+    frames = 50 * envs * max(collector_workers, 1)
+    collector = (Collector(factory(), agent.policy, frames_per_batch=frames, total_frames=-1,
+                           auto_register_policy_transforms=False) if collector_workers == 0 else
+                 MultiSyncCollector([factory] * collector_workers, agent.policy, frames_per_batch=frames,
+                                    total_frames=-1, cat_results="stack", auto_register_policy_transforms=False))
     batches = iter(collector)
     next(batches)  # warm-up: workers started, first reset done
 
@@ -91,9 +98,9 @@ def collector_rate(workers: int, per_worker: int, steps: int, repeats: int) -> f
     return rate
 
 
-def update_rate(updates: int, repeats: int) -> float:
+def update_rate(updates: int, repeats: int, batch_size: int) -> float:
     spec = fetch.make_fetch_env(0).action_spec_unbatched
-    agent = DDPGAgent(fetch.OBSERVATION_SIZE, spec, DDPGConfig(buffer_size=20_000))
+    agent = DDPGAgent(fetch.OBSERVATION_SIZE, spec, DDPGConfig(buffer_size=20_000, batch_size=batch_size))
     n = 10_000
     agent.extend(TensorDict({
         "observation": torch.randn(n, fetch.OBSERVATION_SIZE), "action": spec.rand((n,)),
@@ -126,19 +133,27 @@ def main() -> None:
     raw = best(lambda: raw_rate(steps), args.repeats)
     print(f"raw gymnasium env, 1 process:        {raw:8.0f} env-steps/s  (1.00x)")
     rates = {}
-    for workers, per_worker in ((1, 1), (2, 1), (2, 5)):
-        rate = rates[workers, per_worker] = collector_rate(workers, per_worker, steps, args.repeats)
-        print(f"Collector, HRS shaping, {workers} worker(s) x {per_worker} env(s): {rate:8.0f} env-steps/s  "
-              f"({rate / raw:.2f}x raw)")
-    updates = update_rate(200 if args.quick else 600, args.repeats)
-    print(f"DDPG gradient steps, batch 256, {args.threads} thread(s): {updates:6.1f} steps/s "
-          f"({1e3 / updates:.1f} ms each)")
-    env_seconds = PAPER_STEPS * (1 + TEST_STEPS_PER_STEP) / rates[1, 1]
-    update_seconds = PAPER_STEPS * UPDATES_PER_STEP / updates
-    total = env_seconds + update_seconds
-    print(f"projected paper-scale learning (5e5 steps, 4e5 gradient steps) on one core: {total / 60:.0f} min "
-          f"= {env_seconds / 60:.0f} min collecting and testing (1-worker collector rate) + "
-          f"{update_seconds / 60:.0f} min of gradient steps; goal <= 45 min")
+    for name, collector_workers, env_workers, envs in (
+        ("Collector, this process, 1 env", 0, 0, 1),
+        ("Collector over ParallelEnv(2), shaping here", 0, 2, 2),
+        ("MultiSyncCollector, 1 worker x 1 env", 1, 0, 1),
+        ("MultiSyncCollector, 2 workers x 1 env", 2, 0, 1),
+        ("MultiSyncCollector, 2 workers x 3 envs", 2, 0, 3),
+    ):
+        rate = rates[name] = collector_rate(collector_workers, env_workers, envs, steps, args.repeats)
+        print(f"{name + ', HRS shaping:':56s} {rate:8.0f} env-steps/s  ({rate / raw:.2f}x raw)")
+    updates = {}
+    for batch in (256, 1536):
+        rate = updates[batch] = update_rate(200 if args.quick else 600, args.repeats, batch)
+        print(f"DDPG gradient steps, batch {batch}, {args.threads} thread(s): {rate:6.1f} steps/s "
+              f"({1e3 / rate:.1f} ms each)")
+    one_core = rates["Collector, this process, 1 env"]
+    for preset, env_steps, batch in (("paper (6 workers' data)", 3_000_000, 1536), ("paper-1worker", 500_000, 256)):
+        env_seconds = (env_steps + TEST_STEPS) / one_core
+        update_seconds = GRADIENT_STEPS / updates[batch]
+        print(f"projected {preset} learning on one core: {(env_seconds + update_seconds) / 60:.0f} min = "
+              f"{env_seconds / 60:.0f} min collecting and testing ({env_steps:.0e} + {TEST_STEPS:.0e} steps) + "
+              f"{update_seconds / 60:.0f} min of {GRADIENT_STEPS:.0e} gradient steps of {batch}; goal <= 45 min")
     print(f"load average after: {os.getloadavg()[0]:.2f}")
 
 

@@ -9,12 +9,14 @@ Dynamic Trajectory Aggregation" (IJCNN 2021):
 * NRS      — naive subgoal shaping with a fixed potential η,
 * SARSA-RS — a learned table over a hand-given three-state aggregation.
 
-Each learning: a TorchRL ``Collector`` over ``TransformedEnv(ParallelEnv(MuJoCo
-workers), shaping)`` (shaping and V stay in this process), the authors' schedule
-(epochs of cycles: collect ``cycle_steps`` env steps, train V on their SMDP
-transitions, ``updates`` DDPG gradient steps, one soft target update), then
-``test_episodes`` greedy episodes whose final-step success gives the epoch's success
-rate. Every epoch is checkpointed, so a re-run resumes mid-learning; results go
+Each learning: a TorchRL ``MultiSyncCollector`` of ``--collector-workers`` processes, each
+stepping its share of the MuJoCo envs through the shaping transform, whose potential
+is this process's V in shared memory (``torchrl_subgoal.training.EnvFactory``); or,
+with ``--collector-workers 0``, a ``Collector`` here over ``TransformedEnv(envs,
+shaping)``. The authors' schedule (epochs of cycles: every env collects one episode,
+V takes one step of ``SubgoalValueLoss`` on the cycle's SMDP transitions, ``updates``
+DDPG gradient steps, one soft target update), then ``test_episodes`` greedy episodes
+whose final-step success gives the epoch's success rate. Every epoch is checkpointed, so a re-run resumes mid-learning; results go
 through the experiment engine (one chunk per learning) and the report gives success
 curves, epochs to a success rate of 0.6 and the asymptotic success beside the paper's.
 
@@ -36,13 +38,10 @@ from typing import Any, Literal
 import numpy as np
 import torch
 from tensordict import TensorDictBase
-from torchrl.collectors import Collector
+from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.envs import (
     EnvBase,
     ExplorationType,
-    ParallelEnv,
-    SerialEnv,
-    TransformedEnv,
     set_exploration_type,
 )
 
@@ -75,14 +74,20 @@ from torchrl_subgoal.experiments.recipe import (
     pattern_sources,
     sweep_and_report,
 )
-from torchrl_subgoal.methods import paper_methods, shaping_transform
+from torchrl_subgoal.methods import paper_methods, shaping_parts
+from torchrl_subgoal.training import EnvFactory, Shaping, batched, shaped_env, smdp_transitions
 
 METHODS = paper_methods(baseline="DDPG")
-#: epochs, cycles per epoch, env steps per cycle, gradient steps per cycle, test episodes, DDPG settings
+#: epochs, cycles per epoch, env steps per cycle, gradient steps per cycle, test episodes, DDPG settings.
+#: "paper" is the authors' released run (docs/pick_and_place.md): 6 MPI workers, each collecting one
+#: 50-step episode per cycle, then 40 synchronous gradient steps whose gradients sum the 6 workers'
+#: 256-transition batches (= one batch of 1,536 under Adam); "paper-1worker" is one worker's share.
 PRESETS: dict[str, dict[str, Any]] = {
-    "paper": {"epochs": 200, "cycles": 50, "cycle_steps": 50, "updates": 40, "test_episodes": 10,
-              "ddpg": {}},
-    "tiny": {"epochs": 2, "cycles": 2, "cycle_steps": 50, "updates": 2, "test_episodes": 1,
+    "paper": {"epochs": 200, "cycles": 50, "cycle_steps": 300, "updates": 40, "test_episodes": 10,
+              "ddpg": {"batch_size": 1536}},
+    "paper-1worker": {"epochs": 200, "cycles": 50, "cycle_steps": 50, "updates": 40, "test_episodes": 10,
+                      "ddpg": {}},
+    "tiny": {"epochs": 2, "cycles": 2, "cycle_steps": 100, "updates": 2, "test_episodes": 1,
              "ddpg": {"hidden": (16, 16), "batch_size": 16}},
 }
 
@@ -95,8 +100,10 @@ class Config:
     epochs: int = setting(0, "epochs per learning (0: the preset's; paper: 200 of 2,500 steps)")
     learnings: int = setting(5, "learnings per method (paper: 5)")
     methods: str = setting("HRS,RRS,DDPG,NRS", f"comma-separated methods among {','.join(METHODS)}")
-    envs: int = setting(2, "MuJoCo envs collecting together (a batch)")
-    env_processes: int = setting(2, "worker processes the envs are spread over (ParallelEnv); 0: this process")
+    envs: int = setting(0, "MuJoCo envs collecting together (0: the preset's, one episode each per cycle)")
+    collector_workers: int = setting(2, "MultiSyncCollector processes the envs are spread over; 0: a "
+                                     "Collector in this process")
+    env_processes: int = setting(0, "ParallelEnv processes per collecting process (0: envs stepped in it)")
     subgoals: str = setting(fetch.PARTICIPANTS_FILE, "subgoal file of the human pattern (HRS, NRS)")
     value_lr: float = setting(1e-3, "Adam learning rate of the neural potential V(o; θ)")
     aggregation_lr: float = setting(0.1, "SGD learning rate of SARSA-RS's table")
@@ -113,16 +120,18 @@ class Config:
 
     def __post_init__(self) -> None:
         check(self.epochs >= 0, "epochs", f"must be >= 0, got {self.epochs}")
-        for name in ("learnings", "envs"):
-            check(getattr(self, name) >= 1, name, f"must be >= 1, got {getattr(self, name)}")
-        check(self.workers >= 0, "workers", f"must be >= 0, got {self.workers}")
-        check(self.env_processes >= 0 and self.envs % max(self.env_processes, 1) == 0, "env_processes",
-              f"must be >= 0 and divide --envs {self.envs}, got {self.env_processes}")
+        check(self.learnings >= 1, "learnings", f"must be >= 1, got {self.learnings}")
+        for name in ("envs", "workers", "collector_workers", "env_processes"):
+            check(getattr(self, name) >= 0, name, f"must be >= 0, got {getattr(self, name)}")
         check(self.value_lr > 0 and self.aggregation_lr > 0, "value_lr", "learning rates must be > 0")
-        schedule = PRESETS[self.preset]
-        check(schedule["cycles"] * schedule["cycle_steps"] % (self.envs * fetch.MAX_EPISODE_STEPS) == 0,
-              "envs", f"an epoch's {schedule['cycles'] * schedule['cycle_steps']} steps must split into "
-              f"whole {fetch.MAX_EPISODE_STEPS}-step episodes over {self.envs} envs")
+        cycle_steps = PRESETS[self.preset]["cycle_steps"]
+        self.envs = self.envs or cycle_steps // fetch.MAX_EPISODE_STEPS
+        check(cycle_steps % (self.envs * fetch.MAX_EPISODE_STEPS) == 0, "envs",
+              f"a cycle's {cycle_steps} steps must split into whole {fetch.MAX_EPISODE_STEPS}-step episodes "
+              f"over {self.envs} envs")
+        processes = max(self.collector_workers, 1) * max(self.env_processes, 1)
+        check(self.envs % processes == 0, "envs", f"{self.envs} envs do not split evenly over "
+              f"--collector-workers {self.collector_workers} x --env-processes {self.env_processes}")
         try:
             options = json.loads(self.shaping)
         except json.JSONDecodeError as exc:
@@ -134,32 +143,56 @@ class Config:
         return [m.strip() for m in self.methods.split(",") if m.strip()]
 
 
-PotentialTrainer = tuple[SubgoalValueLoss, torch.optim.Optimizer]
+@dataclass
+class PotentialTrainer:
+    """V(o; θ)'s training in this process: ``keeper`` reads the SMDP transitions out of collected data."""
+
+    keeper: SubgoalPotentialTransform
+    loss: SubgoalValueLoss
+    optimizer: torch.optim.Optimizer
+
+    def step(self, data: TensorDictBase) -> None:
+        """One step of ``SubgoalValueLoss`` on the real SMDP transitions closed in ``data`` (if any)."""
+        real = smdp_transitions(data, self.keeper)
+        if real.numel():
+            self.optimizer.zero_grad(set_to_none=True)
+            self.loss(real)["loss_value"].backward()
+            self.optimizer.step()
 
 
 def make_shaping(method_name: str, series: SubgoalSeries | None, config: Mapping[str, Any],
-                 gamma: float) -> tuple[SubgoalPotentialTransform | None, PotentialTrainer | None]:
-    """The method's shaping transform and, for a neural potential, its loss and optimiser."""
-    method, options = METHODS[method_name], dict(config["shaping"])
-    if method.shaping == "subgoals":  # HRS, RRS: V(o; θ) trained from the SMDP transitions
-        potential = NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, config["ddpg"]["hidden"]))
-        assert series is not None
-        transform = SubgoalPotentialTransform(series, potential, gamma=gamma, write_transitions=True, **options)
-        loss = SubgoalValueLoss(potential, gamma=gamma, reduction="mean")  # the transform's own potential
-        return transform, (loss, torch.optim.Adam(potential.parameters(), lr=config["value_lr"]))
-    baseline = shaping_transform(method, torch.Size([]), gamma=gamma, value_lr=config["aggregation_lr"],
-                                 patterns=[series] if series is not None else None,
-                                 aggregation=fetch.three_state_aggregation(), eta=config["eta"], **options)
-    return baseline, None
+                 gamma: float) -> tuple[Shaping | None, PotentialTrainer | None]:
+    """The method's shaping and, for a neural potential (HRS, RRS), its trainer."""
+    method = METHODS[method_name]
+    parts = shaping_parts(method, (), patterns=[series] if series is not None else None,
+                          aggregation=fetch.three_state_aggregation(), eta=config["eta"])
+    if parts is None:
+        return None, None
+    subgoals, potential, options = parts
+    shaping = Shaping(subgoals, potential, {**options, **config["shaping"]})
+    if method.shaping != "subgoals":  # NRS: fixed η; SARSA-RS: its table learns online in the transform
+        return shaping, None
+    shaping.potential = NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, config["ddpg"]["hidden"]))
+    trainer = PotentialTrainer(shaping.transform(shaping.potential, gamma, None),
+                               SubgoalValueLoss(shaping.potential, gamma=gamma, reduction="mean"),
+                               torch.optim.Adam(shaping.potential.parameters(), lr=config["value_lr"]))
+    return shaping, trainer
 
 
-def make_env(goal_seed: int, config: Mapping[str, Any]) -> EnvBase:
-    make = partial(fetch.make_fetch_env, goal_seed)
-    processes, envs = config["env_processes"], config["envs"]
-    if processes == 0:
-        return SerialEnv(envs, make)
-    per_process = envs // processes
-    return ParallelEnv(processes, make if per_process == 1 else partial(SerialEnv, per_process, make))
+def make_collector(goal_seed: int, shaping: Shaping | None, value_lr: float | None, agent: DDPGAgent,
+                   config: Mapping[str, Any], device: torch.device) -> Collector | MultiSyncCollector:
+    """A MultiSyncCollector of ``collector_workers`` processes sharing V, or a Collector in this process."""
+    workers = config["collector_workers"]
+    factory = EnvFactory(shaped_env, make_env=batched(partial(fetch.make_fetch_env, goal_seed)),
+                         num_envs=config["envs"] // max(workers, 1), env_workers=config["env_processes"],
+                         shaping=shaping, potential=shaping.potential if shaping is not None else None,
+                         gamma=agent.config.gamma, value_lr=value_lr)
+    common: dict[str, Any] = {"frames_per_batch": config["cycle_steps"], "total_frames": -1,
+                              "policy_device": device, "storing_device": "cpu", "env_device": "cpu",
+                              "auto_register_policy_transforms": False}
+    if workers == 0:
+        return Collector(factory(), agent.policy, **common)
+    return MultiSyncCollector([factory] * workers, agent.policy, cat_results="stack", **common)
 
 
 def evaluate(env: EnvBase, agent: DDPGAgent, episodes: int) -> tuple[float, float]:
@@ -182,8 +215,7 @@ def learn(chunk: Chunk, learning: int, series: SubgoalSeries | None, config: Map
     ddpg = DDPGConfig(**{**config["ddpg"], "hidden": tuple(config["ddpg"]["hidden"])})
     device = torch.device(config["device"])
     shaping, trainer = make_shaping(chunk.method, series, config, ddpg.gamma)
-    env = make_env(goal_seed, config)
-    train_env = TransformedEnv(env, shaping) if shaping is not None else env
+    online_lr = config["aggregation_lr"] if METHODS[chunk.method].shaping == "aggregation" else None
     test_env = fetch.make_fetch_env(goal_seed, device=device)
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, test_env.action_spec_unbatched, ddpg, device)
 
@@ -197,48 +229,41 @@ def learn(chunk: Chunk, learning: int, series: SubgoalSeries | None, config: Map
         if shaping is not None:
             shaping.potential.load_state_dict(state["potential"])
         if trainer is not None:
-            trainer[1].load_state_dict(state["value_optimizer"])
+            trainer.optimizer.load_state_dict(state["value_optimizer"])
         records = state["records"]
         progress(len(records))
     epochs = config["epochs"]
     if len(records) < epochs:
-        collector = Collector(train_env, agent.policy, frames_per_batch=config["cycle_steps"], total_frames=-1,
-                              policy_device=device, storing_device="cpu", env_device="cpu",
-                              auto_register_policy_transforms=False)
+        collector = make_collector(goal_seed, shaping, online_lr, agent, config, device)
         if saved is not None:  # after the collector, whose set-up draws random numbers
             restore_rng_states(saved[0]["rng"])
         batches = iter(collector)
         for epoch in range(len(records), epochs):
+            # workers' noise and envs re-seeded per epoch (epochs end on whole episodes): a resumed
+            # learning collects as the uninterrupted one did
+            collector.set_seed(int(np.random.SeedSequence([chunk.seed, epoch]).generate_state(1)[0]))
             collected = []
             for _ in range(config["cycles"]):
                 data: TensorDictBase = next(batches)
                 if trainer is not None:
-                    train_potential(*trainer, data)
+                    trainer.step(data)
                 agent.extend(data)
                 collected.append(data.select(*DDPG_KEYS).reshape(-1))
                 for _ in range(config["updates"]):
                     agent.update()
                 agent.soft_update()
+                if isinstance(collector, MultiSyncCollector):
+                    collector.update_policy_weights_()
             success, test_return = evaluate(test_env, agent, config["test_episodes"])
             records.append([config["cycles"] * config["cycle_steps"], test_return, success])
             state = {"agent": agent.training_state(), "records": records, "rng": rng_states(),
                      "potential": shaping.potential.state_dict() if shaping is not None else None,
-                     "value_optimizer": trainer[1].state_dict() if trainer is not None else None}
+                     "value_optimizer": trainer.optimizer.state_dict() if trainer is not None else None}
             checkpoint.save(epoch + 1, state, torch.cat(collected))
             progress(1)
         collector.shutdown()
     test_env.close()
     return np.asarray(records, dtype=np.float64)
-
-
-def train_potential(loss: SubgoalValueLoss, optimizer: torch.optim.Optimizer, data: TensorDictBase) -> None:
-    """One Adam step of V on the SMDP transitions emitted in ``data`` (if any)."""
-    smdp = data["next", "smdp"]
-    mask = smdp["mask"].squeeze(-1)
-    if bool(mask.any()):
-        optimizer.zero_grad(set_to_none=True)
-        loss(smdp[mask])["loss_value"].backward()
-        optimizer.step()
 
 
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
@@ -284,8 +309,8 @@ def main(argv: list[str] | None = None) -> int:
     ddpg = dataclasses.asdict(DDPGConfig(**preset["ddpg"], clip_return=cfg.clip_return or None))
     config = {
         **{k: preset[k] for k in ("cycles", "cycle_steps", "updates", "test_episodes")},
-        **{k: getattr(cfg, k) for k in ("envs", "env_processes", "value_lr", "aggregation_lr", "eta",
-                                        "device", "seed")},
+        **{k: getattr(cfg, k) for k in ("envs", "collector_workers", "env_processes", "value_lr", "aggregation_lr",
+                                        "eta", "device", "seed")},
         "epochs": epochs, "ddpg": ddpg, "shaping": json.loads(cfg.shaping),
         "checkpoints": str((Path(cfg.results) / "checkpoints").resolve()),
         "subgoal_file": cfg.subgoals, "patterns": pattern_config(patterns),

@@ -1,4 +1,5 @@
-"""Pick and place: the neural potential's SMDP step, V shared with a ParallelEnv, the recipe, resume."""
+"""Pick and place: the neural potential's SMDP step, V shared with env and collector workers, the recipe,
+resume (in this process and with collector workers)."""
 
 from __future__ import annotations
 
@@ -9,18 +10,20 @@ from pathlib import Path
 import pytest
 import torch
 from torch import nn
-from torchrl.collectors import Collector
+from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.envs import ParallelEnv, TransformedEnv
 
 from tests.recipes.test_recipes import recipe
 from torchrl_subgoal import NeuralPotential, SubgoalPotentialTransform, SubgoalValueLoss
+from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.experiments import load_frame
+from torchrl_subgoal.training import EnvFactory, batched, shaped_env
 
 GAMMA = 0.98
 
 
-def shaped_env(num_envs: int, potential: NeuralPotential, parallel: bool):
+def fetch_env(num_envs: int, potential: NeuralPotential, parallel: bool):
     make = partial(fetch.make_fetch_env, 5)
     base = ParallelEnv(num_envs, make) if parallel else make()
     series = fetch.human_patterns()["participants"]
@@ -30,7 +33,7 @@ def shaped_env(num_envs: int, potential: NeuralPotential, parallel: bool):
 def test_neural_potential_step_matches_the_smdp_target() -> None:
     torch.manual_seed(0)
     potential = NeuralPotential(nn.Linear(fetch.OBSERVATION_SIZE, 1))
-    env = shaped_env(1, potential, parallel=False)
+    env = fetch_env(1, potential, parallel=False)
     data = env.rollout(50, break_when_any_done=False)  # one time-out: one SMDP transition
     smdp = data["next", "smdp"]
     emitted = smdp[smdp["mask"].squeeze(-1)]
@@ -41,9 +44,10 @@ def test_neural_potential_step_matches_the_smdp_target() -> None:
     w, b = potential.network.weight.detach().clone(), potential.network.bias.detach().clone()
     anchor, next_anchor = emitted["subgoal_anchor"], emitted["next", "subgoal_anchor"]
     delta = emitted["next", "reward"] + GAMMA**50 * (next_anchor @ w.T + b) - (anchor @ w.T + b)
-    optimizer = torch.optim.SGD(potential.parameters(), lr=lr)
-    recipe("pick_and_place").train_potential(SubgoalValueLoss(potential, gamma=GAMMA, reduction="mean"),
-                                             optimizer, data)
+    pick_and_place = recipe("pick_and_place")
+    trainer = pick_and_place.PotentialTrainer(env.transform, SubgoalValueLoss(potential, gamma=GAMMA, reduction="mean"),
+                                              torch.optim.SGD(potential.parameters(), lr=lr))
+    trainer.step(data)
     assert torch.allclose(potential.network.weight, w + lr * delta * anchor, atol=1e-6)
     assert torch.allclose(potential.network.bias, b + lr * delta.flatten(), atol=1e-6)
 
@@ -52,14 +56,14 @@ def test_parallel_env_shapes_with_the_potential_the_loss_trains() -> None:
     pick_and_place = recipe("pick_and_place")
     torch.manual_seed(0)
     potential = NeuralPotential(nn.Linear(fetch.OBSERVATION_SIZE, 1))
-    env = shaped_env(2, potential, parallel=True)
+    env = fetch_env(2, potential, parallel=True)
     transform = env.transform
     loss = SubgoalValueLoss(transform.potential, gamma=GAMMA, reduction="mean")
-    optimizer = torch.optim.Adam(loss.potential.parameters(), lr=0.1)
+    trainer = pick_and_place.PotentialTrainer(transform, loss, torch.optim.Adam(loss.potential.parameters(), lr=0.1))
     collector = Collector(env, None, frames_per_batch=100, total_frames=200, auto_register_policy_transforms=False)
     batches = iter(collector)
     before = potential.network.weight.detach().clone()
-    pick_and_place.train_potential(loss, optimizer, next(batches))  # both envs timed out: V moves
+    trainer.step(next(batches))  # both envs timed out: V moves
     after = potential.network.weight.detach().clone()
     data = next(batches)
     collector.shutdown()
@@ -73,7 +77,41 @@ def test_parallel_env_shapes_with_the_potential_the_loss_trains() -> None:
     assert not torch.equal(after, before)
 
 
-TINY = ["--preset", "tiny", "--learnings", "1", "--envs", "1", "--env-processes", "0", "--workers", "0"]
+def test_collector_workers_shape_with_the_trained_potential_and_act_with_the_trained_policy() -> None:
+    """A MultiSyncCollector's 2 workers (1 env each) read V from shared memory: every batch is shaped
+    with V as trained here after the previous batch (the workers wait while this process trains: no
+    staleness), and act with the policy as updated here (``update_policy_weights_``)."""
+    pick_and_place = recipe("pick_and_place")
+    torch.manual_seed(0)
+    config = {"eta": 0.1, "shaping": {}, "value_lr": 0.1, "ddpg": {"hidden": (8,)}}
+    shaping, trainer = pick_and_place.make_shaping("HRS", fetch.human_patterns()["participants"], config, GAMMA)
+    agent = DDPGAgent(fetch.OBSERVATION_SIZE, fetch.make_fetch_env(5).action_spec_unbatched,
+                      DDPGConfig(hidden=(8,), batch_size=16))
+    factory = EnvFactory(shaped_env, make_env=batched(partial(fetch.make_fetch_env, 5)), num_envs=1,
+                         shaping=shaping, potential=shaping.potential, gamma=GAMMA)
+    collector = MultiSyncCollector([factory] * 2, agent.greedy, frames_per_batch=100, total_frames=-1,
+                                   cat_results="stack", auto_register_policy_transforms=False)
+    batches = iter(collector)
+    for _ in range(2):
+        data = next(batches)
+        before = [p.detach().clone() for p in shaping.potential.parameters()]
+        trainer.step(data)  # both workers' episodes timed out: V moves
+        assert any(not torch.equal(a, b) for a, b in zip(before, shaping.potential.parameters(), strict=True))
+        agent.extend(data)
+        agent.update()
+        collector.update_policy_weights_()
+        data = next(batches)
+        with torch.no_grad():  # F = γ V(o_z') − V(o_z) with this process's V, trained before the batch
+            phi = shaping.potential(data["subgoal_anchor"])
+            phi_next = shaping.potential(data["next", "subgoal_anchor"])
+            greedy = agent.greedy(data.select("observation").clone())["action"]
+        shaped = data["next", "reward"] - data["next", "env_reward"]
+        assert torch.allclose(shaped, GAMMA * phi_next - phi, atol=1e-5)
+        assert torch.allclose(data["action"], greedy, atol=1e-5)
+    collector.shutdown()
+
+
+TINY = ["--preset", "tiny", "--learnings", "1", "--envs", "1", "--collector-workers", "0", "--workers", "0"]
 
 
 def test_recipe_all_methods_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -87,12 +125,17 @@ def test_recipe_all_methods_and_report(tmp_path: Path, capsys: pytest.CaptureFix
     assert not summary["lower_is_better"]
     assert set(summary["methods"]) == {"DDPG", "HRS", "RRS", "NRS", "SARSA-RS"}
     frame = load_frame(tmp_path)
-    assert (frame["steps"] == 100).all() and frame["return"].between(-50.0, 0.0).all()
+    assert (frame["steps"] == 200).all() and frame["return"].between(-50.0, 0.0).all()
 
 
-def test_kill_and_resume_equals_an_uninterrupted_learning(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize("processes", [
+    [],
+    ["--envs", "2", "--collector-workers", "2"],  # MuJoCo, policy noise and shaping in 2 worker processes
+], ids=["in-process", "collector-workers"])
+def test_kill_and_resume_equals_an_uninterrupted_learning(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                          processes: list[str]) -> None:
     pick_and_place = recipe("pick_and_place")
-    args = [*TINY, "--epochs", "3", "--methods", "HRS"]
+    args = [*TINY, "--epochs", "3", "--methods", "HRS", *processes]
     assert pick_and_place.main([*args, "--results", str(tmp_path / "whole")]) == 0
 
     evaluate, calls = pick_and_place.evaluate, []
@@ -121,9 +164,9 @@ def test_kill_and_resume_equals_an_uninterrupted_learning(tmp_path: Path, monkey
 
 def test_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pick_and_place = recipe("pick_and_place")
-    assert pick_and_place.main(["--envs", "3", "--env-processes", "0", "--results", str(tmp_path)]) == 2
-    assert "--envs: an epoch's 2500 steps must split into whole 50-step episodes over 3 envs" in capsys.readouterr().err
+    assert pick_and_place.main(["--envs", "4", "--results", str(tmp_path)]) == 2
+    assert "--envs: a cycle's 300 steps must split into whole 50-step episodes over 4 envs" in capsys.readouterr().err
     assert pick_and_place.main(["--shaping", "{bad", "--results", str(tmp_path)]) == 2
     assert "--shaping: not valid JSON" in capsys.readouterr().err
-    assert pick_and_place.main(["--envs", "4", "--env-processes", "3", "--results", str(tmp_path)]) == 2
-    assert "--env-processes: must be >= 0 and divide --envs 4, got 3" in capsys.readouterr().err
+    assert pick_and_place.main(["--envs", "6", "--collector-workers", "4", "--results", str(tmp_path)]) == 2
+    assert "--envs: 6 envs do not split evenly over --collector-workers 4 x --env-processes 0" in capsys.readouterr().err
