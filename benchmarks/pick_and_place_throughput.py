@@ -8,7 +8,8 @@ Measures, in one run (the machine is shared: compare the ratios, not the absolut
   recipe collects: a ``Collector`` in this process over 1 env (everything on one core);
   the same over ``TransformedEnv(ParallelEnv(2), shaping)`` (MuJoCo in 2 processes,
   policy and shaping here); a ``MultiSyncCollector`` of 1 and 2 worker processes of one
-  env each, and of 2 workers of 3 envs each (the paper preset's 6 envs), each worker
+  env each, and of 2 workers of 3 envs each (the paper preset's 6 envs, beside a
+  ``Collector`` here over the same 6 envs), each worker
   stepping its envs through the shaping transform with the shared potential
   (``--collector-workers`` in the recipe);
 * DDPG gradient steps per second (critic + actor, batch 256 and the paper preset's
@@ -17,6 +18,10 @@ Measures, in one run (the machine is shared: compare the ratios, not the absolut
   after another in one process: the paper preset (the authors' 6 workers' data: 3×10^6
   env steps, 4×10^5 gradient steps of 1,536) and one worker's share of it (5×10^5 env
   steps, 4×10^5 gradient steps of 256), with 10 test episodes per epoch.
+
+``--profile`` instead prints where a step of the one-process collector goes (cProfile,
+cumulative time of the policy, the shaping transform, the gymnasium-robotics step and
+MuJoCo's ``mj_step``, as shares of the collector's time).
 
 Every figure is the best of ``--repeats`` timings. The load average is printed
 before and after: it says how busy the shared cores were.
@@ -30,7 +35,9 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import cProfile
 import os
+import pstats
 import time
 from collections.abc import Callable
 from functools import partial
@@ -98,6 +105,43 @@ def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: i
     return rate
 
 
+def profile_collector(steps: int) -> None:
+    """Shares of a one-process collector's time (1 env, HRS shaping, exploring policy)."""
+    series = fetch.human_patterns()["participants"]
+    shaping = Shaping([series], NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, (256, 256, 256))))
+    env = shaped_env(batched(partial(fetch.make_fetch_env, 0)), 1, shaping=shaping, gamma=0.98)
+    agent = DDPGAgent(fetch.OBSERVATION_SIZE, env.action_spec_unbatched, DDPGConfig(buffer_size=1000))
+    explore = agent.policy.forward
+
+    def policy_forward(tensordict: TensorDict) -> TensorDict:  # a name cProfile can find
+        return explore(tensordict)
+
+    agent.policy.forward = policy_forward
+    collector = Collector(env, agent.policy, frames_per_batch=50, total_frames=-1,
+                          auto_register_policy_transforms=False)
+    batches = iter(collector)
+    next(batches)
+    profiler = cProfile.Profile()
+    profiler.enable()
+    for _ in range(steps // 50):
+        next(batches)
+    profiler.disable()
+    collector.shutdown()
+    stats = pstats.Stats(profiler).stats  # type: ignore[attr-defined]
+    total = sum(tt for (_, _, _), (_, _, tt, _, _) in stats.items())
+    parts = {
+        "policy (actor 3x256 + exploration)": lambda f, n: n == "policy_forward",
+        "shaping transform (+ neural potential)": lambda f, n: n == "_step" and f.endswith("torchrl_subgoal/transform.py"),
+        "gymnasium-robotics step (incl. MuJoCo)": lambda f, n: n == "step" and f.endswith(
+            "gymnasium_robotics/envs/robot_env.py"),
+        "MuJoCo mj_step": lambda f, n: "mj_step" in n,
+    }
+    print(f"profile of {steps} collector steps ({total:.2f} s profiled; cumulative shares):")
+    for label, match in parts.items():
+        cumulative = sum(ct for (f, _, n), (_, _, _, ct, _) in stats.items() if match(f, n))
+        print(f"  {label:42s} {100 * cumulative / total:5.1f}%")
+
+
 def update_rate(updates: int, repeats: int, batch_size: int) -> float:
     spec = fetch.make_fetch_env(0).action_spec_unbatched
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, spec, DDPGConfig(buffer_size=20_000, batch_size=batch_size))
@@ -126,9 +170,13 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer steps per timing")
     parser.add_argument("--repeats", type=int, default=3, help="timings per figure (best is kept)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads for the gradient steps")
+    parser.add_argument("--profile", action="store_true", help="only profile the one-process collector")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     steps = 1_000 if args.quick else 3_000
+    if args.profile:
+        profile_collector(steps)
+        return
     print(f"load average before: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     raw = best(lambda: raw_rate(steps), args.repeats)
     print(f"raw gymnasium env, 1 process:        {raw:8.0f} env-steps/s  (1.00x)")
@@ -138,13 +186,14 @@ def main() -> None:
         ("Collector over ParallelEnv(2), shaping here", 0, 2, 2),
         ("MultiSyncCollector, 1 worker x 1 env", 1, 0, 1),
         ("MultiSyncCollector, 2 workers x 1 env", 2, 0, 1),
+        ("Collector, this process, 6 envs", 0, 0, 6),
         ("MultiSyncCollector, 2 workers x 3 envs", 2, 0, 3),
     ):
         rate = rates[name] = collector_rate(collector_workers, env_workers, envs, steps, args.repeats)
         print(f"{name + ', HRS shaping:':56s} {rate:8.0f} env-steps/s  ({rate / raw:.2f}x raw)")
     updates = {}
     for batch in (256, 1536):
-        rate = updates[batch] = update_rate(200 if args.quick else 600, args.repeats, batch)
+        rate = updates[batch] = update_rate((200 if args.quick else 600) * 256 // batch, args.repeats, batch)
         print(f"DDPG gradient steps, batch {batch}, {args.threads} thread(s): {rate:6.1f} steps/s "
               f"({1e3 / rate:.1f} ms each)")
     one_core = rates["Collector, this process, 1 env"]

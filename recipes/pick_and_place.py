@@ -111,6 +111,8 @@ class Config:
     shaping: str = setting("{}", "JSON of extra SubgoalPotentialTransform options, e.g. "
                            '\'{"zero_terminal_potential": false}\'')
     clip_return: float = setting(50.0, "critic targets clipped to [-clip_return, 0]; 0: no clipping")
+    clip_positive: bool = setting(True, "clip critic targets above at 0 (the authors'); a shaped target "
+                                  "Q - Φ exceeds 0 wherever Q > Φ (docs/pick_and_place.md)")
     device: str = setting("cpu", "device of the networks and replay buffer (e.g. cuda)")
     seed: int = setting(0, "sweep seed (goals, random patterns, chunk seeds)")
     results: str = setting("results/pick_and_place", "results directory (re-run to resume)")
@@ -306,7 +308,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     preset = PRESETS[cfg.preset]
     epochs = cfg.epochs or preset["epochs"]
-    ddpg = dataclasses.asdict(DDPGConfig(**preset["ddpg"], clip_return=cfg.clip_return or None))
+    ddpg = dataclasses.asdict(DDPGConfig(**preset["ddpg"], clip_return=cfg.clip_return or None,
+                                         clip_positive=cfg.clip_positive))
     config = {
         **{k: preset[k] for k in ("cycles", "cycle_steps", "updates", "test_episodes")},
         **{k: getattr(cfg, k) for k in ("envs", "collector_workers", "env_processes", "value_lr", "aggregation_lr",
