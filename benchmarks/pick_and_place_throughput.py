@@ -142,7 +142,8 @@ def profile_collector(steps: int) -> None:
         print(f"  {label:42s} {100 * cumulative / total:5.1f}%")
 
 
-def update_rate(updates: int, repeats: int, batch_size: int) -> float:
+def update_rate(updates: int, repeats: int, batch_size: int, threads: int) -> float:
+    torch.set_num_threads(threads)  # a MultiSyncCollector's shutdown hands its workers' threads back
     spec = fetch.make_fetch_env(0).action_spec_unbatched
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, spec, DDPGConfig(buffer_size=20_000, batch_size=batch_size))
     n = 10_000
@@ -193,7 +194,8 @@ def main() -> None:
         print(f"{name + ', HRS shaping:':56s} {rate:8.0f} env-steps/s  ({rate / raw:.2f}x raw)")
     updates = {}
     for batch in (256, 1536):
-        rate = updates[batch] = update_rate((200 if args.quick else 600) * 256 // batch, args.repeats, batch)
+        rate = updates[batch] = update_rate((200 if args.quick else 600) * 256 // batch, args.repeats, batch,
+                                            args.threads)
         print(f"DDPG gradient steps, batch {batch}, {args.threads} thread(s): {rate:6.1f} steps/s "
               f"({1e3 / rate:.1f} ms each)")
     one_core = rates["Collector, this process, 1 env"]

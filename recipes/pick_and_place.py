@@ -211,6 +211,7 @@ def evaluate(env: EnvBase, agent: DDPGAgent, episodes: int) -> tuple[float, floa
 def learn(chunk: Chunk, learning: int, series: SubgoalSeries | None, config: Mapping[str, Any],
           progress: Callable[[int], None]) -> np.ndarray:
     """One learning; returns ``[epochs, 3]`` records (env steps, test return, success rate)."""
+    torch.set_num_threads(1)  # a MultiSyncCollector's shutdown gives this process its workers' threads back
     torch.manual_seed(chunk.seed)
     np.random.seed(chunk.seed % 2**32)
     goal_seed = int(np.random.SeedSequence([config["seed"], learning]).generate_state(1)[0])
