@@ -27,7 +27,9 @@ def fetch_env(num_envs: int, potential: NeuralPotential, parallel: bool):
     make = partial(fetch.make_fetch_env, 5)
     base = ParallelEnv(num_envs, make) if parallel else make()
     series = fetch.human_patterns()["participants"]
-    return TransformedEnv(base, SubgoalPotentialTransform(series, potential, gamma=GAMMA, write_transitions=True))
+    # Φ = V (not the library's default "nonpositive" level), to compare F with V directly
+    return TransformedEnv(base, SubgoalPotentialTransform(series, potential, gamma=GAMMA, write_transitions=True,
+                                                          start_potential="value"))
 
 
 def test_neural_potential_step_matches_the_smdp_target() -> None:
@@ -83,7 +85,7 @@ def test_collector_workers_shape_with_the_trained_potential_and_act_with_the_tra
     staleness), and act with the policy as updated here (``update_policy_weights_``)."""
     pick_and_place = recipe("pick_and_place")
     torch.manual_seed(0)
-    config = {"eta": 0.1, "shaping": {}, "value_lr": 0.1, "ddpg": {"hidden": (8,)}}
+    config = {"eta": 0.1, "shaping": {"start_potential": "value"}, "value_lr": 0.1, "ddpg": {"hidden": (8,)}}
     shaping, trainer = pick_and_place.make_shaping("HRS", fetch.human_patterns()["participants"], config, GAMMA)
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, fetch.make_fetch_env(5).action_spec_unbatched,
                       DDPGConfig(hidden=(8,), batch_size=16))
