@@ -504,6 +504,34 @@ def first_region(z, obs, lo, hi, centre, weight, radius2, z_out):
         z_out[b, 0] = _first_region_one(z[b, 0], obs[b], lo, hi, centre, weight, radius2)
 
 
+# --------------------------------------------------------------------------- linear actor-critics
+#
+# ``fastmath`` lets LLVM vectorise these loops (about 30% of a PinBall learner-step). The
+# per-learner steps (:func:`_ac_learner`, :func:`_qac_learner`) are compiled once, not
+# inlined, and called by both the batch kernels (the TorchRL loop) and the fused engine, so
+# the two run the same machine code and agree bit for bit (``tests/agents/test_fused.py``).
+# Numba's on-disk cache of a compiled caller is keyed on its own file only: after editing
+# this file, delete the ``__pycache__/*.nb[ic]`` of ``agents/fused.py`` (or touch it).
+
+
+@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
+def _dot(x, y):
+    """``Σ x[f] y[f]`` over ``x``'s length, as four interleaved partial sums."""
+    n = x.shape[0]
+    s0 = s1 = s2 = s3 = 0.0
+    f = 0
+    while f + 4 <= n:
+        s0 += x[f] * y[f]
+        s1 += x[f + 1] * y[f + 1]
+        s2 += x[f + 2] * y[f + 2]
+        s3 += x[f + 3] * y[f + 3]
+        f += 4
+    while f < n:
+        s0 += x[f] * y[f]
+        f += 1
+    return (s0 + s1) + (s2 + s3)
+
+
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
 def _basis_exponentials(trig, k, first_dim, end_dim, out):
     """``out[i] = exp(iπ c_i · s̃)`` over dimensions ``[first_dim, end_dim)``, with ``c_i``
@@ -557,12 +585,10 @@ def fourier_features(obs, low, inv_range, order, half, scratch, out):
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
 def _policy(theta_b, phi, probs):
     """``probs`` ← softmax(θ φ)."""
-    n_actions, n_features = theta_b.shape
+    n_actions = theta_b.shape[0]
     top = -np.inf
     for a in range(n_actions):
-        s = 0.0
-        for f in range(n_features):
-            s += theta_b[a, f] * phi[f]
+        s = _dot(theta_b[a], phi)
         probs[a] = s
         top = max(top, s)
     total = 0.0
@@ -599,7 +625,7 @@ def ac_act(theta, phi, probs, obs, low, inv_range, order, half, streams, action_
             _policy(theta[b], phi[b], probs[b])
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
 def _feature_scratch(order, half, dim, n_features):
     """Scratch arrays of :func:`fourier_features` (the two halves' exponentials and the per-dimension
     ones) and a feature vector."""
@@ -617,19 +643,15 @@ def _policy_gradient_step(theta_b, phi_b, probs_b, a_taken, lr, scale, signal):
             theta_b[a, f] += g * phi_b[f]
 
 
-@numba.njit(cache=True, nogil=True, fastmath=True)  # not inlined: fastmath must hold in every caller
+@numba.njit(cache=True, nogil=True, fastmath=True)
 def _ac_learner(b, w, theta, phi, probs, a_taken, reward, obs_next, terminated, done, obs_root, low, inv_range,
                 order, half, streams, actor_lr, critic_lr, gamma, normalize, scratch, phi_next):
     """:func:`ac_step` for learner ``b``; returns its next action."""
     n_features = theta.shape[2]
     fourier_features(obs_next, low, inv_range, order, half, scratch, phi_next)
-    value = 0.0
-    value_next = 0.0
-    norm2 = 0.0
-    for f in range(n_features):
-        value += w[b, f] * phi[b, f]
-        value_next += w[b, f] * phi_next[f]
-        norm2 += phi[b, f] * phi[b, f]
+    value = _dot(w[b], phi[b])
+    value_next = _dot(w[b], phi_next)
+    norm2 = _dot(phi[b], phi[b])
     delta = reward - value
     if not terminated:
         delta += gamma * value_next
@@ -667,20 +689,16 @@ def ac_step(
                                     gamma, normalize, scratch, phi_next)
 
 
-@numba.njit(cache=True, nogil=True, fastmath=True)  # not inlined: fastmath must hold in every caller
+@numba.njit(cache=True, nogil=True, fastmath=True)
 def _qac_learner(b, w, theta, phi, probs, a_taken, reward, obs_next, terminated, done, obs_root, low, inv_range,
                  order, half, streams, actor_lr, critic_lr, gamma, normalize, scratch, phi_next):
     """:func:`qac_step` for learner ``b``; returns its next action."""
     n_features = theta.shape[2]
     fourier_features(obs_next, low, inv_range, order, half, scratch, phi_next)
     a_next = _policy_sample(theta[b], phi_next, uniform(streams, b), probs[b])
-    q = 0.0
-    q_next = 0.0
-    norm2 = 0.0
-    for f in range(n_features):
-        q += w[b, a_taken * n_features + f] * phi[b, f]
-        q_next += w[b, a_next * n_features + f] * phi_next[f]
-        norm2 += phi[b, f] * phi[b, f]
+    q = _dot(w[b, a_taken * n_features:(a_taken + 1) * n_features], phi[b])
+    q_next = _dot(w[b, a_next * n_features:(a_next + 1) * n_features], phi_next)
+    norm2 = _dot(phi[b], phi[b])
     scale = 1.0 / np.sqrt(norm2) if normalize else 1.0
     _policy(theta[b], phi[b], probs[b])
     _policy_gradient_step(theta[b], phi[b], probs[b], a_taken, actor_lr, scale, q)
