@@ -9,6 +9,10 @@ report included) and prints:
 * learner-steps (the sum of every recorded episode's steps) per second of sweep wall time,
 * the share of the sweep's wall time spent after 99% of the learner-episodes were done.
 
+``--engine`` measures instead the fused engine alone, in one process: CPU time per
+recorded learner-step of one batch (four-rooms: 100 unshaped SARSA learners, 300
+episodes; PinBall: 50 actor-critic learners, 3 episodes capped at 2,000 steps).
+
 ``--against DIR`` also runs the reproductions with the package of another
 checkout (e.g. the commit before a change: ``git worktree add /tmp/before <commit>``),
 alternating the two in every repeat so that both see the same machine load,
@@ -19,6 +23,7 @@ Usage::
     python benchmarks/reproduction_speed.py                 # paper scale: four-rooms then PinBall
     python benchmarks/reproduction_speed.py --quick         # 1/10 of the learnings, 1/4 of PinBall's episodes
     python benchmarks/reproduction_speed.py --domains four_rooms --against /tmp/before --repeats 2
+    python benchmarks/reproduction_speed.py --engine --against /tmp/before --repeats 3
 """
 
 from __future__ import annotations
@@ -44,10 +49,43 @@ SCALES: dict[str, dict[str, list[str]]] = {
     "pinball": {"paper": ["--learnings", "10"], "quick": ["--learnings", "2", "--episodes", "50"]},
 }
 WARM_UP: dict[str, list[str]] = {  # compiles (or loads) every numba kernel the run needs
-    "four_rooms": ["--learnings", "1", "--episodes", "2", "--workers", "0"],
-    "pinball": ["--learnings", "1", "--episodes", "1", "--max-steps", "50", "--workers", "0"],
+    "four_rooms": ["--learnings", "1", "--episodes", "2"],
+    "pinball": ["--learnings", "1", "--episodes", "1", "--max-steps", "50"],
 }
 FIGURES = ("wall_s", "sweep_wall_s", "cpu_s", "cores_busy", "learner_steps_per_s", "tail_share")
+ENGINE_FIGURES = ("cpu_ns_per_learner_step", "learner_steps")
+
+
+def measure_engine(domain: str) -> dict[str, float]:
+    """CPU time per recorded learner-step of the fused engine on one batch (after a compiling run)."""
+    import torch
+
+    from torchrl_subgoal.agents import (
+        AC_PRESETS,
+        SARSA_PRESETS,
+        FourierActorCritic,
+        SoftmaxSarsa,
+        run_episodes,
+    )
+    from torchrl_subgoal.envs import FourRoomsEnv, PinBallEnv
+
+    torch.set_num_threads(1)
+
+    def batch(n: int) -> tuple[Any, Any, int]:
+        if domain == "four_rooms":
+            grid = FourRoomsEnv(n)
+            return grid, SoftmaxSarsa(n, grid.num_states, 4, SARSA_PRESETS["released"], seed=1), 300
+        table = PinBallEnv(n, seed=1, max_steps=2000)
+        spec = table.observation_spec["observation"]
+        return table, FourierActorCritic(n, spec.low[0], spec.high[0], 5, AC_PRESETS["released"], seed=1), 3
+
+    run_episodes(*batch(2)[:2], 1, engine="fused")  # compiles or loads the kernels
+    env, agent, episodes = batch(100 if domain == "four_rooms" else 50)
+    cpu = time.process_time()
+    records = run_episodes(env, agent, episodes, engine="fused")
+    cpu = time.process_time() - cpu
+    steps = int(records.steps.sum())
+    return {"cpu_ns_per_learner_step": 1e9 * cpu / steps, "learner_steps": steps}
 
 
 def _cpu_seconds() -> float:
@@ -128,11 +166,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--domains", default="four_rooms,pinball", help="comma-separated: four_rooms, pinball")
     parser.add_argument("--repeats", type=int, default=1, help="runs per side; the table shows the medians")
     parser.add_argument("--against", metavar="DIR", help="also run the package of this checkout, alternating")
+    parser.add_argument("--engine", action="store_true", help="the fused engine's CPU time per learner-step only")
     parser.add_argument("--measure", metavar="DOMAIN", help=argparse.SUPPRESS)  # one run, JSON out (internal)
     parser.add_argument("recipe_args", nargs="*", help=argparse.SUPPRESS)
     opts = parser.parse_args(argv)
     if opts.measure:
-        print(json.dumps(measure(opts.measure, opts.recipe_args)))
+        figures = measure_engine(opts.measure) if opts.recipe_args == ["engine"] else measure(opts.measure,
+                                                                                             opts.recipe_args)
+        print(json.dumps(figures))
         return
     domains = [d.strip() for d in opts.domains.split(",") if d.strip()]
     unknown = [d for d in domains if d not in SCALES]
@@ -143,6 +184,9 @@ def main(argv: list[str] | None = None) -> None:
     sides: dict[str, str | None] = {"this checkout": None}
     if opts.against is not None:
         sides = {"against": opts.against, "this checkout": None}
+    if opts.engine:
+        _engine_table(domains, sides, opts.repeats)
+        return
     scale = "quick" if opts.quick else "paper"
     print(f"{scale} scale, 2 workers, median of {opts.repeats} run(s) per side; {os.cpu_count()} CPUs\n")
     print("| reproduction | wall s | sweep wall s | CPU s | cores busy | learner-steps/s | wall after 99% |")
@@ -150,11 +194,7 @@ def main(argv: list[str] | None = None) -> None:
     for domain in domains:
         for path in sides.values():
             _child(domain, WARM_UP[domain], path)
-        runs: dict[str, list[dict[str, float]]] = {label: [] for label in sides}
-        for _ in range(opts.repeats):
-            for label, path in sides.items():
-                runs[label].append(_child(domain, SCALES[domain][scale], path))
-        medians = {label: {k: median(r[k] for r in rs) for k in FIGURES} for label, rs in runs.items()}
+        medians = _alternate(domain, SCALES[domain][scale], sides, opts.repeats, FIGURES)
         for label in sides:
             print(_row(f"{domain} ({label})", medians[label]), flush=True)
         if opts.against is not None:
@@ -163,6 +203,29 @@ def main(argv: list[str] | None = None) -> None:
                   f"{new['sweep_wall_s'] / old['sweep_wall_s']:.2f}x | {new['cpu_s'] / old['cpu_s']:.2f}x | | "
                   f"{new['learner_steps_per_s'] / old['learner_steps_per_s']:.2f}x | |", flush=True)
 
+
+def _alternate(domain: str, args: list[str], sides: dict[str, str | None], repeats: int,
+               figures: tuple[str, ...]) -> dict[str, dict[str, float]]:
+    """Median figures per side over ``repeats`` runs, the sides alternating within every repeat."""
+    runs: dict[str, list[dict[str, float]]] = {label: [] for label in sides}
+    for _ in range(repeats):
+        for label, path in sides.items():
+            runs[label].append(_child(domain, args, path))
+    return {label: {k: median(r[k] for r in rs) for k in figures} for label, rs in runs.items()}
+
+
+def _engine_table(domains: list[str], sides: dict[str, str | None], repeats: int) -> None:
+    print(f"fused engine, one process, median of {repeats} run(s) per side\n")
+    print("| engine | CPU ns per learner-step | learner-steps |")
+    print("|---|---|---|")
+    for domain in domains:
+        medians = _alternate(domain, ["engine"], sides, repeats, ENGINE_FIGURES)
+        for label in sides:
+            m = medians[label]
+            print(f"| {domain} ({label}) | {m['cpu_ns_per_learner_step']:.0f} | {m['learner_steps']:.0f} |", flush=True)
+        if len(sides) == 2:
+            ratio = medians["this checkout"]["cpu_ns_per_learner_step"] / medians["against"]["cpu_ns_per_learner_step"]
+            print(f"| {domain}: this / against | {ratio:.2f}x | |", flush=True)
 
 if __name__ == "__main__":
     main()

@@ -415,6 +415,29 @@ def _record_learner(b, done, terminated, reward, t, ret, episode, steps_out, ret
     return filed
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _transform_learner(b, shaping, zb, znb, achieved, r_h, k, reward, done, terminated, table, eta, gamma,
+                       value_gamma, value_lr, zero_terminal, start_mode, z_start):
+    """The shaping transform's step for learner ``b`` in a fused loop: ``(reward as float32, r_h', k')``."""
+    if shaping == NO_SHAPING:
+        return reward, 0.0, 0
+    shaped, rh_new, k_new = _shape_learner(b, zb, znb, achieved[b, 0], r_h, k, reward, done, terminated, table, eta,
+                                           gamma, value_gamma, value_lr, zero_terminal, start_mode, z_start)
+    return np.float32(shaped), rh_new, k_new
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _record_and_keep(b, done, terminated, reward, t, ret, episode, steps_out, returns_out, success_out, active, kept):
+    """File learner ``b``'s step (:func:`_record_learner`) and keep it in ``active[:kept]`` while it
+    lacks episodes: ``(episodes filed, new kept)``."""
+    filed = 1 if _record_learner(b, done, terminated, reward, t, ret, episode, steps_out, returns_out,
+                                 success_out) else 0
+    if episode[b] < steps_out.shape[1]:
+        active[kept] = b
+        kept += 1
+    return filed, kept
+
+
 @numba.njit(cache=True, nogil=True)
 def sarsa_grid_run(
     # the grid env (its state arrays are updated in place)
@@ -458,18 +481,14 @@ def sarsa_grid_run(
             done = terminated or t_env[b] >= max_steps
             reward = np.float32(goal_reward if terminated else step_reward)
             znb = 0
-            shaped = reward
-            rh_new, k_new = 0.0, 0
-            if shaping != NO_SHAPING:  # the transform's step
-                if shaping == SUBGOAL_SHAPING:
-                    obs = cells[s] if observe_cell else state2[b]
-                    znb = _advance_one(zb, obs, pattern[b], lo, hi, centre, weight, radius2, succ)
-                else:
-                    znb = lookup[s]
-                shaped_64, rh_new, k_new = _shape_learner(
-                    b, zb, znb, achieved[b, 0], r_h, k, reward, done, terminated, table, eta, gamma_shaping,
-                    value_gamma, value_lr, zero_terminal, start_mode, z_start)
-                shaped = np.float32(shaped_64)
+            if shaping == SUBGOAL_SHAPING:  # the transform's step
+                obs = cells[s] if observe_cell else state2[b]
+                znb = _advance_one(zb, obs, pattern[b], lo, hi, centre, weight, radius2, succ)
+            elif shaping == LOOKUP_SHAPING:
+                znb = lookup[s]
+            shaped, rh_new, k_new = _transform_learner(b, shaping, zb, znb, achieved, r_h, k, reward, done, terminated,
+                                                       table, eta, gamma_shaping, value_gamma, value_lr,
+                                                       zero_terminal, start_mode, z_start)
             row_next = s * abstract_states + (znb if abstract_states > 1 else 0)
             if done:  # the env and the transform reset this learner
                 state[b] = start
@@ -478,12 +497,9 @@ def sarsa_grid_run(
             row_root = state[b] * abstract_states + (z[b, 0] if abstract_states > 1 else 0)
             action[b] = _sarsa_learner(q[b], row, action[b], shaped, row_next, terminated, done, row_root, streams,
                                        b, lr, gamma, inv_temperature, scratch)
-            if _record_learner(b, done, terminated, reward, t_rec, ret, episode, steps_out, returns_out,
-                               success_out):
-                filed_total += 1
-            if episode[b] < max_episodes:
-                active[kept] = b
-                kept += 1
+            filed, kept = _record_and_keep(b, done, terminated, reward, t_rec, ret, episode, steps_out, returns_out,
+                                           success_out, active, kept)
+            filed_total += filed
         n_active = kept
     return max_steps_run, filed_total
 

@@ -260,18 +260,14 @@ def _pinball_ac_run(
             obs[2], obs[3] = velocity[b, 0], velocity[b, 1]
             zb = z[b, 0]
             znb = zb
-            shaped = reward
-            rh_new, k_new = 0.0, 0
-            if shaping != _kernels.NO_SHAPING:
-                if shaping == _kernels.SUBGOAL_SHAPING:
-                    znb = _kernels._advance_one(zb, obs, pattern[b], lo, hi, centre, weight, radius2, succ)
-                else:
-                    znb = _kernels._first_region_one(zb, obs, region_lo, region_hi, region_centre, region_weight,
-                                                     region_radius2)
-                shaped_64, rh_new, k_new = _kernels._shape_learner(
-                    b, zb, znb, achieved[b, 0], r_h, k, reward, done, terminated, table, eta, gamma_shaping,
-                    value_gamma, value_lr, zero_terminal, start_mode, z_start)
-                shaped = np.float32(shaped_64)
+            if shaping == _kernels.SUBGOAL_SHAPING:
+                znb = _kernels._advance_one(zb, obs, pattern[b], lo, hi, centre, weight, radius2, succ)
+            elif shaping == _kernels.LOOKUP_SHAPING:
+                znb = _kernels._first_region_one(zb, obs, region_lo, region_hi, region_centre, region_weight,
+                                                 region_radius2)
+            shaped, rh_new, k_new = _kernels._transform_learner(
+                b, shaping, zb, znb, achieved, r_h, k, reward, done, terminated, table, eta, gamma_shaping,
+                value_gamma, value_lr, zero_terminal, start_mode, z_start)
             _kernels._carry_learner(b, done, shaping, 0, zb, znb, z, achieved, r_h, k, rh_new, k_new)
             for d in range(4):
                 obs_next[d] = obs[d]
@@ -294,12 +290,9 @@ def _pinball_ac_run(
                 action[b] = _kernels._ac_learner(b, w, theta, phi, probs, action[b], shaped, obs_next, terminated,
                                                  done, obs_root, low, inv_range, order, half, agent_streams,
                                                  actor_lr, critic_lr, gamma, normalize, scratch, phi_next)
-            if _kernels._record_learner(b, done, terminated, reward, t_rec, ret, episode, steps_out, returns_out,
-                                        success_out):
-                filed_total += 1
-            if episode[b] < max_episodes:
-                active[kept] = b
-                kept += 1
+            filed, kept = _kernels._record_and_keep(b, done, terminated, reward, t_rec, ret, episode, steps_out,
+                                                    returns_out, success_out, active, kept)
+            filed_total += filed
         n_active = kept
     return max_steps_run, filed_total
 
