@@ -40,7 +40,7 @@ from torchrl_subgoal import load_patterns
 from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import GOAL, START, free_cells, room_aggregation
-from torchrl_subgoal.experiments import Chunk, EpisodeTable
+from torchrl_subgoal.experiments import Chunk, EpisodeTable, learner_seeds
 from torchrl_subgoal.experiments.cli import check, parse_config, setting
 from torchrl_subgoal.experiments.recipe import (
     RECIPE_ERRORS,
@@ -90,7 +90,8 @@ class Config:
     results: str = setting("results/four_rooms", "results directory (re-run to resume)")
     backend: Literal["local", "ray"] = setting("local", "where chunks run")
     workers: int = setting(2, "local worker processes (0: in this process)")
-    chunk_size: int = setting(1000, "learners per batch (larger is faster; smaller resumes finer)")
+    chunk_size: int = setting(100, "learners per batch (results do not depend on it; small chunks keep both "
+                              "workers busy to the end and resume finer)")
     overwrite: bool = setting(False, "discard results of a different experiment in --results")
 
     def __post_init__(self) -> None:
@@ -131,7 +132,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     subgoal_aware = config["agent_state"] == "s,z" and method.shaping in ("subgoals", "naive")
     abstract_states = max(len(p) for p in patterns) + 1 if subgoal_aware else 1
-    agent = SoftmaxSarsa(chunk.n_learners, env.num_states, 4, sarsa, seed=chunk.seed,
+    agent = SoftmaxSarsa(chunk.n_learners, env.num_states, 4, sarsa, seed=learner_seeds(config["seed"], chunk),
                          abstract_states=abstract_states)
     records = run_episodes(learning_env, agent, config["episodes"], progress=progress, engine=config["engine"])
     return EpisodeTable(records.steps, records.returns, records.success)
@@ -149,6 +150,7 @@ def main(argv: list[str] | None = None) -> int:
             **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential",
                                         "start_potential", "reward", "engine", "agent_state")},
             "sarsa": dataclasses.asdict(SARSA_PRESETS[cfg.preset]),
+            "seed": cfg.seed,  # learners' seeds derive from it (learner_seeds)
             "subgoal_file": cfg.subgoals,
             "patterns": pattern_config(patterns),
             "pattern_sources": pattern_sources(patterns),

@@ -38,7 +38,7 @@ from torchrl.envs import TransformedEnv
 from torchrl_subgoal import Box, Circle, StateAggregation, load_patterns
 from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic, run_episodes
 from torchrl_subgoal.envs import PinBallEnv
-from torchrl_subgoal.experiments import Chunk, EpisodeTable
+from torchrl_subgoal.experiments import Chunk, EpisodeTable, learner_seeds
 from torchrl_subgoal.experiments.cli import check, parse_config, setting
 from torchrl_subgoal.experiments.recipe import (
     RECIPE_ERRORS,
@@ -88,7 +88,8 @@ class Config:
     results: str = setting("results/pinball", "results directory (re-run to resume)")
     backend: Literal["local", "ray"] = setting("local", "where chunks run")
     workers: int = setting(2, "local worker processes (0: in this process)")
-    chunk_size: int = setting(100, "learners per batch")
+    chunk_size: int = setting(10, "learners per batch (results do not depend on it; small chunks keep both "
+                              "workers busy to the end and resume finer)")
     overwrite: bool = setting(False, "discard results of a different experiment in --results")
 
     def __post_init__(self) -> None:
@@ -122,7 +123,8 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     method = METHODS[chunk.method]
     patterns, pattern_index = chunk_patterns(chunk, config)
 
-    env = PinBallEnv(chunk.n_learners, config["map"], max_steps=config["max_steps"], seed=chunk.seed,
+    seeds = learner_seeds(config["seed"], chunk)  # each learner's own: results do not depend on the chunking
+    env = PinBallEnv(chunk.n_learners, config["map"], max_steps=config["max_steps"], seed=seeds,
                      step_penalty=config["step_penalty"], thrust_penalty=config["thrust_penalty"])
     shaping = shaping_transform(
         method, env.batch_size, gamma=ac.gamma, value_lr=ac.value_lr, patterns=patterns,
@@ -132,7 +134,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     spec = env.observation_spec["observation"]
-    agent = FourierActorCritic(chunk.n_learners, spec.low[0], spec.high[0], 5, ac, seed=chunk.seed)
+    agent = FourierActorCritic(chunk.n_learners, spec.low[0], spec.high[0], 5, ac, seed=seeds)
     records = run_episodes(learning_env, agent, config["episodes"], progress=progress, engine=config["engine"])
     return EpisodeTable(records.steps, records.returns, records.success)
 
@@ -150,6 +152,7 @@ def main(argv: list[str] | None = None) -> int:
                                         "start_potential", "step_penalty", "thrust_penalty", "map", "max_steps",
                                         "engine")},
             "actor_critic": dataclasses.asdict(AC_PRESETS[cfg.preset]),
+            "seed": cfg.seed,  # learners' seeds derive from it (learner_seeds)
             "subgoal_file": cfg.subgoals,
             "patterns": pattern_config(patterns),
             "pattern_sources": pattern_sources(patterns),

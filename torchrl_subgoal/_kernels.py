@@ -14,8 +14,100 @@ flattened, per-learner scalars have a trailing singleton.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numba
 import numpy as np
+
+# --------------------------------------------------------------------------- random streams
+#
+# Every learner draws from its own counter-based stream, Philox4x32-10 (Salmon et al., "Parallel
+# random numbers: as easy as 1, 2, 3", SC 2011), keyed by the learner's 64-bit seed: a draw
+# depends on that seed and on how many draws the learner made before, never on the batch it
+# runs in. A stream is a row ``[key, draws, spare, purpose]`` of a ``uint64`` array: ``purpose``
+# (the third counter word) separates the streams of one seed (the agent's, the env's); each
+# Philox block gives two 53-bit uniforms, the second kept in ``spare`` for the next draw.
+
+_PHILOX_M0, _PHILOX_M1 = np.uint64(0xD2511F53), np.uint64(0xCD9E8D57)
+_PHILOX_W0, _PHILOX_W1 = np.uint64(0x9E3779B9), np.uint64(0xBB67AE85)
+_LOW32, _SHIFT32, _SHIFT11 = np.uint64(0xFFFFFFFF), np.uint64(32), np.uint64(11)
+AGENT_STREAM, ENV_STREAM = 0, 1
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def philox4x32(c0, c1, c2, c3, k0, k1):
+    """Philox4x32-10 of the counter ``(c0..c3)`` under the key ``(k0, k1)`` (32-bit words in ``uint64``)."""
+    for r in range(10):
+        p0 = _PHILOX_M0 * c0
+        p1 = _PHILOX_M1 * c2
+        c0, c1, c2, c3 = (p1 >> _SHIFT32) ^ c1 ^ k0, p1 & _LOW32, (p0 >> _SHIFT32) ^ c3 ^ k1, p0 & _LOW32
+        if r < 9:
+            k0 = (k0 + _PHILOX_W0) & _LOW32
+            k1 = (k1 + _PHILOX_W1) & _LOW32
+    return c0, c1, c2, c3
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def uniform(streams, b):
+    """The next uniform in ``[0, 1)`` of learner ``b``'s stream (advances it)."""
+    row = streams[b]
+    draws = row[1]
+    row[1] = draws + np.uint64(1)
+    if draws & np.uint64(1):
+        bits = row[2]
+    else:
+        block = draws >> np.uint64(1)
+        key = row[0]
+        c0, c1, c2, c3 = philox4x32(block & _LOW32, block >> _SHIFT32, row[3], np.uint64(0), key & _LOW32,
+                                    key >> _SHIFT32)
+        bits = (c0 << _SHIFT32) | c1
+        row[2] = (c2 << _SHIFT32) | c3
+    return np.float64(bits >> _SHIFT11) * (1.0 / 9007199254740992.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def draw_uniforms(streams, count, out):
+    """``out[b, i]``: the next ``count`` uniforms of every learner's stream."""
+    for b in range(streams.shape[0]):
+        for i in range(count):
+            out[b, i] = uniform(streams, b)
+
+
+def learner_keys(seed: int | Sequence[int] | np.ndarray | np.random.Generator, n: int) -> np.ndarray:
+    """The 64-bit key of each of ``n`` learners' streams.
+
+    ``seed`` is one key per learner (a sequence of ``n`` non-negative integers,
+    e.g. from :func:`~torchrl_subgoal.experiments.sweep.learner_seeds`), or one
+    integer from which learner ``b``'s key is derived with
+    ``numpy.random.SeedSequence(seed, spawn_key=(b,))`` (so learner ``b`` of a
+    batch of ten and of a batch of a thousand is the same learner), or a numpy
+    generator that draws the keys.
+
+    Examples:
+        >>> learner_keys(0, 3)[:2].tolist() == learner_keys(0, 2).tolist()
+        True
+        >>> learner_keys([5, 6], 2).tolist()
+        [5, 6]
+    """
+    if isinstance(seed, np.random.Generator):
+        return seed.integers(0, 2**63, size=n, dtype=np.int64).astype(np.uint64)
+    if isinstance(seed, (int, np.integer)):
+        if seed < 0:
+            raise ValueError(f"seed must be >= 0, got {seed}")
+        return np.array([np.random.SeedSequence(int(seed), spawn_key=(b,)).generate_state(1, np.uint64)[0]
+                         for b in range(n)], dtype=np.uint64)
+    keys = np.asarray(seed)
+    if keys.shape != (n,) or keys.dtype.kind not in "iu" or (keys < 0).any():
+        raise ValueError(f"seed: give one non-negative integer per learner ({n}), got {keys.shape[0] if keys.ndim else 1}")
+    return keys.astype(np.uint64)
+
+
+def new_streams(keys: np.ndarray, purpose: int) -> np.ndarray:
+    """Fresh streams ``[n, 4]`` (no draw made yet) for the keys, one per learner."""
+    streams = np.zeros((keys.shape[0], 4), np.uint64)
+    streams[:, 0] = keys
+    streams[:, 3] = purpose
+    return streams
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -42,6 +134,15 @@ def _in_region(o, lo, hi, centre, weight, radius2):
     return True
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _advance_one(zb, o, p, lo, hi, centre, weight, radius2, succ):
+    """The abstract state after observing ``o`` in ``zb`` for a learner of pattern ``p``."""
+    for j in range(lo.shape[1]):
+        if succ[p, zb, j] and _in_region(o, lo[p, j], hi[p, j], centre[p, j], weight[p, j], radius2[p, j]):
+            return j + 1
+    return zb
+
+
 @numba.njit(cache=True, nogil=True)
 def advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_out):
     """``z_out[b]``: abstract state after observing ``obs[b]`` in ``z[b]`` (see SubgoalTables).
@@ -50,20 +151,51 @@ def advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_ou
     (``[P, J, D]``), which keeps them in cache whatever the number of learners.
     See :func:`_in_region` for how an observation is compared (NaN is never inside).
     """
-    n_nodes = lo.shape[1]
     for b in range(z.shape[0]):
-        p = pattern[b]
-        zb = z[b, 0]
-        z_out[b, 0] = zb
-        for j in range(n_nodes):
-            if not succ[p, zb, j]:
-                continue
-            if _in_region(obs[b], lo[p, j], hi[p, j], centre[p, j], weight[p, j], radius2[p, j]):
-                z_out[b, 0] = j + 1
-                break
+        z_out[b, 0] = _advance_one(z[b, 0], obs[b], pattern[b], lo, hi, centre, weight, radius2, succ)
 
 
 START_VALUE, START_ZERO, START_NONPOSITIVE = 0, 1, 2  # SubgoalPotentialTransform's start_potential
+NO_SHAPING, SUBGOAL_SHAPING, LOOKUP_SHAPING = 0, 1, 2  # what the fused runs shape with
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _smdp_accumulate(zb, znb, rh, kb, reward, done, value_gamma):
+    """One step of the SMDP return: ``(emit, r_h + γ_v^k r, γ_v^k, k + 1)``."""
+    emit = znb != zb or done
+    r = rh
+    discount = 1.0
+    if reward != 0.0 or emit:  # γ_v^k is needed only then
+        discount = value_gamma**kb
+        r += reward * discount
+    return emit, r, discount, kb + 1
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _td_error(table, row, zb, znb, terminated, r, discount, value_gamma):
+    """``δ = r_h + γ_v^k γ_v V(z') − V(z)`` (``V(z') = 0`` at a terminal state)."""
+    v_next = 0.0 if terminated else table[row, znb]
+    return r + discount * value_gamma * v_next - table[row, zb]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _shaped_reward(table, row, zb, znb, achieved_prev, terminated, z_start, reward, eta, gamma, zero_terminal,
+                   start_mode):
+    """``r + γ Φ(z') − Φ(z)`` with the potential as it is now (see :func:`shape_step`)."""
+    if table.shape[0] == 0:
+        phi = eta if achieved_prev else 0.0
+        phi_next = eta if znb != zb else 0.0
+    else:
+        phi = table[row, zb]
+        phi_next = table[row, znb]
+        if start_mode != START_VALUE:  # shift Φ so that the start's potential is 0 or ≤ 0
+            v0 = table[row, z_start]
+            c = v0 if start_mode == START_ZERO else max(v0, 0.0)
+            phi -= c
+            phi_next -= c
+    if zero_terminal and terminated:
+        phi_next = 0.0
+    return reward + gamma * phi_next - phi
 
 
 @numba.njit(cache=True, nogil=True)
@@ -86,47 +218,57 @@ def shape_step(
     TD error is computed with the table as it was, then all are applied.
     """
     n = z.shape[0]
-    naive = table.shape[0] == 0
+    learn = lr > 0.0 and table.shape[0] > 0
     delta = np.zeros(n)
     for b in range(n):
-        kb = k[b, 0]
-        emit = z_next[b, 0] != z[b, 0] or done[b, 0]
-        r = r_h[b, 0]
-        discount = 1.0
-        if reward[b, 0] != 0.0 or emit:  # γ_v^k is needed only then
-            discount = value_gamma**kb
-            r += reward[b, 0] * discount
-        kb += 1
-        if emit and lr > 0.0 and not naive:
-            row = 0 if shared else b
-            v_next = 0.0 if terminated[b, 0] else table[row, z_next[b, 0]]
-            delta[b] = r + discount * value_gamma * v_next - table[row, z[b, 0]]
+        emit, r, discount, kb = _smdp_accumulate(z[b, 0], z_next[b, 0], r_h[b, 0], k[b, 0], reward[b, 0],
+                                                 done[b, 0], value_gamma)
+        if emit and learn:
+            delta[b] = _td_error(table, 0 if shared else b, z[b, 0], z_next[b, 0], terminated[b, 0], r, discount,
+                                 value_gamma)
         rh_out[b, 0] = 0.0 if emit else r
         k_out[b, 0] = 0 if emit else kb
         if emit_out.shape[0] > 0:
             rh_acc_out[b, 0] = r
             k_acc_out[b, 0] = kb
             emit_out[b, 0] = emit
-    if lr > 0.0 and not naive:
+    if learn:
         for b in range(n):
             if delta[b] != 0.0:
                 table[0 if shared else b, z[b, 0]] += lr * delta[b]
     for b in range(n):
-        if naive:
-            phi = eta if achieved_prev[b, 0] else 0.0
-            phi_next = eta if z_next[b, 0] != z[b, 0] else 0.0
-        else:
-            row = 0 if shared else b
-            phi = table[row, z[b, 0]]
-            phi_next = table[row, z_next[b, 0]]
-            if start_mode != START_VALUE:  # shift Φ so that the start's potential is 0 or ≤ 0
-                v0 = table[row, z_start[b, 0]]
-                c = v0 if start_mode == START_ZERO else max(v0, 0.0)
-                phi -= c
-                phi_next -= c
-        if zero_terminal and terminated[b, 0]:
-            phi_next = 0.0
-        reward_out[b, 0] = reward[b, 0] + gamma * phi_next - phi
+        reward_out[b, 0] = _shaped_reward(table, 0 if shared else b, z[b, 0], z_next[b, 0], achieved_prev[b, 0],
+                                          terminated[b, 0], z_start[b, 0], reward[b, 0], eta, gamma, zero_terminal,
+                                          start_mode)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _shape_learner(b, zb, znb, achieved_prev, r_h, k, reward, done, terminated, table, eta, gamma, value_gamma, lr,
+                   zero_terminal, start_mode, z_start):
+    """:func:`shape_step` for learner ``b`` alone (its own table row): ``(shaped reward, r_h', k')``."""
+    emit, r, discount, kb = _smdp_accumulate(zb, znb, r_h[b, 0], k[b, 0], reward, done, value_gamma)
+    if emit and lr > 0.0 and table.shape[0] > 0:
+        delta = _td_error(table, b, zb, znb, terminated, r, discount, value_gamma)
+        if delta != 0.0:
+            table[b, zb] += lr * delta
+    shaped = _shaped_reward(table, b, zb, znb, achieved_prev, terminated, z_start[b, 0], reward, eta, gamma,
+                            zero_terminal, start_mode)
+    return shaped, (0.0 if emit else r), (0 if emit else kb)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _carry_learner(b, reset, shaping, initial_z, zb, znb, z, achieved, r_h, k, rh_new, k_new):
+    """:func:`carry_abstract_states` for learner ``b``."""
+    if reset:
+        z[b, 0] = initial_z
+        achieved[b, 0] = False
+        r_h[b, 0] = 0.0
+        k[b, 0] = 0
+    elif shaping != NO_SHAPING:
+        achieved[b, 0] = znb != zb
+        z[b, 0] = znb
+        r_h[b, 0] = rh_new
+        k[b, 0] = k_new
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -150,33 +292,41 @@ def _softmax_choice(q_row, inv_temperature, u, scratch):
 
 
 @numba.njit(cache=True, nogil=True)
-def softmax_sample(q, state, inv_temperature, u, action_out):
-    """``action_out[b] ~ softmax(q[b, state[b]] / τ)``."""
+def softmax_sample(q, state, inv_temperature, streams, action_out):
+    """``action_out[b] ~ softmax(q[b, state[b]] / τ)``, drawn from learner ``b``'s stream."""
     scratch = np.empty(q.shape[2])
     for b in range(q.shape[0]):
-        action_out[b] = _softmax_choice(q[b, state[b]], inv_temperature, u[b], scratch)
+        action_out[b] = _softmax_choice(q[b, state[b]], inv_temperature, uniform(streams, b), scratch)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _sarsa_learner(q_b, s, a, reward, s_next, terminated, done, s_root, streams, b, lr, gamma, inv_temperature,
+                   scratch):
+    """:func:`sarsa_step` for learner ``b`` (its table ``q_b``); returns its next action."""
+    a2 = _softmax_choice(q_b[s_next], inv_temperature, uniform(streams, b), scratch)
+    target = reward
+    if not terminated:
+        target += gamma * q_b[s_next, a2]
+    q_b[s, a] += lr * (target - q_b[s, a])
+    if done:
+        a2 = _softmax_choice(q_b[s_root], inv_temperature, uniform(streams, b), scratch)
+    return a2
 
 
 @numba.njit(cache=True, nogil=True)
 def sarsa_step(
-    q, s, a, reward, s_next, terminated, done, s_root, u, lr, gamma, inv_temperature, action_out
+    q, s, a, reward, s_next, terminated, done, s_root, streams, lr, gamma, inv_temperature, action_out
 ):
     """One SARSA(0) step per learner: draw ``a' ~ π(·|s')``, update ``Q(s, a)``, then
     the next action — ``a'``, or a fresh draw at the reset state where the episode ended.
 
-    ``u`` holds two uniforms per learner (``[2n]``): for ``a'`` and for the reset draw.
+    Learner ``b`` draws from its stream ``streams[b]``: one uniform for ``a'``,
+    and one more for the reset draw when its episode ended.
     """
-    n = q.shape[0]
     scratch = np.empty(q.shape[2])
-    for b in range(n):
-        a2 = _softmax_choice(q[b, s_next[b]], inv_temperature, u[b], scratch)
-        target = reward[b]
-        if not terminated[b]:
-            target += gamma * q[b, s_next[b], a2]
-        q[b, s[b], a[b]] += lr * (target - q[b, s[b], a[b]])
-        if done[b]:
-            a2 = _softmax_choice(q[b, s_root[b]], inv_temperature, u[n + b], scratch)
-        action_out[b] = a2
+    for b in range(q.shape[0]):
+        action_out[b] = _sarsa_learner(q[b], s[b], a[b], reward[b], s_next[b], terminated[b], done[b], s_root[b],
+                                       streams, b, lr, gamma, inv_temperature, scratch)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -207,20 +357,10 @@ def record_episodes(
     Returns how many episodes were filed (those past ``steps_out.shape[1]`` are not).
     """
     filed = 0
-    max_episodes = steps_out.shape[1]
     for b in range(done.shape[0]):
-        t[b] += 1
-        ret[b] += reward[b]
-        if done[b]:
-            e = episode[b]
-            if e < max_episodes:
-                steps_out[b, e] = t[b]
-                returns_out[b, e] = ret[b]
-                success_out[b, e] = terminated[b]
-                filed += 1
-            episode[b] = e + 1
-            t[b] = 0
-            ret[b] = 0.0
+        if _record_learner(b, done[b], terminated[b], reward[b], t, ret, episode, steps_out, returns_out,
+                           success_out):
+            filed += 1
     return filed
 
 
@@ -235,33 +375,67 @@ def grid_reset(state, t, reset, start, cells, cell_out):
         cell_out[b, 1] = cells[state[b], 1]
 
 
-NO_SHAPING, SUBGOAL_SHAPING, LOOKUP_SHAPING = 0, 1, 2
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def shaping_buffers(n):
-    """Per-step outputs of the fused runs' shaping, ``z'``, ``r_h'``, ``k'`` and the shaped
-    reward, and the empty arrays that tell :func:`shape_step` to skip the SMDP transition."""
-    return (np.empty((n, 1), np.int64), np.empty((n, 1), np.float32), np.empty((n, 1), np.int64),
-            np.empty((n, 1), np.float32), np.empty((0, 1), np.float32), np.empty((0, 1), np.int64),
-            np.empty((0, 1), np.bool_))
-
-
 @numba.njit(cache=True, nogil=True)
 def carry_abstract_states(reset, shaping, initial_z, z, achieved, r_h, k, z_next, rh_out, k_out):
     """Each learner's abstract state for the next step: the reset one where ``reset``,
     else this step's outputs (left alone without shaping)."""
     for b in range(z.shape[0]):
-        if reset[b, 0]:
-            z[b, 0] = initial_z
-            achieved[b, 0] = False
-            r_h[b, 0] = 0.0
-            k[b, 0] = 0
-        elif shaping != NO_SHAPING:
-            achieved[b, 0] = z_next[b, 0] != z[b, 0]
-            z[b, 0] = z_next[b, 0]
-            r_h[b, 0] = rh_out[b, 0]
-            k[b, 0] = k_out[b, 0]
+        _carry_learner(b, reset[b, 0], shaping, initial_z, z[b, 0], z_next[b, 0], z, achieved, r_h, k, rh_out[b, 0],
+                       k_out[b, 0])
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _active_learners(episode, max_episodes):
+    """Indices of the learners that still lack episodes, and how many there are."""
+    active = np.empty(episode.shape[0], np.int64)
+    count = 0
+    for b in range(episode.shape[0]):
+        if episode[b] < max_episodes:
+            active[count] = b
+            count += 1
+    return active, count
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _record_learner(b, done, terminated, reward, t, ret, episode, steps_out, returns_out, success_out):
+    """:func:`record_episodes` for learner ``b``; whether it filed an episode."""
+    t[b] += 1
+    ret[b] += reward
+    if not done:
+        return False
+    e = episode[b]
+    filed = e < steps_out.shape[1]
+    if filed:
+        steps_out[b, e] = t[b]
+        returns_out[b, e] = ret[b]
+        success_out[b, e] = terminated
+    episode[b] = e + 1
+    t[b] = 0
+    ret[b] = 0.0
+    return filed
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _transform_learner(b, shaping, zb, znb, achieved, r_h, k, reward, done, terminated, table, eta, gamma,
+                       value_gamma, value_lr, zero_terminal, start_mode, z_start):
+    """The shaping transform's step for learner ``b`` in a fused loop: ``(reward as float32, r_h', k')``."""
+    if shaping == NO_SHAPING:
+        return reward, 0.0, 0
+    shaped, rh_new, k_new = _shape_learner(b, zb, znb, achieved[b, 0], r_h, k, reward, done, terminated, table, eta,
+                                           gamma, value_gamma, value_lr, zero_terminal, start_mode, z_start)
+    return np.float32(shaped), rh_new, k_new
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _record_and_keep(b, done, terminated, reward, t, ret, episode, steps_out, returns_out, success_out, active, kept):
+    """File learner ``b``'s step (:func:`_record_learner`) and keep it in ``active[:kept]`` while it
+    lacks episodes: ``(episodes filed, new kept)``."""
+    filed = 1 if _record_learner(b, done, terminated, reward, t, ret, episode, steps_out, returns_out,
+                                 success_out) else 0
+    if episode[b] < steps_out.shape[1]:
+        active[kept] = b
+        kept += 1
+    return filed, kept
 
 
 @numba.njit(cache=True, nogil=True)
@@ -270,113 +444,154 @@ def sarsa_grid_run(
     state, t_env, transitions, cells, start, goal, max_steps, goal_reward, step_reward,
     # the shaping transform: which abstraction, its tables, its per-learner state and the potential
     shaping, observe_cell, pattern, lo, hi, centre, weight, radius2, succ, lookup, initial_z,
-    z, achieved, r_h, k, table, shared, eta, gamma_shaping, value_gamma, value_lr, zero_terminal, start_mode,
-    z_start,
-    # the SARSA learners
-    q, abstract_states, action, lr, gamma, inv_temperature, uniforms,
+    z, achieved, r_h, k, table, eta, gamma_shaping, value_gamma, value_lr, zero_terminal, start_mode, z_start,
+    # the SARSA learners and their random streams
+    q, abstract_states, action, lr, gamma, inv_temperature, streams, max_steps_run,
     # episode records
     t_rec, ret, episode, steps_out, returns_out, success_out,
 ):
     """Run steps of grid world + shaping + SARSA until every learner has its episodes.
 
-    The same kernels, in the same order and with the same random numbers, as one
-    iteration of :func:`torchrl_subgoal.agents.run_episodes` with a
-    ``TransformedEnv(FourRoomsEnv, SubgoalPotentialTransform)`` and a
+    Per learner, the same kernels in the same order with the same random
+    numbers as one iteration of :func:`torchrl_subgoal.agents.run_episodes`
+    with a ``TransformedEnv(FourRoomsEnv, SubgoalPotentialTransform)`` and a
     :class:`~torchrl_subgoal.agents.SoftmaxSarsa`: env step, transform step,
-    reset of finished learners, SARSA step, records. At most
-    ``uniforms.shape[0]`` steps; returns ``(steps taken, episodes filed)``.
+    reset, SARSA step, records. Learners are independent (own stream, own
+    tables), so one that has its episodes is dropped from the loop and costs
+    nothing more. At most ``max_steps_run`` steps; returns ``(steps taken, episodes filed)``.
     """
     n = state.shape[0]
-    reward = np.empty((n, 1), np.float32)
-    terminated = np.empty((n, 1), np.bool_)
-    truncated = np.empty((n, 1), np.bool_)
-    done = np.empty((n, 1), np.bool_)
-    cell = np.empty((n, 2), np.int64)
-    z_next, rh_out, k_out, shaped, no_f, no_i, no_b = shaping_buffers(n)
-    rows = np.empty(n, np.int64)
-    rows_next = np.empty(n, np.int64)
-    rows_root = np.empty(n, np.int64)
-    next_action = np.empty(n, np.int64)
+    state2 = state.reshape((n, 1))  # the state number as a one-entry observation
+    scratch = np.empty(q.shape[2])
     max_episodes = steps_out.shape[1]
+    active, n_active = _active_learners(episode, max_episodes)
     filed_total = 0
-    for step in range(uniforms.shape[0]):
-        for b in range(n):
-            rows[b] = state[b] * abstract_states + (z[b, 0] if abstract_states > 1 else 0)
-        grid_step(state, t_env, action, transitions, cells, goal, max_steps, goal_reward, step_reward,
-                  reward[:, 0], terminated[:, 0], truncated[:, 0], cell)
-        for b in range(n):
-            done[b, 0] = terminated[b, 0] or truncated[b, 0]
-        if shaping == SUBGOAL_SHAPING:
-            if observe_cell:
-                advance_regions(z, cell, pattern, lo, hi, centre, weight, radius2, succ, z_next)
-            else:
-                advance_regions(z, state.reshape((n, 1)), pattern, lo, hi, centre, weight, radius2, succ, z_next)
-        elif shaping == LOOKUP_SHAPING:
-            for b in range(n):
-                z_next[b, 0] = lookup[state[b]]
-        if shaping == NO_SHAPING:
-            shaped[:, 0] = reward[:, 0]
-        else:
-            shape_step(z, z_next, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma_shaping,
-                       value_gamma, value_lr, zero_terminal, start_mode, z_start, rh_out, k_out, shaped, no_f, no_i,
-                       no_b)
-        for b in range(n):
-            zn = z_next[b, 0] if shaping != NO_SHAPING else 0
-            rows_next[b] = state[b] * abstract_states + (zn if abstract_states > 1 else 0)
-            if done[b, 0]:  # the env and the transform reset this learner
+    for step in range(max_steps_run):
+        if n_active == 0:
+            return step, filed_total
+        kept = 0
+        for i in range(n_active):
+            b = active[i]
+            zb = z[b, 0]
+            row = state[b] * abstract_states + (zb if abstract_states > 1 else 0)
+            s = transitions[state[b], action[b]]  # the grid env's step
+            state[b] = s
+            t_env[b] += 1
+            terminated = s == goal
+            done = terminated or t_env[b] >= max_steps
+            reward = np.float32(goal_reward if terminated else step_reward)
+            znb = 0
+            if shaping == SUBGOAL_SHAPING:  # the transform's step
+                obs = cells[s] if observe_cell else state2[b]
+                znb = _advance_one(zb, obs, pattern[b], lo, hi, centre, weight, radius2, succ)
+            elif shaping == LOOKUP_SHAPING:
+                znb = lookup[s]
+            shaped, rh_new, k_new = _transform_learner(b, shaping, zb, znb, achieved, r_h, k, reward, done, terminated,
+                                                       table, eta, gamma_shaping, value_gamma, value_lr,
+                                                       zero_terminal, start_mode, z_start)
+            row_next = s * abstract_states + (znb if abstract_states > 1 else 0)
+            if done:  # the env and the transform reset this learner
                 state[b] = start
                 t_env[b] = 0
-        carry_abstract_states(done, shaping, initial_z, z, achieved, r_h, k, z_next, rh_out, k_out)
-        for b in range(n):
-            rows_root[b] = state[b] * abstract_states + (z[b, 0] if abstract_states > 1 else 0)
-        sarsa_step(q, rows, action, shaped[:, 0], rows_next, terminated[:, 0], done[:, 0], rows_root,
-                   uniforms[step], lr, gamma, inv_temperature, next_action)
-        filed_total += record_episodes(done[:, 0], terminated[:, 0], reward[:, 0], t_rec, ret, episode,
-                                       steps_out, returns_out, success_out)
-        action[:] = next_action
-        if episode.min() >= max_episodes:
-            return step + 1, filed_total
-    return uniforms.shape[0], filed_total
+            _carry_learner(b, done, shaping, initial_z, zb, znb, z, achieved, r_h, k, rh_new, k_new)
+            row_root = state[b] * abstract_states + (z[b, 0] if abstract_states > 1 else 0)
+            action[b] = _sarsa_learner(q[b], row, action[b], shaped, row_next, terminated, done, row_root, streams,
+                                       b, lr, gamma, inv_temperature, scratch)
+            filed, kept = _record_and_keep(b, done, terminated, reward, t_rec, ret, episode, steps_out, returns_out,
+                                           success_out, active, kept)
+            filed_total += filed
+        n_active = kept
+    return max_steps_run, filed_total
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _first_region_one(zb, o, lo, hi, centre, weight, radius2):
+    """The first region (shared ``[J, D]`` tables) containing ``o``, else ``zb``."""
+    for j in range(lo.shape[0]):
+        if _in_region(o, lo[j], hi[j], centre[j], weight[j], radius2[j]):
+            return j
+    return zb
 
 
 @numba.njit(cache=True, nogil=True)
 def first_region(z, obs, lo, hi, centre, weight, radius2, z_out):
     """``z_out[b]``: the first region (shared ``[J, D]`` tables) containing ``obs[b]``, else ``z[b]``."""
     for b in range(obs.shape[0]):
-        z_out[b, 0] = z[b, 0]
-        for j in range(lo.shape[0]):
-            if _in_region(obs[b], lo[j], hi[j], centre[j], weight[j], radius2[j]):
-                z_out[b, 0] = j
-                break
+        z_out[b, 0] = _first_region_one(z[b, 0], obs[b], lo, hi, centre, weight, radius2)
+
+
+# --------------------------------------------------------------------------- linear actor-critics
+#
+# ``fastmath`` lets LLVM vectorise these loops (about 30% of a PinBall learner-step). The
+# per-learner steps (:func:`_ac_learner`, :func:`_qac_learner`) are compiled once, not
+# inlined, and called by both the batch kernels (the TorchRL loop) and the fused engine, so
+# the two run the same machine code and agree bit for bit (``tests/agents/test_fused.py``).
+# Numba's on-disk cache of a compiled caller is keyed on its own file only: after editing
+# this file, delete the ``__pycache__/*.nb[ic]`` of ``agents/fused.py`` (or touch it).
 
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
-def _basis_exponentials(obs, low, inv_range, k, first_dim, end_dim, out):
+def _dot(x, y):
+    """``Σ x[f] y[f]`` over ``x``'s length, as four interleaved partial sums."""
+    n = x.shape[0]
+    s0 = s1 = s2 = s3 = 0.0
+    f = 0
+    while f + 4 <= n:
+        s0 += x[f] * y[f]
+        s1 += x[f + 1] * y[f + 1]
+        s2 += x[f + 2] * y[f + 2]
+        s3 += x[f + 3] * y[f + 3]
+        f += 4
+    while f < n:
+        s0 += x[f] * y[f]
+        f += 1
+    return (s0 + s1) + (s2 + s3)
+
+
+@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
+def _basis_exponentials(trig, k, first_dim, end_dim, out):
     """``out[i] = exp(iπ c_i · s̃)`` over dimensions ``[first_dim, end_dim)``, with ``c_i``
-    the base-``k`` digits of ``i`` (last dimension least significant), as (re, im) pairs."""
-    for i in range(out.shape[0]):
-        re, im, rem = 1.0, 0.0, i
-        for d in range(end_dim - 1, first_dim - 1, -1):
-            c = rem % k
-            rem //= k
-            x = min(max((obs[d] - low[d]) * inv_range[d], 0.0), 1.0)
-            angle = np.pi * c * x
-            cr, ci = np.cos(angle), np.sin(angle)
-            re, im = re * cr - im * ci, re * ci + im * cr
-        out[i, 0], out[i, 1] = re, im
+    the base-``k`` digits of ``i`` (last dimension least significant), as (re, im) pairs.
+
+    Built from the last dimension up, each product ``(exponentials of the later dimensions)
+    × trig[d, c]``, in place: the products of :func:`fourier_features`' definition in the
+    same order, without recomputing a dimension's cosines for every entry.
+    """
+    out[0, 0], out[0, 1] = 1.0, 0.0
+    size = 1
+    for d in range(end_dim - 1, first_dim - 1, -1):
+        for c in range(k - 1, -1, -1):  # c = 0 last: it overwrites the entries it reads
+            cr, ci = trig[d, c, 0], trig[d, c, 1]
+            for j in range(size):
+                re, im = out[j, 0], out[j, 1]
+                out[c * size + j, 0], out[c * size + j, 1] = re * cr - im * ci, re * ci + im * cr
+        size *= k
 
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
-def fourier_features(obs, low, inv_range, order, half, first, second, out):
+def fourier_features(obs, low, inv_range, order, half, scratch, out):
     """``out[f] = cos(π c_f · s̃)`` for every coefficient vector ``c_f ∈ {0..order}^D`` in
     lexicographic order, ``s̃ = clip((obs - low) / range, 0, 1)``.
 
     Computed as ``Re(A_a B_b)`` with ``f = a·M + b``: ``A`` are the complex
     exponentials of the first ``half`` dimensions, ``B`` of the others (one
-    complex product per feature instead of a cosine).
+    complex product per feature instead of a cosine); each is a product of the
+    per-dimension ``exp(iπ c s̃_d)``, the powers of ``exp(iπ s̃_d)`` (one cosine
+    and one sine per dimension; equal to ``cos(π c s̃_d)`` and ``sin(π c s̃_d)``
+    within a few units in the last place).
+    ``scratch`` is :func:`_feature_scratch`'s.
     """
-    _basis_exponentials(obs, low, inv_range, order + 1, 0, half, first)
-    _basis_exponentials(obs, low, inv_range, order + 1, half, obs.shape[0], second)
+    first, second, trig = scratch
+    k = order + 1
+    for d in range(obs.shape[0]):  # exp(iπ c s̃_d) = exp(iπ s̃_d)^c: two trigonometric calls per dimension
+        x = min(max((obs[d] - low[d]) * inv_range[d], 0.0), 1.0)
+        cr, ci = np.cos(np.pi * x), np.sin(np.pi * x)
+        trig[d, 0, 0], trig[d, 0, 1] = 1.0, 0.0
+        for c in range(1, k):
+            re, im = trig[d, c - 1, 0], trig[d, c - 1, 1]
+            trig[d, c, 0], trig[d, c, 1] = re * cr - im * ci, re * ci + im * cr
+    _basis_exponentials(trig, k, 0, half, first)
+    _basis_exponentials(trig, k, half, obs.shape[0], second)
     n_second = second.shape[0]
     for a in range(first.shape[0]):
         for b in range(n_second):
@@ -386,12 +601,10 @@ def fourier_features(obs, low, inv_range, order, half, first, second, out):
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
 def _policy(theta_b, phi, probs):
     """``probs`` ← softmax(θ φ)."""
-    n_actions, n_features = theta_b.shape
+    n_actions = theta_b.shape[0]
     top = -np.inf
     for a in range(n_actions):
-        s = 0.0
-        for f in range(n_features):
-            s += theta_b[a, f] * phi[f]
+        s = _dot(theta_b[a], phi)
         probs[a] = s
         top = max(top, s)
     total = 0.0
@@ -416,18 +629,25 @@ def _policy_sample(theta_b, phi, u, logits):
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
-def ac_act(theta, phi, probs, obs, low, inv_range, order, half, u, action_out):
-    """Features of ``obs`` into ``phi``, the policy into ``probs`` and a first action per learner."""
-    first, second, _ = _feature_scratch(order, half, obs.shape[1], 0)
+def ac_act(theta, phi, probs, obs, low, inv_range, order, half, streams, action_out):
+    """Features of ``obs`` into ``phi``, the policy into ``probs`` and a first action per learner
+    (drawn from its stream; an empty ``streams`` draws nothing and leaves ``action_out`` alone)."""
+    scratch, _ = _feature_scratch(order, half, obs.shape[1], 0)
     for b in range(obs.shape[0]):
-        fourier_features(obs[b], low, inv_range, order, half, first, second, phi[b])
-        action_out[b] = _policy_sample(theta[b], phi[b], u[b], probs[b])
+        fourier_features(obs[b], low, inv_range, order, half, scratch, phi[b])
+        if streams.shape[0] > 0:
+            action_out[b] = _policy_sample(theta[b], phi[b], uniform(streams, b), probs[b])
+        else:
+            _policy(theta[b], phi[b], probs[b])
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
 def _feature_scratch(order, half, dim, n_features):
-    """Scratch arrays of :func:`fourier_features` (the two halves' exponentials) and a feature vector."""
-    return np.empty(((order + 1) ** half, 2)), np.empty(((order + 1) ** (dim - half), 2)), np.empty(n_features)
+    """Scratch arrays of :func:`fourier_features` (the two halves' exponentials and the per-dimension
+    ones) and a feature vector."""
+    scratch = (np.empty(((order + 1) ** half, 2)), np.empty(((order + 1) ** (dim - half), 2)),
+               np.empty((dim, order + 1, 2)))
+    return scratch, np.empty(n_features)
 
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
@@ -440,95 +660,116 @@ def _policy_gradient_step(theta_b, phi_b, probs_b, a_taken, lr, scale, signal):
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
+def _ac_learner(b, w, theta, phi, probs, a_taken, reward, obs_next, terminated, done, obs_root, low, inv_range,
+                order, half, streams, actor_lr, critic_lr, gamma, normalize, scratch, phi_next):
+    """:func:`ac_step` for learner ``b``; returns its next action."""
+    n_features = theta.shape[2]
+    fourier_features(obs_next, low, inv_range, order, half, scratch, phi_next)
+    value = _dot(w[b], phi[b])
+    value_next = _dot(w[b], phi_next)
+    norm2 = _dot(phi[b], phi[b])
+    delta = reward - value
+    if not terminated:
+        delta += gamma * value_next
+    scale = 1.0 / np.sqrt(norm2) if normalize else 1.0
+    _policy_gradient_step(theta[b], phi[b], probs[b], a_taken, actor_lr, scale, delta)
+    c = critic_lr * scale * delta
+    for f in range(n_features):
+        w[b, f] += c * phi[b, f]
+    if done:
+        fourier_features(obs_root, low, inv_range, order, half, scratch, phi_next)
+    for f in range(n_features):
+        phi[b, f] = phi_next[f]
+    return _policy_sample(theta[b], phi[b], uniform(streams, b), probs[b])
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True)
 def ac_step(
-    w, theta, phi, probs, action, reward, obs_next, terminated, done, obs_root, active,
-    low, inv_range, order, half, u, actor_lr, critic_lr, gamma, normalize, action_out,
+    w, theta, phi, probs, action, reward, obs_next, terminated, done, obs_root,
+    low, inv_range, order, half, streams, actor_lr, critic_lr, gamma, normalize, action_out,
 ):
-    """One-step actor-critic for every active learner.
+    """One-step actor-critic for every learner.
 
     ``δ = r + γ V(s') (1 − terminated) − V(s)``, ``V = w·φ``; ``w += α_c δ φ(s)``;
     ``θ += α_a δ (1[a] − π(·|s)) ⊗ φ(s)``; with ``normalize`` both rates are
     divided by ``‖φ(s)‖``. ``phi`` and ``probs`` hold each learner's ``φ(s)``
     and ``π(·|s)`` (computed when its action was drawn; ``θ`` has not changed
     since) and are replaced by those of the next state (``s'``, or the reset
-    state where the episode ended), from which the next action is drawn with ``u``.
+    state where the episode ended), from which the next action is drawn with
+    one uniform of the learner's stream.
     """
-    n_features = theta.shape[2]
-    first, second, phi_next = _feature_scratch(order, half, obs_next.shape[1], n_features)
+    scratch, phi_next = _feature_scratch(order, half, obs_next.shape[1], theta.shape[2])
     for b in range(w.shape[0]):
-        if not active[b]:
-            continue
-        fourier_features(obs_next[b], low, inv_range, order, half, first, second, phi_next)
-        value = 0.0
-        value_next = 0.0
-        norm2 = 0.0
-        for f in range(n_features):
-            value += w[b, f] * phi[b, f]
-            value_next += w[b, f] * phi_next[f]
-            norm2 += phi[b, f] * phi[b, f]
-        delta = reward[b] - value
-        if not terminated[b]:
-            delta += gamma * value_next
-        scale = 1.0 / np.sqrt(norm2) if normalize else 1.0
-        _policy_gradient_step(theta[b], phi[b], probs[b], action[b], actor_lr, scale, delta)
-        c = critic_lr * scale * delta
-        for f in range(n_features):
-            w[b, f] += c * phi[b, f]
-        if done[b]:
-            fourier_features(obs_root[b], low, inv_range, order, half, first, second, phi_next)
-        for f in range(n_features):
-            phi[b, f] = phi_next[f]
-        action_out[b] = _policy_sample(theta[b], phi[b], u[b], probs[b])
+        action_out[b] = _ac_learner(b, w, theta, phi, probs, action[b], reward[b], obs_next[b], terminated[b],
+                                    done[b], obs_root[b], low, inv_range, order, half, streams, actor_lr, critic_lr,
+                                    gamma, normalize, scratch, phi_next)
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True)
+def _qac_learner(b, w, theta, phi, probs, a_taken, reward, obs_next, terminated, done, obs_root, low, inv_range,
+                 order, half, streams, actor_lr, critic_lr, gamma, normalize, scratch, phi_next):
+    """:func:`qac_step` for learner ``b``; returns its next action."""
+    n_features = theta.shape[2]
+    fourier_features(obs_next, low, inv_range, order, half, scratch, phi_next)
+    a_next = _policy_sample(theta[b], phi_next, uniform(streams, b), probs[b])
+    q = _dot(w[b, a_taken * n_features:(a_taken + 1) * n_features], phi[b])
+    q_next = _dot(w[b, a_next * n_features:(a_next + 1) * n_features], phi_next)
+    norm2 = _dot(phi[b], phi[b])
+    scale = 1.0 / np.sqrt(norm2) if normalize else 1.0
+    _policy(theta[b], phi[b], probs[b])
+    _policy_gradient_step(theta[b], phi[b], probs[b], a_taken, actor_lr, scale, q)
+    delta = reward - q
+    if not terminated:
+        delta += gamma * q_next
+    c = critic_lr * scale * delta
+    for f in range(n_features):
+        w[b, a_taken * n_features + f] += c * phi[b, f]
+    if done:
+        fourier_features(obs_root, low, inv_range, order, half, scratch, phi_next)
+        a_next = _policy_sample(theta[b], phi_next, uniform(streams, b), probs[b])
+    for f in range(n_features):
+        phi[b, f] = phi_next[f]
+    return a_next
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
 def qac_step(
-    w, theta, phi, probs, action, reward, obs_next, terminated, done, obs_root, active,
-    low, inv_range, order, half, u, actor_lr, critic_lr, gamma, normalize, action_out,
+    w, theta, phi, probs, action, reward, obs_next, terminated, done, obs_root,
+    low, inv_range, order, half, streams, actor_lr, critic_lr, gamma, normalize, action_out,
 ):
-    """One step of the Q-based actor-critic (the authors' released PinBall agent) for every active learner.
+    """One step of the Q-based actor-critic (the authors' released PinBall agent) for every learner.
 
     ``w`` is ``[B, A·F]``: a linear critic ``Q(s, a) = w_a·φ(s)`` per action.
-    First ``a' ~ π(·|s')`` is drawn with ``u[b]`` (the policy before this
-    step's update). Then, with ``q = Q(s, a)`` before the critic's update:
-    ``θ += α_a q (1[a] − π(·|s)) ⊗ φ(s)`` (``π`` with the current ``θ``) and
-    ``w_a += α_c δ φ(s)``, ``δ = r + γ Q(s', a') (1 − terminated) − q``; with
-    ``normalize`` both rates are divided by ``‖φ(s)‖``. Where the episode
-    ended the next action is drawn at the reset state with ``u[n + b]``
-    (``u`` is ``[2n]``). ``phi`` holds each learner's ``φ(s)`` and becomes
-    that of the next state; ``probs`` is scratch.
+    First ``a' ~ π(·|s')`` is drawn from the learner's stream (the policy
+    before this step's update). Then, with ``q = Q(s, a)`` before the critic's
+    update: ``θ += α_a q (1[a] − π(·|s)) ⊗ φ(s)`` (``π`` with the current
+    ``θ``) and ``w_a += α_c δ φ(s)``, ``δ = r + γ Q(s', a') (1 − terminated) − q``;
+    with ``normalize`` both rates are divided by ``‖φ(s)‖``. Where the episode
+    ended the next action is drawn at the reset state with one more uniform.
+    ``phi`` holds each learner's ``φ(s)`` and becomes that of the next state;
+    ``probs`` is scratch.
     """
-    n = w.shape[0]
-    n_features = theta.shape[2]
-    first, second, phi_next = _feature_scratch(order, half, obs_next.shape[1], n_features)
-    for b in range(n):
-        if not active[b]:
-            continue
-        fourier_features(obs_next[b], low, inv_range, order, half, first, second, phi_next)
-        a_next = _policy_sample(theta[b], phi_next, u[b], probs[b])
-        a_taken = action[b]
-        q = 0.0
-        q_next = 0.0
-        norm2 = 0.0
-        for f in range(n_features):
-            q += w[b, a_taken * n_features + f] * phi[b, f]
-            q_next += w[b, a_next * n_features + f] * phi_next[f]
-            norm2 += phi[b, f] * phi[b, f]
-        scale = 1.0 / np.sqrt(norm2) if normalize else 1.0
-        _policy(theta[b], phi[b], probs[b])
-        _policy_gradient_step(theta[b], phi[b], probs[b], a_taken, actor_lr, scale, q)
-        delta = reward[b] - q
-        if not terminated[b]:
-            delta += gamma * q_next
-        c = critic_lr * scale * delta
-        for f in range(n_features):
-            w[b, a_taken * n_features + f] += c * phi[b, f]
-        if done[b]:
-            fourier_features(obs_root[b], low, inv_range, order, half, first, second, phi_next)
-            a_next = _policy_sample(theta[b], phi_next, u[n + b], probs[b])
-        for f in range(n_features):
-            phi[b, f] = phi_next[f]
-        action_out[b] = a_next
+    scratch, phi_next = _feature_scratch(order, half, obs_next.shape[1], theta.shape[2])
+    for b in range(w.shape[0]):
+        action_out[b] = _qac_learner(b, w, theta, phi, probs, action[b], reward[b], obs_next[b], terminated[b],
+                                     done[b], obs_root[b], low, inv_range, order, half, streams, actor_lr, critic_lr,
+                                     gamma, normalize, scratch, phi_next)
+
+
+@numba.njit(cache=True, nogil=True)
+def random_actions(action, streams, probability, n_actions, out):
+    """``out[b]``: ``action[b]``, or with ``probability`` a uniform one of ``n_actions``, drawn
+    from ball ``b``'s stream (one uniform decides, a second picks the action when it is replaced)."""
+    for b in range(action.shape[0]):
+        out[b] = _random_action(action[b], streams, b, probability, n_actions)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _random_action(a, streams, b, probability, n_actions):
+    """The executed action of ball ``b`` (see :func:`random_actions`)."""
+    if probability > 0.0 and uniform(streams, b) < probability:
+        return min(int(uniform(streams, b) * n_actions), n_actions - 1)
+    return a
 
 
 @numba.njit(cache=True, nogil=True)

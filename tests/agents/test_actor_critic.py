@@ -7,6 +7,7 @@ import pytest
 import torch
 from tensordict import TensorDict
 
+from torchrl_subgoal import _kernels
 from torchrl_subgoal.agents import AC_PRESETS, ActorCriticConfig, FourierActorCritic, run_episodes
 from torchrl_subgoal.agents.actor_critic import fourier_coefficients
 from torchrl_subgoal.envs import PinBallEnv
@@ -75,7 +76,6 @@ def _inverse_cdf(probs: torch.Tensor, u: np.ndarray) -> torch.Tensor:
 @pytest.mark.parametrize("normalize", [False, True])
 def test_q_actor_critic_update_matches_autograd(normalize: bool) -> None:
     """The authors' released agent: a' ~ π(·|s') first, actor step scaled by Q(s, a), SARSA critic per action."""
-    import copy
 
     n, cfg = 3, ActorCriticConfig(actor_lr=0.05, critic_lr=0.1, gamma=0.9, value_lr=0.0, normalize_lr=normalize,
                                   critic="action")
@@ -99,7 +99,9 @@ def test_q_actor_critic_update_matches_autograd(normalize: bool) -> None:
         [n],
     )
     root = TensorDict({"observation": torch.where(terminated | truncated, obs_reset, obs_next)}, [n])
-    u = copy.deepcopy(agent.rng).random(2 * n)
+    drawn = np.empty((n, 2))
+    _kernels.draw_uniforms(agent.streams.copy(), 2, drawn)  # each learner's next two draws
+    u = np.concatenate([drawn[:, 0], drawn[:, 1]])  # a' for all, then the reset draws
     agent.step(transition, root)
 
     phi, phi_next, phi_reset = agent.features(obs), agent.features(obs_next), agent.features(obs_reset)

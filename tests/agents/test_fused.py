@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 from torchrl.envs import TransformedEnv
 
-from torchrl_subgoal import Cell, SubgoalSeries
+from torchrl_subgoal import Cell, SubgoalSeries, _kernels
 from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import room_aggregation
@@ -16,18 +17,29 @@ PATTERNS = [SubgoalSeries([Cell(4, 9), Cell(11, 9)]), SubgoalSeries([Cell(1, 11)
 
 
 def setup(method: str, n: int, abstract_states: int, max_steps: int, step_cost: bool = False,
-          start: str = "nonpositive", zero_terminal: bool = True) -> tuple[object, SoftmaxSarsa]:
+          start: str = "nonpositive", zero_terminal: bool = True,
+          learners: list[int] | None = None) -> tuple[object, SoftmaxSarsa]:
+    """Learners ``0..n-1`` (or the given ones of those): learner ``b`` follows pattern ``b % 2``
+    and has the ``b``-th seed derived from 7, whatever batch it runs in."""
     cfg = SARSA_PRESETS["released"]
-    env = FourRoomsEnv(n, max_steps=max_steps, goal_reward=0.0 if step_cost else 1.0,
+    learners = list(range(n)) if learners is None else learners
+    m = len(learners)
+    env = FourRoomsEnv(m, max_steps=max_steps, goal_reward=0.0 if step_cost else 1.0,
                        step_reward=-1.0 if step_cost else 0.0)
     shaping = shaping_transform(
         paper_methods("SARSA")[method], env.batch_size, gamma=cfg.gamma, value_lr=cfg.value_lr,
-        patterns=PATTERNS, pattern_index=torch.arange(n) % 2, aggregation=room_aggregation(),
+        patterns=PATTERNS, pattern_index=torch.tensor(learners) % 2, aggregation=room_aggregation(),
         eta=1.0, observation_key="cell", start_potential=start,  # type: ignore[arg-type]
         zero_terminal_potential=zero_terminal,
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
-    return learning_env, SoftmaxSarsa(n, 104, 4, cfg, seed=7, abstract_states=abstract_states)
+    seeds = _kernels.learner_keys(7, n)[learners]
+    return learning_env, SoftmaxSarsa(m, 104, 4, cfg, seed=seeds, abstract_states=abstract_states)
+
+
+def _tables(env: object, agent: SoftmaxSarsa) -> tuple[torch.Tensor, torch.Tensor | None]:
+    potential = env.transform.potential if hasattr(env, "transform") else None
+    return agent.q.clone(), (potential.table.detach().clone() if hasattr(potential, "table") else None)
 
 
 @pytest.mark.parametrize(
@@ -43,18 +55,41 @@ def test_fused_equals_torchrl(method: str, abstract_states: int, step_cost: bool
         env, agent = setup(method, n=12, abstract_states=abstract_states, max_steps=150, step_cost=step_cost,
                            start=start, zero_terminal=zero_terminal)
         records = run_episodes(env, agent, 25, engine=engine)
-        potential = env.transform.potential if hasattr(env, "transform") else None
-        table = potential.table.detach().clone() if hasattr(potential, "table") else None
-        results[engine] = (records, agent.q.clone(), table)
+        results[engine] = (records, *_tables(env, agent))
     (a, qa, va), (b, qb, vb) = results["torchrl"], results["fused"]
     assert torch.equal(a.steps, b.steps) and torch.equal(a.returns, b.returns)
     assert torch.equal(a.success, b.success) and a.env_steps == b.env_steps
-    assert torch.equal(qa, qb)
+    # the TorchRL loop keeps stepping learners that have their episodes, the fused one stops them:
+    # the tables agree for the learner that finished last (see test_learner_is_independent_of_its_batch)
+    last = int(a.steps.sum(1).argmax())
+    assert torch.equal(qa[last], qb[last])
     if va is not None:
-        assert torch.equal(va, vb) and va.abs().sum() > 0
+        assert torch.equal(va[last], vb[last]) and va.abs().sum() > 0
     assert (a.steps == 150).any() and a.success.any()  # both truncations and goals happened
     if step_cost:
         assert torch.equal(a.returns, -(a.steps - a.success.long()).float())  # −1 per step, 0 at the goal
+
+
+@pytest.mark.parametrize(("method", "abstract_states"), [("HRS", 4), ("NRS", 1), ("SARSA-RS", 1)])
+def test_learner_is_independent_of_its_batch(method: str, abstract_states: int) -> None:
+    """A learner's records and final tables depend on its seed only: the same in a batch of 12,
+    in batches of 5 and 7, and alone (also with the TorchRL loop, which then stops with it)."""
+    def run(learners: list[int], engine: str = "fused") -> tuple[torch.Tensor, ...]:
+        env, agent = setup(method, n=12, abstract_states=abstract_states, max_steps=150, start="value",
+                           zero_terminal=False, learners=learners)
+        records = run_episodes(env, agent, 25, engine=engine)  # type: ignore[arg-type]
+        q, v = _tables(env, agent)
+        return records.steps, records.returns, q, (v if v is not None else torch.zeros(len(learners)))
+
+    whole = run(list(range(12)))
+    parts = [run([2, 9, 4, 0, 11]), run([1, 3, 5, 6, 7, 8, 10])]
+    order = [2, 9, 4, 0, 11, 1, 3, 5, 6, 7, 8, 10]
+    for whole_part, *split in zip(whole, *parts, strict=True):
+        assert torch.equal(whole_part[order], torch.cat(split))
+    alone = run([9], engine="torchrl")
+    for whole_part, alone_part in zip(whole, alone, strict=True):
+        assert torch.equal(whole_part[9:10], alone_part)
+    assert torch.unique(whole[2].flatten(1), dim=0).shape[0] > 3  # the learners did differ
 
 
 def test_fused_rejects_other_setups() -> None:
@@ -83,7 +118,7 @@ def pinball_setup(method: str, n: int, max_steps: int, preset: str = "released")
         pattern_index=torch.arange(n) % 2, aggregation=thirds, eta=100.0, aggregation_key="observation",
     )
     spec = env.observation_spec["observation"]
-    agent = FourierActorCritic(n, spec.low[0], spec.high[0], 5, cfg, seed=5)
+    agent = FourierActorCritic(n, spec.low[0], spec.high[0], 5, cfg, seed=np.arange(n) + 5)
     return (TransformedEnv(env, shaping) if shaping is not None else env), agent
 
 

@@ -56,6 +56,28 @@ def test_four_rooms_engines_agree(tmp_path: Path) -> None:
     assert frames[0].equals(frames[1])
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("domain", ["four_rooms", "pinball"])
+def test_results_do_not_depend_on_chunking_or_workers(tmp_path: Path, domain: str) -> None:
+    """Every learner draws from its own streams (seeded by sweep seed, method, pattern, learning):
+    the same records with one chunk per method, with chunks of 3 on two workers, and of 7 inline."""
+    from torchrl_subgoal.experiments import load_frame
+
+    tiny = (["--episodes", "6", "--learnings", "1", "--methods", "HRS,NRS,SARSA-RS"] if domain == "four_rooms"
+            else ["--episodes", "10", "--learnings", "1", "--max-steps", "60", "--methods", "HRS,AC",
+                  "--step-penalty", "-1", "--thrust-penalty", "-5"])  # returns tell the learners apart
+    frames = []
+    for chunk_size, workers in (("1000", "0"), ("3", "2"), ("7", "0")):
+        out = tmp_path / f"{chunk_size}-{workers}"
+        cmd = [sys.executable, str(ROOT / "recipes" / f"{domain}.py"), *tiny, "--chunk-size", chunk_size,
+               "--workers", workers, "--results", str(out)]
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+        assert done.returncode == 0, done.stderr[-2000:]
+        frames.append(load_frame(out).sort_values(["method", "pattern", "learning", "episode"], ignore_index=True))
+    assert frames[0].equals(frames[1]) and frames[0].equals(frames[2])
+    assert len(frames[0][["steps", "return"]].drop_duplicates()) > 3  # the learners did differ
+
+
 @pytest.mark.parametrize(("flag", "value", "message"), [
     ("--episodes", "0", "--episodes: must be >= 1"),
     ("--methods", "HRS,XYZ", "--methods: unknown method(s) ['XYZ']"),

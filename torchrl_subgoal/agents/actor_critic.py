@@ -78,10 +78,10 @@ class FourierActorCritic:
       step draws ``a' ~ π(·|s')`` first, then ``θ += α_a Q(s, a) ∇ log π(a|s)``
       and ``w_a += α_c δ φ(s)`` with ``δ = r + γ Q(s', a') (1 − terminated) − Q(s, a)``.
 
-    With ``normalize_lr`` both rates are divided by ``‖φ(s)‖``. Draws use the
-    agent's numpy generator: one uniform per learner and step (two with the
-    ``"action"`` critic, the second for the reset state when an episode
-    ends). One fused kernel per step.
+    With ``normalize_lr`` both rates are divided by ``‖φ(s)‖``. Each learner
+    draws from its own random stream (Philox keyed by its seed): one uniform
+    per step (with the ``"action"`` critic one more for the reset state when
+    an episode ends). One fused kernel per step.
 
     Args:
         num_learners: learners (env batch size).
@@ -89,7 +89,9 @@ class FourierActorCritic:
         high: upper bounds.
         num_actions: actions.
         config: learning rates, discount, basis order.
-        seed: seed or numpy generator of the policy's draws.
+        seed: one seed per learner, or one integer they are derived from, or a
+            numpy generator that draws them (as in :class:`SoftmaxSarsa`); each
+            learner draws from its own stream.
         observation_key: the observation.
 
     Examples:
@@ -112,7 +114,7 @@ class FourierActorCritic:
         num_actions: int,
         config: ActorCriticConfig,
         *,
-        seed: int | np.random.Generator = 0,
+        seed: int | Sequence[int] | np.ndarray | np.random.Generator = 0,
         observation_key: NestedKey = "observation",
     ) -> None:
         self.config = config
@@ -131,11 +133,9 @@ class FourierActorCritic:
         self.theta = np.zeros((num_learners, num_actions, self.num_features))
         self.phi = np.zeros((num_learners, self.num_features))  # φ of each learner's current state
         self.probs = np.full((num_learners, num_actions), 1.0 / num_actions)  # π(·|s) at that state
-        self.rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        self.streams = _kernels.new_streams(_kernels.learner_keys(seed, num_learners), _kernels.AGENT_STREAM)
         self.observation_key = observation_key
-        self._all = np.ones(num_learners, dtype=np.bool_)
         self._step_kernel = _kernels.qac_step if q_critic else _kernels.ac_step
-        self.uniforms_per_step = num_learners * (2 if q_critic else 1)
 
     def features(self, observation: torch.Tensor) -> torch.Tensor:
         """``φ(s)`` of a batch of observations ``[N, D]`` (the kernel's features, for inspection)."""
@@ -144,7 +144,7 @@ class FourierActorCritic:
         out = np.empty((n, self.num_features))
         theta = np.zeros((n, 1, self.num_features))
         _kernels.ac_act(theta, out, np.empty((n, 1)), obs, self.low, self.inv_range, self.config.order, self.half,
-                        np.zeros(n), np.empty(n, np.int64))
+                        np.zeros((0, 4), np.uint64), np.empty(n, np.int64))
         return torch.from_numpy(out)
 
     def q_values(self, observation: torch.Tensor) -> torch.Tensor:
@@ -162,7 +162,7 @@ class FourierActorCritic:
         n = self.w.shape[0]
         action = np.empty(n, np.int64)
         _kernels.ac_act(self.theta, self.phi, self.probs, self._obs(tensordict), self.low, self.inv_range,
-                        self.config.order, self.half, self.rng.random(n), action)
+                        self.config.order, self.half, self.streams, action)
         tensordict.set("action", torch.from_numpy(action))
         return tensordict
 
@@ -174,9 +174,7 @@ class FourierActorCritic:
         self._step_kernel(
             self.w, self.theta, self.phi, self.probs, transition.get("action").numpy().reshape(n),
             nxt.get("reward").numpy().reshape(n), self._obs(nxt), nxt.get("terminated").numpy().reshape(n),
-            nxt.get("done").numpy().reshape(n), self._obs(next_root), self._all, self.low, self.inv_range,
-            cfg.order, self.half, self.rng.random(self.uniforms_per_step), cfg.actor_lr, cfg.critic_lr, cfg.gamma,
-            cfg.normalize_lr,
-            action,
+            nxt.get("done").numpy().reshape(n), self._obs(next_root), self.low, self.inv_range,
+            cfg.order, self.half, self.streams, cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr, action,
         )
         next_root.set("action", torch.from_numpy(action))

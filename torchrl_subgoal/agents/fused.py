@@ -6,10 +6,11 @@ waits for it. In four-rooms, the slowest of 1,000 NRS learners needs about
 ``step_and_maybe_reset`` call costs a fixed ~0.3-0.8 ms of TensorDict
 bookkeeping whatever the batch size. This engine takes the *same objects* —
 the env, its :class:`~torchrl_subgoal.SubgoalPotentialTransform` and the
-learner — and runs them in one compiled loop that calls the same kernels in
-the same order with the same random numbers, so its records, Q tables and
-potentials are identical to the TorchRL loop's (``tests/agents/test_fused.py``)
-while a step costs tens of microseconds.
+learner — and runs them in one compiled loop that calls, per learner, the
+same kernels in the same order with the same random numbers (each learner
+draws from its own stream), so its records are identical to the TorchRL
+loop's (``tests/agents/test_fused.py``) while a learner-step costs tens of
+nanoseconds (four-rooms) or a few microseconds (PinBall).
 
 Supported: :class:`~torchrl_subgoal.envs.FourRoomsEnv` with
 :class:`~torchrl_subgoal.agents.SoftmaxSarsa`, and
@@ -20,11 +21,15 @@ Supported: :class:`~torchrl_subgoal.envs.FourRoomsEnv` with
 potential (a subgoal series, or a lookup / region aggregation). Anything else
 raises a ``TypeError`` that says so; use the TorchRL engine for it.
 
-Four-rooms: records, Q tables and potentials equal the TorchRL loop's. PinBall:
-learners that have all their episodes stop (the TorchRL loop keeps stepping
-them until the slowest is done, which at 10,000-step episodes dominates the
-cost); their recorded episodes are identical, their final weights are the
-ones at their last recorded episode.
+Learners are independent (their own random streams and tables), so a learner
+that has all its episodes leaves the loop and costs nothing more: the TorchRL
+loop keeps stepping it until the slowest learner is done, which in
+four-rooms' NRS tail and at PinBall's 10,000-step episodes dominates the cost.
+Recorded episodes are identical in both engines; a learner's final tables
+(Q, θ and w, its potential) are the ones at its last recorded episode, which
+equal the TorchRL loop's for the learner that finished last (and for every
+learner when it runs alone). Hence a potential shared by all learners is
+refused here.
 """
 
 from __future__ import annotations
@@ -176,21 +181,28 @@ def run_four_rooms_fused(
     if state["kind"] == _kernels.LOOKUP_SHAPING and observe_cell:
         raise TypeError("a lookup aggregation reads the state number ('observation')")
     initial_z = int(state["lookup"][base.start_state]) if state["kind"] == _kernels.LOOKUP_SHAPING else 0
+    _check_own_tables(state)
     cfg = agent.config
 
     def run_block(records: tuple[np.ndarray, ...]) -> tuple[int, int]:
-        uniforms = agent.rng.random((block, 2 * n))
         return _kernels.sarsa_grid_run(
             base._state.numpy(), base._t.numpy(), base._transitions_np, base._cells_np,
             base.start_state, base.goal_state, base.max_steps, base.goal_reward, base.step_reward,
             state["kind"], observe_cell, *state["regions"], state["lookup"], initial_z,
-            state["z"], state["achieved"], state["r_h"], state["k"], state["table"], state["shared"],
+            state["z"], state["achieved"], state["r_h"], state["k"], state["table"],
             state["eta"], state["gamma"], state["value_gamma"], state["value_lr"], state["zero_terminal"],
             state["start_mode"], state["z_start"], agent._q, agent.abstract_states, action, cfg.lr, cfg.gamma,
-            1.0 / cfg.temperature, uniforms, *records,
+            1.0 / cfg.temperature, agent.streams, block, *records,
         )
 
     return _run_blocks(n, episodes, run_block, progress)
+
+
+def _check_own_tables(state: dict[str, Any]) -> None:
+    """The fused engine stops learners that have their episodes: each must own its potential table."""
+    if state["shared"]:
+        raise TypeError("the fused engine stops learners that have their episodes, so each needs its own "
+                        "potential table (a TabularPotential with the env's batch shape); use engine='torchrl'")
 
 
 # --------------------------------------------------------------------------- PinBall
@@ -198,102 +210,91 @@ def run_four_rooms_fused(
 
 @numba.njit(cache=True, nogil=True)
 def _pinball_ac_run(
-    # the env: state arrays updated in place, geometry, dynamics settings
+    # the env: state arrays updated in place, geometry, dynamics settings, the balls' random streams
     position, velocity, env_steps, start_x, start_y, edges, boxes, first_edge, ball_radius,
     target_x, target_y, target_radius, velocity_limit, max_steps, random_prob, goal_reward,
-    step_penalty, thrust_penalty, env_uniforms,
+    step_penalty, thrust_penalty, env_streams,
     # the shaping transform
     shaping, pattern, lo, hi, centre, weight, radius2, succ, region_lo, region_hi, region_centre, region_weight,
-    region_radius2, z, achieved, r_h, k, table, shared, eta, gamma_shaping, value_gamma, value_lr, zero_terminal,
+    region_radius2, z, achieved, r_h, k, table, eta, gamma_shaping, value_gamma, value_lr, zero_terminal,
     start_mode, z_start,
-    # the actor-critic learners
-    w, theta, phi, probs, action, low, inv_range, order, half, agent_uniforms, actor_lr, critic_lr, gamma, normalize,
-    q_critic,
+    # the actor-critic learners and their random streams
+    w, theta, phi, probs, action, low, inv_range, order, half, agent_streams, actor_lr, critic_lr, gamma, normalize,
+    q_critic, max_steps_run,
     # records
     t_rec, ret, episode, steps_out, returns_out, success_out,
 ):
-    """PinBall + shaping + actor-critic, the TorchRL loop's kernels in its order (see module doc).
+    """PinBall + shaping + actor-critic, per learner the TorchRL loop's kernels in its order (see module doc).
 
-    Learners that have all their episodes are skipped (the random draws stay
-    aligned, so every recorded episode is the TorchRL loop's).
+    Learners are independent (own streams, own tables): one that has all its
+    episodes is dropped from the loop. At most ``max_steps_run`` steps;
+    returns ``(steps taken, episodes filed)``.
     """
-    n = position.shape[0]
     n_actions = 5
-    executed = np.empty(n, np.int64)
-    reached = np.empty(n, np.bool_)
-    reward = np.empty((n, 1), np.float32)
-    terminated = np.empty((n, 1), np.bool_)
-    done = np.empty((n, 1), np.bool_)
-    obs = np.empty((n, 4), np.float32)
-    obs_next = np.empty((n, 4), np.float64)
-    obs_root = np.empty((n, 4), np.float64)
-    z_next, rh_out, k_out, shaped, no_f, no_i, no_b = _kernels.shaping_buffers(n)
-    active = np.empty(n, np.bool_)
-    next_action = np.empty(n, np.int64)
+    executed = np.empty(1, np.int64)
+    reached = np.empty(1, np.bool_)
+    obs = np.empty(4, np.float32)
+    obs_next = np.empty(4, np.float64)
+    obs_root = np.empty(4, np.float64)
+    scratch, phi_next = _kernels._feature_scratch(order, half, 4, theta.shape[2])
     max_episodes = steps_out.shape[1]
+    active, n_active = _kernels._active_learners(episode, max_episodes)
     filed_total = 0
-    for step in range(agent_uniforms.shape[0]):
-        u = env_uniforms[step]
-        for b in range(n):
-            executed[b] = min(int(u[n + b] * n_actions), n_actions - 1) if u[b] < random_prob else action[b]
-        step_balls(position, velocity, executed, reached, edges, boxes, first_edge, ball_radius,
-                   target_x, target_y, target_radius, velocity_limit)
-        for b in range(n):
+    for step in range(max_steps_run):
+        if n_active == 0:
+            return step, filed_total
+        kept = 0
+        for i in range(n_active):
+            b = active[i]
+            executed[0] = _kernels._random_action(action[b], env_streams, b, random_prob, n_actions)
+            step_balls(position[b:b + 1], velocity[b:b + 1], executed, reached, edges, boxes, first_edge, ball_radius,
+                       target_x, target_y, target_radius, velocity_limit)
             env_steps[b] += 1
-            term = reached[b]
-            terminated[b, 0] = term
-            done[b, 0] = term or env_steps[b] >= max_steps
-            r = goal_reward if term else 0.0
+            terminated = reached[0]
+            done = terminated or env_steps[b] >= max_steps
+            r = goal_reward if terminated else 0.0
             if step_penalty != 0.0 or thrust_penalty != 0.0:
-                r += thrust_penalty if executed[b] != n_actions - 1 else step_penalty
-            reward[b, 0] = r
-            obs[b, 0], obs[b, 1] = position[b, 0], position[b, 1]
-            obs[b, 2], obs[b, 3] = velocity[b, 0], velocity[b, 1]
-        if shaping == _kernels.SUBGOAL_SHAPING:
-            _kernels.advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_next)
-        elif shaping == _kernels.LOOKUP_SHAPING:
-            _kernels.first_region(z, obs, region_lo, region_hi, region_centre, region_weight, region_radius2, z_next)
-        if shaping == _kernels.NO_SHAPING:
-            shaped[:, 0] = reward[:, 0]
-        else:
-            _kernels.shape_step(z, z_next, achieved, r_h, k, reward, done, terminated, table, shared, eta,
-                                gamma_shaping, value_gamma, value_lr, zero_terminal, start_mode, z_start, rh_out, k_out,
-                                shaped, no_f, no_i, no_b)
-        _kernels.carry_abstract_states(done, shaping, 0, z, achieved, r_h, k, z_next, rh_out, k_out)
-        for b in range(n):
+                r += thrust_penalty if executed[0] != n_actions - 1 else step_penalty
+            reward = np.float32(r)
+            obs[0], obs[1] = position[b, 0], position[b, 1]
+            obs[2], obs[3] = velocity[b, 0], velocity[b, 1]
+            zb = z[b, 0]
+            znb = zb
+            if shaping == _kernels.SUBGOAL_SHAPING:
+                znb = _kernels._advance_one(zb, obs, pattern[b], lo, hi, centre, weight, radius2, succ)
+            elif shaping == _kernels.LOOKUP_SHAPING:
+                znb = _kernels._first_region_one(zb, obs, region_lo, region_hi, region_centre, region_weight,
+                                                 region_radius2)
+            shaped, rh_new, k_new = _kernels._transform_learner(
+                b, shaping, zb, znb, achieved, r_h, k, reward, done, terminated, table, eta, gamma_shaping,
+                value_gamma, value_lr, zero_terminal, start_mode, z_start)
+            _kernels._carry_learner(b, done, shaping, 0, zb, znb, z, achieved, r_h, k, rh_new, k_new)
             for d in range(4):
-                obs_next[b, d] = obs[b, d]
-            if done[b, 0]:  # the env and the transform reset this ball
+                obs_next[d] = obs[d]
+            if done:  # the env and the transform reset this ball
                 position[b, 0], position[b, 1] = start_x, start_y
                 velocity[b, 0], velocity[b, 1] = 0.0, 0.0
                 env_steps[b] = 0
-            obs_root[b, 0] = np.float32(position[b, 0])
-            obs_root[b, 1] = np.float32(position[b, 1])
-            obs_root[b, 2] = np.float32(velocity[b, 0])
-            obs_root[b, 3] = np.float32(velocity[b, 1])
-            active[b] = episode[b] < max_episodes
-        if shaping == _kernels.LOOKUP_SHAPING:  # region aggregation: z of the reset state
-            _kernels.first_region(z, obs_root, region_lo, region_hi, region_centre, region_weight,
-                                  region_radius2, z_next)
-            for b in range(n):
-                if done[b, 0]:
-                    z[b, 0] = z_next[b, 0]
-        if q_critic:
-            _kernels.qac_step(w, theta, phi, probs, action, shaped[:, 0], obs_next, terminated[:, 0], done[:, 0],
-                              obs_root, active, low, inv_range, order, half, agent_uniforms[step], actor_lr,
-                              critic_lr, gamma, normalize, next_action)
-        else:
-            _kernels.ac_step(w, theta, phi, probs, action, shaped[:, 0], obs_next, terminated[:, 0], done[:, 0],
-                             obs_root, active, low, inv_range, order, half, agent_uniforms[step], actor_lr, critic_lr,
-                             gamma, normalize, next_action)
-        filed_total += _kernels.record_episodes(done[:, 0], terminated[:, 0], reward[:, 0], t_rec, ret, episode,
-                                                steps_out, returns_out, success_out)
-        for b in range(n):
-            if active[b]:
-                action[b] = next_action[b]
-        if episode.min() >= max_episodes:
-            return step + 1, filed_total
-    return agent_uniforms.shape[0], filed_total
+            obs_root[0] = np.float32(position[b, 0])
+            obs_root[1] = np.float32(position[b, 1])
+            obs_root[2] = np.float32(velocity[b, 0])
+            obs_root[3] = np.float32(velocity[b, 1])
+            if shaping == _kernels.LOOKUP_SHAPING and done:  # region aggregation: z of the reset state
+                z[b, 0] = _kernels._first_region_one(z[b, 0], obs_root, region_lo, region_hi, region_centre,
+                                                     region_weight, region_radius2)
+            if q_critic:
+                action[b] = _kernels._qac_learner(b, w, theta, phi, probs, action[b], shaped, obs_next, terminated,
+                                                  done, obs_root, low, inv_range, order, half, agent_streams,
+                                                  actor_lr, critic_lr, gamma, normalize, scratch, phi_next)
+            else:
+                action[b] = _kernels._ac_learner(b, w, theta, phi, probs, action[b], shaped, obs_next, terminated,
+                                                 done, obs_root, low, inv_range, order, half, agent_streams,
+                                                 actor_lr, critic_lr, gamma, normalize, scratch, phi_next)
+            filed, kept = _kernels._record_and_keep(b, done, terminated, reward, t_rec, ret, episode, steps_out,
+                                                    returns_out, success_out, active, kept)
+            filed_total += filed
+        n_active = kept
+    return max_steps_run, filed_total
 
 
 def run_pinball_fused(
@@ -321,26 +322,22 @@ def run_pinball_fused(
             raise TypeError("the fused PinBall engine needs a region aggregation (StateAggregation.from_regions)")
         region = shaping.abstraction.regions
         kind = _kernels.LOOKUP_SHAPING
-    if state["shared"]:
-        raise TypeError("the fused PinBall engine skips finished learners, so each needs its own potential table")
+    _check_own_tables(state)
     g = base.physics.geometry
     tx, ty, tr = g.target
     cfg = agent.config
 
     def run_block(records: tuple[np.ndarray, ...]) -> tuple[int, int]:
-        env_uniforms = base._rng.random((block, 2 * n)) if base.random_action_prob > 0 else np.ones((block, 2 * n))
-        agent_uniforms = agent.rng.random((block, agent.uniforms_per_step))
         return _pinball_ac_run(
             base._position.numpy(), base._velocity.numpy(), base._steps.numpy(), base.start[0], base.start[1],
             g.edges, g.boxes, g.first_edge, g.ball_radius, tx, ty, tr, base.physics.velocity_limit,
             base.max_steps, base.random_action_prob, base.goal_reward, base.step_penalty, base.thrust_penalty,
-            env_uniforms, kind, *state["regions"], region["lo"], region["hi"], region["centre"], region["weight"],
+            base.streams, kind, *state["regions"], region["lo"], region["hi"], region["centre"], region["weight"],
             region["radius2"], state["z"], state["achieved"], state["r_h"], state["k"], state["table"],
-            state["shared"], state["eta"], state["gamma"], state["value_gamma"], state["value_lr"],
+            state["eta"], state["gamma"], state["value_gamma"], state["value_lr"],
             state["zero_terminal"], state["start_mode"], state["z_start"], agent.w, agent.theta, agent.phi,
-            agent.probs, action, agent.low, agent.inv_range,
-            cfg.order, agent.half, agent_uniforms, cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr,
-            cfg.critic == "action", *records,
+            agent.probs, action, agent.low, agent.inv_range, cfg.order, agent.half, agent.streams, cfg.actor_lr,
+            cfg.critic_lr, cfg.gamma, cfg.normalize_lr, cfg.critic == "action", block, *records,
         )
 
     return _run_blocks(n, episodes, run_block, progress)

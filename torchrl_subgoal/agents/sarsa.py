@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,9 +48,10 @@ class SoftmaxSarsa:
 
     Learner ``b`` owns ``Q[b]`` of shape ``[num_states, num_actions]``; the env
     batch (flattened) is the learner batch. Actions are drawn from
-    ``softmax(Q/τ)`` with uniforms from the agent's own numpy generator, so a seed
-    fixes every learner's behaviour (one fused kernel per step draws, updates and
-    draws again). The update is
+    ``softmax(Q/τ)`` with uniforms from each learner's own random stream
+    (Philox keyed by its seed), so a learner's behaviour depends on its seed
+    only, not on the batch it runs in (one fused kernel per step draws, updates
+    and draws again). The update is
     ``Q(s,a) ← Q(s,a) + α (r + γ Q(s',a') (1 − terminated) − Q(s,a))`` with
     ``a' ~ π(·|s')``; at truncation it bootstraps from ``Q(s', a')``.
 
@@ -58,9 +60,10 @@ class SoftmaxSarsa:
         num_states: discrete states (observation values).
         num_actions: actions.
         config: learning rate, discount, temperature.
-        seed: seed (or numpy generator) of the policy's random draws; its
-            draws are sequential, so blocks of them (the fused engine) match
-            draws made one step at a time.
+        seed: one seed per learner (a sequence), or one integer from which
+            learner ``b``'s seed is derived (see
+            :func:`~torchrl_subgoal._kernels.learner_keys`), or a numpy
+            generator that draws them. Learner ``b`` draws from its own stream.
         observation_key: the discrete observation.
         abstract_states: if > 1, the table is over ``(s, z)`` pairs, with ``z``
             read from ``abstract_key`` (the shaping transform's subgoal index).
@@ -91,7 +94,7 @@ class SoftmaxSarsa:
         num_actions: int,
         config: SarsaConfig,
         *,
-        seed: int | np.random.Generator = 0,
+        seed: int | Sequence[int] | np.ndarray | np.random.Generator = 0,
         observation_key: NestedKey = "observation",
         abstract_states: int = 1,
         abstract_key: NestedKey = "subgoal_index",
@@ -102,7 +105,7 @@ class SoftmaxSarsa:
         self.abstract_key = abstract_key
         self.num_states = num_states * abstract_states
         self.q = torch.zeros(num_learners, self.num_states, num_actions)
-        self.rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        self.streams = _kernels.new_streams(_kernels.learner_keys(seed, num_learners), _kernels.AGENT_STREAM)
         self.observation_key = observation_key
         self._rows = torch.arange(num_learners)
         self._q = self.q.numpy()  # the kernels update the table in place through this view
@@ -110,9 +113,8 @@ class SoftmaxSarsa:
     def sample(self, state: torch.Tensor) -> torch.Tensor:
         """Softmax actions for each learner's table row ``[N]`` (see :meth:`state`)."""
         s = state.numpy().reshape(-1)
-        u = self.rng.random(s.shape[0])
         action = torch.empty_like(state)
-        _kernels.softmax_sample(self._q, s, 1.0 / self.config.temperature, u, action.numpy().reshape(-1))
+        _kernels.softmax_sample(self._q, s, 1.0 / self.config.temperature, self.streams, action.numpy().reshape(-1))
         return action
 
     def greedy(self, state: torch.Tensor) -> torch.Tensor:
@@ -135,12 +137,11 @@ class SoftmaxSarsa:
         cfg = self.config
         nxt = transition.get("next")
         n = self.q.shape[0]
-        u = self.rng.random(2 * n)
         action = torch.empty(n, dtype=torch.long)
         _kernels.sarsa_step(
             self._q, _flat(self.state(transition)), _flat(transition.get("action")),
             _flat(nxt.get("reward")), _flat(self.state(nxt)), _flat(nxt.get("terminated")),
-            _flat(nxt.get("done")), _flat(self.state(next_root)), u, cfg.lr, cfg.gamma,
+            _flat(nxt.get("done")), _flat(self.state(next_root)), self.streams, cfg.lr, cfg.gamma,
             1.0 / cfg.temperature, action.numpy(),
         )
         next_root.set("action", action.view(transition.get("action").shape))

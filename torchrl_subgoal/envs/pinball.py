@@ -53,6 +53,8 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
+from torchrl_subgoal import _kernels
+
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
@@ -378,19 +380,6 @@ def _step_balls(
         reached[i] = done
 
 
-def random_actions(action: np.ndarray, uniforms: np.ndarray, probability: float) -> np.ndarray:
-    """Replace each action by a uniformly random one with ``probability``.
-
-    ``uniforms`` holds ``2n`` draws: the first ``n`` decide, the last ``n``
-    pick the action, so blocks of draws give the same actions as draws made
-    one step at a time (what the fused engine relies on).
-    """
-    n = action.shape[0]
-    replace = uniforms[:n] < probability
-    random = np.minimum((uniforms[n:] * len(ACTION_NAMES)).astype(np.int64), len(ACTION_NAMES) - 1)
-    return np.where(replace, random, action)
-
-
 #: the compiled physics kernel (also called from the fused engine's loop)
 step_balls = numba.njit(cache=True, nogil=True)(_step_balls)
 
@@ -597,8 +586,8 @@ class PinBallEnv(EnvBase):
     in ``0..4`` = ``+x, +y, -x, -y, none`` (:data:`ACTION_NAMES`); reward
     ``[N, 1]``; ``done``/``terminated``/``truncated`` ``[N, 1]``. With
     probability ``random_action_prob`` the executed action is drawn uniformly
-    from the five instead (drawn from the env's own numpy generator, so a seed fixes
-    the trajectory). ``terminated`` is set when the ball enters the target
+    from the five instead (drawn from each ball's own random stream, so a
+    ball's trajectory depends on its seed and its actions only). ``terminated`` is set when the ball enters the target
     (reward ``goal_reward``), ``truncated`` after ``max_steps`` steps. The
     per-step reward also adds ``thrust_penalty`` when the executed action is a
     thrust and ``step_penalty`` when it is "none" (the classic domain charges
@@ -617,7 +606,8 @@ class PinBallEnv(EnvBase):
         step_penalty: reward added on a step with action "none" (classic: -1).
         thrust_penalty: reward added on a step with a thrust (classic: -5).
         velocity_limit: per-axis velocity clip after the thrust (Java original: 1.0).
-        seed: seed of the env's random generator; ``None`` draws one.
+        seed: one seed per ball, or one integer they are derived from (see
+            :func:`~torchrl_subgoal._kernels.learner_keys`); ``None`` draws one.
         device: device of the tensors.
         backend: physics backend, see :class:`PinBallPhysics`.
 
@@ -643,7 +633,7 @@ class PinBallEnv(EnvBase):
         step_penalty: float = 0.0,
         thrust_penalty: float = 0.0,
         velocity_limit: float = 2.0,
-        seed: int | None = None,
+        seed: int | Sequence[int] | np.ndarray | None = None,
         device: torch.device | str = "cpu",
         backend: Backend = "auto",
     ) -> None:
@@ -679,7 +669,7 @@ class PinBallEnv(EnvBase):
         self._steps = torch.zeros(n, dtype=torch.int64, device=device)
         self._start = torch.tensor(cfg.start, dtype=torch.float64, device=device)
         self._position[:] = self._start
-        self._rng = np.random.default_rng(seed)
+        self._set_seed(seed)
 
         # Reflections keep the speed, which the thrust clip bounds by √2·limit.
         speed = math.sqrt(2.0) * self.velocity_limit
@@ -738,9 +728,10 @@ class PinBallEnv(EnvBase):
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = tensordict.get("action")
         if self.random_action_prob > 0.0:
-            action = torch.from_numpy(
-                random_actions(action.cpu().numpy(), self._rng.random(2 * action.shape[0]), self.random_action_prob)
-            ).to(self.device)
+            executed = np.empty(action.shape[0], np.int64)
+            _kernels.random_actions(action.cpu().numpy().astype(np.int64), self.streams, self.random_action_prob,
+                                    len(ACTION_NAMES), executed)
+            action = torch.from_numpy(executed).to(self.device)
         terminated = self.physics.step(self._position, self._velocity, action).unsqueeze(1)
         self._steps += 1
         truncated = (self._steps >= self.max_steps).unsqueeze(1) & ~terminated
@@ -760,8 +751,9 @@ class PinBallEnv(EnvBase):
             device=self.device,
         )
 
-    def _set_seed(self, seed: int | None) -> None:
-        self._rng = np.random.default_rng(seed)
+    def _set_seed(self, seed: int | Sequence[int] | np.ndarray | None) -> None:
+        keys = _kernels.learner_keys(np.random.default_rng() if seed is None else seed, self.batch_size.numel())
+        self.streams = _kernels.new_streams(keys, _kernels.ENV_STREAM)
 
     # -- map helpers -------------------------------------------------------
 

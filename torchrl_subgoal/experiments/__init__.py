@@ -37,6 +37,7 @@ from torchrl_subgoal.experiments.sweep import (
     MethodSpec,
     RunChunk,
     Sweep,
+    learner_seeds,
     plan_chunks,
     select_methods,
 )
@@ -61,6 +62,7 @@ __all__ = [
     "RunChunk",
     "Sweep",
     "UnknownMethodError",
+    "learner_seeds",
     "load_frame",
     "load_results",
     "plan_chunks",

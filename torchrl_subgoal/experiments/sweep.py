@@ -149,9 +149,33 @@ def chunk_seed(seed: int, method: str, index: int) -> int:
     Derived with :class:`numpy.random.SeedSequence` from the sweep seed, a stable hash of
     the method name, and the chunk index.
     """
-    method_key = int.from_bytes(hashlib.sha256(method.encode()).digest()[:8], "little")
-    sequence = np.random.SeedSequence(entropy=seed, spawn_key=(method_key, index))
+    sequence = np.random.SeedSequence(entropy=seed, spawn_key=(_name_key(method), index))
     return int(sequence.generate_state(1, np.uint64)[0] >> np.uint64(1))
+
+
+def learner_seeds(seed: int, chunk: Chunk) -> np.ndarray:
+    """One 63-bit seed per learner of ``chunk``, from the sweep seed and the learner's
+    ``(method, pattern, learning)`` only: seed each learner's random streams with it and
+    its results do not depend on the chunk size, the batch it runs in or the worker count
+    (unlike :attr:`Chunk.seed <torchrl_subgoal.experiments.store.Chunk>`, which changes with the chunking).
+
+    Examples:
+        >>> a = Chunk("HRS", 0, (("p1", 0), ("p1", 1)), seed=1)
+        >>> b = Chunk("HRS", 3, (("p1", 1),), seed=2)
+        >>> bool(learner_seeds(0, a)[1] == learner_seeds(0, b)[0])
+        True
+    """
+    method_key = _name_key(chunk.method)
+    return np.array([
+        np.random.SeedSequence(entropy=seed, spawn_key=(method_key, _name_key(pattern), learning))
+        .generate_state(1, np.uint64)[0] >> np.uint64(1)
+        for pattern, learning in chunk.learners
+    ], dtype=np.int64)
+
+
+def _name_key(name: str) -> int:
+    """A stable 64-bit key of a method or pattern name."""
+    return int.from_bytes(hashlib.sha256(name.encode()).digest()[:8], "little")
 
 
 def plan_chunks(methods: Sequence[MethodSpec], seed: int, chunk_size: int) -> list[Chunk]:
