@@ -688,7 +688,10 @@ def load_results(
             missing (they are listed in :attr:`Results.missing`). Corrupt chunks always raise.
 
     Raises:
-        DomainMismatchError, UnknownMethodError, IncompleteResultsError, CorruptChunkError.
+        DomainMismatchError: the directory holds another domain's results.
+        UnknownMethodError: a method in ``methods`` is not in the sweep.
+        IncompleteResultsError: chunks are missing (unless ``allow_incomplete``).
+        CorruptChunkError: a chunk cannot be read.
 
     Examples:
         >>> results = load_results("results/four_rooms")  # doctest: +SKIP

@@ -469,7 +469,8 @@ def train_a2c(
     actor, critic = actor_critic(probe, observation_key, features=config.features, hidden=config.hidden,
                                  fourier_order=config.fourier_order)
     cap = episode_cap if episode_cap is not None else float(getattr(probe, "max_steps", math.nan))
-    probe.close()
+    if not probe.is_closed:  # a batched env that was never started (a SerialEnv from batched()) is closed already
+        probe.close()
     advantage = GAE(gamma=config.gamma, lmbda=config.gae_lambda, value_network=critic,
                     average_gae=config.normalize_advantage)
     loss = A2CLoss(actor, critic, entropy_coeff=config.entropy_coeff, critic_coeff=config.critic_coeff,
@@ -504,7 +505,7 @@ def train_a2c(
             potential_loss = math.nan
             if value_loss is not None and value_optimizer is not None:
                 real = smdp_transitions(data, keeper)
-                if real.numel():
+                if len(real):
                     value_optimizer.zero_grad(set_to_none=True)
                     out = value_loss(real)["loss_value"]
                     out.backward()
