@@ -30,6 +30,8 @@ import gymnasium as gym
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule
 from torch import nn
@@ -158,6 +160,23 @@ def train(shaped: bool, frames: int, seed: int, num_envs: int = 16, frames_per_b
 # --8<-- [end:train]
 
 
+def returns_axes(ax: Axes, title: str) -> None:
+    """Labels of a plot of returns against frames: the optimum, a symmetric log scale."""
+    ax.axhline(-13, color="grey", linestyle=":", label="optimal (-13)")
+    ax.set_yscale("symlog", linthresh=10)
+    ax.set(xlabel="frames", ylabel="return of recent episodes (env reward)", title=title)
+    ax.legend(loc="lower right")
+
+
+def save(fig: Figure, lines: list[str], stem: Path) -> None:
+    """Write the figure (``stem.png``) and print the lines, also into ``stem.txt``."""
+    fig.tight_layout()
+    fig.savefig(stem.with_suffix(".png"), dpi=110)
+    text = "\n".join(lines)
+    print(text)
+    stem.with_suffix(".txt").write_text(text + "\n")
+
+
 def frames_to(curve: np.ndarray, level: float) -> float:
     """Frames until the recent mean return first rises above ``level`` (``nan``: never)."""
     above = np.flatnonzero(curve[:, 1] > level)
@@ -197,16 +216,9 @@ def main() -> None:
     phi = np.mean([p for _, p in results["shaped"]], 0)
     lines.append("learned potential, mean of the shaped learners: "
                  + ", ".join(f"Φ({z})={v:.1f}" for z, v in enumerate(phi)))
-    ax.axhline(-13, color="grey", linestyle=":", label="optimal (-13)")
-    ax.set_yscale("symlog", linthresh=10)
-    ax.set(xlabel="frames", ylabel="return of recent episodes (env reward)", title="CliffWalking-v1, A2C")
-    ax.legend(loc="lower right")
-    fig.tight_layout()
-    fig.savefig(args.out / "shape_your_env.png", dpi=110)
+    returns_axes(ax, "CliffWalking-v1, A2C")
     # --8<-- [end:compare]
-    text = "\n".join(lines)
-    print(text)
-    (args.out / "shape_your_env.txt").write_text(text + "\n")
+    save(fig, lines, args.out / "shape_your_env")
 
 
 if __name__ == "__main__":

@@ -27,7 +27,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
-from shape_your_env import COLS, GAMMA, a2c_agent, make_env_with, recent_returns, series
+from shape_your_env import (
+    COLS,
+    GAMMA,
+    a2c_agent,
+    make_env_with,
+    recent_returns,
+    returns_axes,
+    save,
+    series,
+)
 from torch import nn
 from torchrl.collectors import Collector
 from torchrl.data import LazyTensorStorage, ReplayBuffer
@@ -122,18 +131,11 @@ def main() -> None:
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(9, 3.4))
     left.plot(curve[:, 0], curve[:, 1])
-    left.axhline(-13, color="grey", linestyle=":", label="optimal (-13)")
-    left.set_yscale("symlog", linthresh=10)
-    left.set(xlabel="frames", ylabel="return of recent episodes", title="A2C shaped by a neural potential")
-    left.legend(loc="lower right")
+    returns_axes(left, "A2C shaped by a neural potential")
     right.plot(curve[:, 0], curve[:, 2])
     right.set_yscale("log")
     right.set(xlabel="frames", ylabel="SubgoalValueLoss (mean)", title="the potential's TD loss")
-    fig.tight_layout()
-    fig.savefig(args.out / "train_the_potential.png", dpi=110)
-    text = "\n".join(lines)
-    print(text)
-    (args.out / "train_the_potential.txt").write_text(text + "\n")
+    save(fig, lines, args.out / "train_the_potential")
 
 
 if __name__ == "__main__":
