@@ -384,6 +384,10 @@ def random_actions(action: np.ndarray, uniforms: np.ndarray, probability: float)
     ``uniforms`` holds ``2n`` draws: the first ``n`` decide, the last ``n``
     pick the action, so blocks of draws give the same actions as draws made
     one step at a time (what the fused engine relies on).
+
+    Examples:
+        >>> random_actions(np.array([0, 0]), np.array([0.05, 0.9, 0.5, 0.5]), 0.1).tolist()  # only the first is replaced
+        [2, 0]
     """
     n = action.shape[0]
     replace = uniforms[:n] < probability
@@ -822,6 +826,13 @@ def check_subgoal(predicate: Predicate) -> str | None:
     A PinBall subgoal is a circle over the ball position (observation entries
     0 and 1) with a positive radius and its centre on the table (the unit
     square). Used by subgoal files that declare ``domain: pinball``.
+
+    Examples:
+        >>> from torchrl_subgoal import Cell, Circle
+        >>> check_subgoal(Circle((0.5, 0.2), 0.04)) is None
+        True
+        >>> check_subgoal(Cell(3, 6))
+        'pinball subgoals are circles over (x, y), not cell'
     """
     from torchrl_subgoal.subgoals import Circle
 
