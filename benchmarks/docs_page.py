@@ -17,6 +17,7 @@ import argparse
 import datetime as dt
 import os
 import platform
+import re
 import subprocess
 import sys
 import tempfile
@@ -26,6 +27,12 @@ from importlib import metadata
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def clean(text: str) -> str:
+    """``text`` without terminal colour codes (TorchRL's log lines carry them)."""
+    return _ANSI.sub("", text)
 
 
 @dataclass(frozen=True)
@@ -145,11 +152,11 @@ def run(item: Run, tmp: Path, timeout: float) -> list[str]:
              f"`{shown}`: wall time {wall:.0f} s, load average (1/5/15 min) {load_before} before, "
              f"{_load()} after.", ""]
     if status != 0:
-        tail = "\n".join(err.strip().splitlines()[-15:])
+        tail = "\n".join(clean(err).strip().splitlines()[-15:])
         lines += [f"**Failed** ({'timeout' if status is None else f'exit status {status}'}):", "",
                   "```text", tail, "```", ""]
     if out.strip():
-        lines += ["```text", out.rstrip(), "```", ""]
+        lines += ["```text", clean(out).rstrip(), "```", ""]
     return lines
 
 
