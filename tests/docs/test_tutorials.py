@@ -37,7 +37,7 @@ def test_tutorial_runs_at_a_tiny_budget(script: Path, tmp_path: Path) -> None:
     for pattern in EXPECTED[script.stem]:
         assert re.search(pattern, done.stdout, re.MULTILINE), f"{pattern!r} not in:\n{done.stdout}"
     if figures:
-        assert (tmp_path / f"{script.stem}.txt").read_text().strip() == done.stdout.strip()
+        assert (tmp_path / f"{script.stem}.txt").read_text().strip() in done.stdout  # (TorchRL logs on stdout too)
         assert (tmp_path / f"{script.stem}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -52,6 +52,7 @@ def test_pages_include_sections_that_exist() -> None:
             includes += 1
             if section:
                 assert f"[start:{section}]" in source and f"[end:{section}]" in source, (page.name, path, section)
-        for image in re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", text):
+        prose = re.sub(r"```.*?```", "", text, flags=re.DOTALL)  # not the verbatim outputs of benchmarks.md
+        for image in re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", prose):
             assert (page.parent / image).exists(), (page.name, image)
     assert includes > 0
