@@ -2,12 +2,14 @@
 #   make demo   small four-rooms reproduction: prints a table, writes plots
 #   make test   lint, type-check and the test suite (what CI runs)
 #   make test-fast   the suite without the tests marked slow
+#   make docs   the documentation site (strict: any warning fails) into site/
+#   make bench-docs   run the benchmarks at a quick scale and regenerate docs/benchmarks.md
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint install clean
+.PHONY: demo test test-fast lint docs bench-docs install clean
 
 # The studio's browser tests drive Debian's Chromium through Playwright (a dev
 # dependency); nothing downloads a browser build. Installed once, with apt.
@@ -28,8 +30,16 @@ demo: $(STAMP)
 	$(PY) recipes/four_rooms.py
 
 lint: $(STAMP)
-	$(PY) -m ruff check torchrl_subgoal recipes tests benchmarks
+	$(PY) -m ruff check torchrl_subgoal recipes tests benchmarks docs/tutorials
 	$(PY) -m mypy
+
+# MkDocs + Material + mkdocstrings (the docs extra, part of dev); --strict turns every
+# warning (a broken link, an unparsable docstring) into a failure. Nothing is fetched.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir site
+
+bench-docs: $(STAMP)
+	$(PY) benchmarks/docs_page.py docs/benchmarks.md
 
 $(CHROMIUM):
 	$(SUDO) apt-get update -qq
@@ -39,7 +49,7 @@ $(CHROMIUM):
 # instances never start at once
 PYTEST := $(PY) -m pytest -q -n 2 --dist loadgroup
 
-test: lint $(CHROMIUM)
+test: lint docs $(CHROMIUM)
 	$(PYTEST)
 
 # skip the longest end-to-end tests (marked slow) while developing; CI runs them all
@@ -47,4 +57,4 @@ test-fast: $(STAMP) $(CHROMIUM)
 	$(PYTEST) -m "not slow"
 
 clean:
-	rm -rf $(VENV) results .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) results site .pytest_cache .mypy_cache .ruff_cache

@@ -74,6 +74,16 @@ class Potential(TensorDictModuleBase):
     Args:
         in_keys: the entries read.
         out_key: where the value is written.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> class Progress(Potential):  # Φ(z) = z: a fixed potential over the subgoal index
+        ...     def value(self, z):
+        ...         return z.float()
+        >>> phi = Progress(["subgoal_index"])
+        >>> phi(TensorDict({"subgoal_index": torch.tensor([[0], [2]])}, [2]))["subgoal_value"].squeeze(-1)
+        tensor([0., 2.])
     """
 
     #: entries of ``in_keys`` that may be absent from a TensorDict (passed as ``None``)

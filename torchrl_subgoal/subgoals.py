@@ -69,7 +69,15 @@ MAX_SUBGOALS = 1000
 
 
 class SubgoalFileError(ValueError):
-    """A subgoal file or pattern is malformed; the message names file, pattern and field."""
+    """A subgoal file or pattern is malformed; the message names file, pattern and field.
+
+    Examples:
+        >>> try:
+        ...     SubgoalSeries([], name="mine", source="f.yaml")
+        ... except SubgoalFileError as error:
+        ...     print(error)
+        f.yaml: pattern 'mine': a pattern needs at least one subgoal
+    """
 
 
 def _where(source: str | None, pattern: str | None, field_: str) -> str:
@@ -163,6 +171,10 @@ def parse_text(text: str | bytes, source: str = "<subgoals>") -> Any:
     Raises:
         SubgoalFileError: the text is larger than :data:`MAX_FILE_BYTES`, not UTF-8,
             or not valid YAML/JSON; the message names ``source``.
+
+    Examples:
+        >>> parse_text("patterns: {p: {subgoals: [{cell: [3, 6]}]}}")["patterns"]["p"]
+        {'subgoals': [{'cell': [3, 6]}]}
     """
     if len(text) > MAX_FILE_BYTES:
         raise SubgoalFileError(
@@ -274,6 +286,12 @@ class State(Predicate):
 
     Works on a scalar categorical observation (``o == state``) and on a one-hot
     observation (``o[state] == 1``).
+
+    Examples:
+        >>> State(24).to_dict()  # as in a subgoal file
+        {'state': 24}
+        >>> State(2).region(4, one_hot=True).lo.tolist()  # o[2] == 1 in a one-hot observation of 4
+        [-inf, -inf, 1.0, -inf]
     """
 
     state: int
@@ -298,7 +316,14 @@ class State(Predicate):
 
 @dataclass(frozen=True)
 class Cell(Predicate):
-    """Observation entries ``dims`` (default the first two) equal ``(row, col)``."""
+    """Observation entries ``dims`` (default the first two) equal ``(row, col)``.
+
+    Examples:
+        >>> Cell(3, 6).to_dict()
+        {'cell': [3, 6]}
+        >>> Cell(3, 6, cell_dims=(1, 2)).to_dict()
+        {'cell': [3, 6], 'dims': [1, 2]}
+    """
 
     row: int
     col: int
@@ -323,7 +348,12 @@ class Cell(Predicate):
 
 @dataclass(frozen=True)
 class Circle(Predicate):
-    """Observation entries ``dims`` lie within ``radius`` of ``centre`` (boundary included)."""
+    """Observation entries ``dims`` lie within ``radius`` of ``centre`` (boundary included).
+
+    Examples:
+        >>> Circle((0.5, 0.2), 0.04).to_dict()
+        {'circle': {'centre': [0.5, 0.2], 'radius': 0.04}}
+    """
 
     centre: tuple[float, ...]
     radius: float
@@ -351,7 +381,12 @@ class Circle(Predicate):
 
 @dataclass(frozen=True)
 class Box(Predicate):
-    """Observation entries ``dims`` lie within ``centre ± margin`` (per component)."""
+    """Observation entries ``dims`` lie within ``centre ± margin`` (per component).
+
+    Examples:
+        >>> Box((0.0, 0.0), (0.01, 0.01), (6, 7)).to_dict()
+        {'box': {'centre': [0.0, 0.0], 'margin': 0.01, 'dims': [6, 7]}}
+    """
 
     centre: tuple[float, ...]
     margin: tuple[float, ...]
@@ -900,6 +935,13 @@ def load_patterns(path: str | Path, *, domain: str | None = None) -> dict[str, S
 
     Raises:
         SubgoalFileError: naming the file, the pattern and the field.
+
+    Examples:
+        >>> import os, tempfile
+        >>> path = os.path.join(tempfile.mkdtemp(), "mine.yaml")
+        >>> save_patterns(path, {"hallways": SubgoalSeries([Cell(3, 6), Cell(7, 9)])}, domain="four_rooms")
+        >>> load_patterns(path)["hallways"].predicates
+        (Cell(row=3, col=6, cell_dims=(0, 1)), Cell(row=7, col=9, cell_dims=(0, 1)))
     """
     path = Path(path)
     return patterns_from_data(parse_text(_read_file(path), str(path)), str(path), domain=domain)
@@ -954,7 +996,21 @@ def patterns_from_data(
 def save_patterns(
     path: str | Path, patterns: Mapping[str, SubgoalSeries], *, domain: str | None = None
 ) -> None:
-    """Write patterns to a subgoal file that :func:`load_patterns` reads back."""
+    """Write patterns to a subgoal file that :func:`load_patterns` reads back.
+
+    Examples:
+        >>> import os, tempfile
+        >>> path = os.path.join(tempfile.mkdtemp(), "mine.yaml")
+        >>> save_patterns(path, {"p": SubgoalSeries([State(24), State(35)])})
+        >>> print(open(path).read())
+        format: torchrl_subgoal/v1
+        patterns:
+          p:
+            subgoals:
+            - state: 24
+            - state: 35
+        <BLANKLINE>
+    """
     data: dict[str, Any] = {"format": FORMAT}
     if domain is not None:
         data["domain"] = domain

@@ -120,3 +120,20 @@ def test_pinball_env_factory_is_seeded_from_torch() -> None:
         torch.manual_seed(1)
         rollouts.append(env.rollout(30)["next", "observation"])
     assert torch.equal(*rollouts)
+
+
+def test_train_a2c_on_a_single_env_batched_by_serial_env() -> None:
+    """The documented path for a user's unbatched env: ``batched(make_single)`` (a SerialEnv,
+    which is closed until started: the probe env used to raise on close)."""
+    from torchrl.envs import GymEnv
+
+    from torchrl_subgoal.training import batched
+
+    def make_single() -> GymEnv:
+        return GymEnv("CliffWalking-v1", categorical_action_encoding=True)
+
+    series = SubgoalSeries([State(24)])
+    shaping = Shaping(series, TabularPotential(2), {"observation_key": "observation"})
+    config = A2CConfig(num_envs=2, frames_per_batch=32, total_frames=64, features="one_hot", hidden=())
+    curve = train_a2c(batched(make_single), config, shaping=shaping, seed=0, episode_cap=100)
+    assert curve.frames == [32, 64]

@@ -18,7 +18,16 @@ __all__ = ["EpisodeRecords", "OnlineAgent", "run_episodes"]
 
 
 class OnlineAgent(Protocol):
-    """What :func:`run_episodes` needs from a learner batched like the env."""
+    """What :func:`run_episodes` needs from a learner batched like the env.
+
+    Examples:
+        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> env = FourRoomsEnv(num_envs=4)
+        >>> agent = SoftmaxSarsa(4, env.num_states, 4, SARSA_PRESETS["released"], seed=0)
+        >>> callable(agent.act) and callable(agent.step)  # a structural type: SoftmaxSarsa is one
+        True
+    """
 
     def act(self, tensordict: TensorDictBase) -> TensorDictBase:
         """Write ``"action"`` for every env of ``tensordict`` (the first step)."""
@@ -35,7 +44,17 @@ class OnlineAgent(Protocol):
 
 @dataclass
 class EpisodeRecords:
-    """Per-learner, per-episode results: ``[num_learners, num_episodes]`` tensors."""
+    """Per-learner, per-episode results: ``[num_learners, num_episodes]`` tensors.
+
+    Examples:
+        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> env = FourRoomsEnv(num_envs=4)
+        >>> agent = SoftmaxSarsa(4, env.num_states, 4, SARSA_PRESETS["released"], seed=0)
+        >>> records = run_episodes(env, agent, episodes=2)
+        >>> records.steps.shape, records.returns.shape, records.success.dtype
+        (torch.Size([4, 2]), torch.Size([4, 2]), torch.bool)
+    """
 
     steps: torch.Tensor
     returns: torch.Tensor
@@ -74,6 +93,15 @@ def run_episodes(
 
     Returns:
         steps, (unshaped) return and success (terminated) of every episode.
+
+    Examples:
+        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> env = FourRoomsEnv(num_envs=4)
+        >>> agent = SoftmaxSarsa(4, env.num_states, 4, SARSA_PRESETS["released"], seed=0)
+        >>> records = run_episodes(env, agent, episodes=3, engine="fused")  # same episodes, compiled
+        >>> records.steps.shape
+        torch.Size([4, 3])
     """
     if engine == "fused":
         from torchrl_subgoal.agents.fused import run_episodes_fused

@@ -814,6 +814,13 @@ def check_subgoal(predicate: Predicate) -> str | None:
     A PinBall subgoal is a circle over the ball position (observation entries
     0 and 1) with a positive radius and its centre on the table (the unit
     square). Used by subgoal files that declare ``domain: pinball``.
+
+    Examples:
+        >>> from torchrl_subgoal import Cell, Circle
+        >>> check_subgoal(Circle((0.5, 0.2), 0.04)) is None
+        True
+        >>> check_subgoal(Cell(3, 6))
+        'pinball subgoals are circles over (x, y), not cell'
     """
     from torchrl_subgoal.subgoals import Circle
 

@@ -65,6 +65,11 @@ class ThresholdTimes:
             crosses it); learners that never cross it get ``n_episodes``.
         reached: per learner, whether the threshold was crossed at all.
         n_episodes: episodes per learner.
+
+    Examples:
+        >>> times = time_to_threshold([[9, 7, 4, 2], [9, 9, 9, 9]], 5)
+        >>> times.n_episodes, times.n_not_reached
+        (4, 1)
     """
 
     episodes: npt.NDArray[np.int64]
@@ -128,7 +133,13 @@ def asymptotic_performance(curves: ArrayLike, window: Sequence[int]) -> FloatArr
 
 
 def mean_and_sem(curves: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """Mean across learners (axis 0) and its standard error (0 with a single learner)."""
+    """Mean across learners (axis 0) and its standard error (0 with a single learner).
+
+    Examples:
+        >>> mean, sem = mean_and_sem([[1.0, 2.0], [3.0, 2.0]])
+        >>> mean.tolist(), sem.tolist()
+        ([2.0, 2.0], [1.0, 0.0])
+    """
     x = np.asarray(curves, dtype=np.float64)
     mean = x.mean(axis=0)
     if x.shape[0] < 2:
@@ -138,7 +149,13 @@ def mean_and_sem(curves: ArrayLike) -> tuple[FloatArray, FloatArray]:
 
 @dataclass(frozen=True)
 class TestResult:
-    """A test statistic and its p-value (NaN when the test is undefined, e.g. constant data)."""
+    """A test statistic and its p-value (NaN when the test is undefined, e.g. constant data).
+
+    Examples:
+        >>> result = anova({"a": [1, 2, 3], "b": [7, 8, 9]})
+        >>> isinstance(result, TestResult), result.pvalue < 0.01
+        (True, True)
+    """
 
     statistic: float
     pvalue: float
@@ -146,7 +163,13 @@ class TestResult:
 
 @dataclass(frozen=True)
 class PairwiseResult:
-    """One pairwise comparison of :func:`pairwise_tests`."""
+    """One pairwise comparison of :func:`pairwise_tests`.
+
+    Examples:
+        >>> pair = pairwise_tests({"a": [1, 2, 3, 4], "b": [9, 8, 9, 8]})[0]
+        >>> pair.first, pair.second, bool(pair.pvalue_adjusted >= pair.pvalue)
+        ('a', 'b', True)
+    """
 
     first: str
     second: str

@@ -302,7 +302,16 @@ class Results:
 
 
 def check_method_name(name: str) -> str:
-    """Return ``name`` if it can name a directory below ``chunks/``; raise otherwise."""
+    """Return ``name`` if it can name a directory below ``chunks/``; raise otherwise.
+
+    Examples:
+        >>> check_method_name("SARSA-RS")
+        'SARSA-RS'
+        >>> check_method_name("../HRS")
+        Traceback (most recent call last):
+        ...
+        ValueError: method name '../HRS' must start with a letter or digit and use only letters, digits and _ . + -
+    """
     if not _METHOD_NAME.match(name):
         raise ValueError(
             f"method name {name!r} must start with a letter or digit and use only "
@@ -312,7 +321,12 @@ def check_method_name(name: str) -> str:
 
 
 def collect_versions() -> dict[str, str]:
-    """Versions of Python and of the packages that shape a result, for ``config.json``."""
+    """Versions of Python and of the packages that shape a result, for ``config.json``.
+
+    Examples:
+        >>> sorted(collect_versions())
+        ['numpy', 'python', 'tensordict', 'torch', 'torchrl', 'torchrl_subgoal']
+    """
     versions = {"python": platform.python_version()}
     for package in ("torch", "torchrl", "tensordict", "numpy", "torchrl_subgoal"):
         try:
@@ -323,7 +337,16 @@ def collect_versions() -> dict[str, str]:
 
 
 def to_json_data(value: Any, what: str = "config") -> Any:
-    """``value`` as plain JSON data (tuples become lists); a clear error if it is not JSON."""
+    """``value`` as plain JSON data (tuples become lists); a clear error if it is not JSON.
+
+    Examples:
+        >>> to_json_data({"thresholds": (500, 50)})
+        {'thresholds': [500, 50]}
+        >>> to_json_data({"lr": float("nan")})
+        Traceback (most recent call last):
+        ...
+        TypeError: config must be JSON-serialisable (no NaN): Out of range float values are not JSON compliant...
+    """
     try:
         return json.loads(json.dumps(value, allow_nan=False))
     except (TypeError, ValueError) as exc:
@@ -331,7 +354,12 @@ def to_json_data(value: Any, what: str = "config") -> Any:
 
 
 def diff_fields(stored: Any, requested: Any, prefix: str = "") -> list[str]:
-    """Dotted paths where two JSON values differ, e.g. ``['config.lr', 'seed']``."""
+    """Dotted paths where two JSON values differ, e.g. ``['config.lr', 'seed']``.
+
+    Examples:
+        >>> diff_fields({"config": {"lr": 0.1, "gamma": 0.99}, "seed": 0}, {"config": {"lr": 0.2, "gamma": 0.99}, "seed": 1})
+        ['config.lr', 'seed']
+    """
     if isinstance(stored, dict) and isinstance(requested, dict):
         out: list[str] = []
         for key in sorted(set(stored) | set(requested), key=str):
@@ -659,6 +687,14 @@ def open_manifest(results_dir: str | os.PathLike[str], domain: str | None = None
     Raises:
         ResultsError: the directory holds no sweep.
         DomainMismatchError: it holds a sweep of another domain.
+
+    Examples:
+        >>> import tempfile
+        >>> try:
+        ...     open_manifest(tempfile.mkdtemp())
+        ... except ResultsError as error:
+        ...     print(type(error).__name__)
+        ResultsError
     """
     store = ResultsStore(results_dir)
     manifest = store.read_manifest()
@@ -688,7 +724,10 @@ def load_results(
             missing (they are listed in :attr:`Results.missing`). Corrupt chunks always raise.
 
     Raises:
-        DomainMismatchError, UnknownMethodError, IncompleteResultsError, CorruptChunkError.
+        DomainMismatchError: the directory holds another domain's results.
+        UnknownMethodError: a method in ``methods`` is not in the sweep.
+        IncompleteResultsError: chunks are missing (unless ``allow_incomplete``).
+        CorruptChunkError: a chunk cannot be read.
 
     Examples:
         >>> results = load_results("results/four_rooms")  # doctest: +SKIP

@@ -105,6 +105,15 @@ class A2CConfig:
             update) instead of from each batch's transitions.
         record_window: batches the recorded mean episode length is estimated over (frames per
             finished episode in the window).
+
+    Examples:
+        >>> config = A2CConfig(num_envs=8, frames_per_batch=128, total_frames=1024)
+        >>> config.iterations
+        8
+        >>> A2CConfig(num_envs=8, frames_per_batch=100)
+        Traceback (most recent call last):
+        ...
+        ValueError: frames_per_batch (100) must be a multiple of num_envs (8)
     """
 
     num_envs: int = 16
@@ -167,6 +176,15 @@ class Shaping:
             :class:`~torchrl_subgoal.SubgoalPotentialTransform` (``observation_key``,
             ``zero_terminal_potential``…); ``gamma`` and ``value_lr`` come from the
             :class:`A2CConfig`.
+
+    Examples:
+        >>> from torchrl_subgoal import Cell, SubgoalSeries, TabularPotential
+        >>> series = SubgoalSeries([Cell(3, 6), Cell(7, 9)])
+        >>> shaping = Shaping(series, TabularPotential(series.num_abstract_states), {"observation_key": "cell"})
+        >>> shaping.trained
+        True
+        >>> type(shaping.transform(shaping.potential, gamma=0.99, value_lr=None)).__name__
+        'SubgoalPotentialTransform'
     """
 
     subgoals: SubgoalSeries | Sequence[SubgoalSeries] | StateAggregation
@@ -214,6 +232,15 @@ def shaped_env(
     on the outer env a reward scaling, the shaping transform, a step counter and the episode's env return.
 
     ``potential`` is this process's view of the shaping potential (by default ``shaping.potential``).
+
+    Examples:
+        >>> from torchrl_subgoal import Cell, SubgoalSeries, TabularPotential
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> shaping = Shaping(SubgoalSeries([Cell(3, 6)]), TabularPotential(2), {"observation_key": "cell"})
+        >>> env = shaped_env(FourRoomsEnv, 4, shaping=shaping)
+        >>> data = env.rollout(3)
+        >>> data["next", "subgoal_index"].shape, data["next", "episode_return"].shape
+        (torch.Size([4, 3, 1]), torch.Size([4, 3, 1]))
     """
     if env_workers:
         base: EnvBase = ParallelEnv(env_workers, functools.partial(make_env, num_envs // env_workers))
@@ -352,7 +379,18 @@ def make_collector(
     config: A2CConfig,
 ) -> Collector | MultiSyncCollector:
     """A ``Collector`` over ``env_factory()`` in this process, or a ``MultiSyncCollector`` of
-    ``config.collector_workers`` processes each building its env from ``env_factory``."""
+    ``config.collector_workers`` processes each building its env from ``env_factory``.
+
+    Examples:
+        >>> import functools
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> config = A2CConfig(num_envs=4, frames_per_batch=32, total_frames=64)
+        >>> actor, _ = actor_critic(FourRoomsEnv(4), features="one_hot")
+        >>> collector = make_collector(functools.partial(FourRoomsEnv, 4), actor, config)
+        >>> [batch.shape for batch in collector]
+        [torch.Size([4, 8]), torch.Size([4, 8])]
+        >>> collector.shutdown()
+    """
     if config.collector_workers == 0:
         return Collector(env_factory(), policy, frames_per_batch=config.frames_per_batch,
                          total_frames=config.total_frames, auto_register_policy_transforms=False)
@@ -373,6 +411,11 @@ class LearningCurve:
         episode_return: mean env return of the recent finished episodes (env units).
         success: whether the last finished episode terminated (reached its goal).
         episodes: episodes finished so far.
+
+    Examples:
+        >>> curve = LearningCurve(frames=[256, 512, 768], episode_length=[900.0, 120.0, 40.0])
+        >>> curve.frames_to(100), curve.frames_to(10)
+        (768, None)
     """
 
     frames: list[int] = field(default_factory=list)
@@ -457,6 +500,15 @@ def train_a2c(
             ``max_steps`` when it has one).
         logger: a TorchRL logger (CSV, TensorBoard…) for losses and episode statistics.
         progress: called with 1 after every batch.
+
+    Examples:
+        >>> from torchrl_subgoal import Cell, SubgoalSeries, TabularPotential
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> shaping = Shaping(SubgoalSeries([Cell(3, 6)]), TabularPotential(2), {"observation_key": "cell"})
+        >>> config = A2CConfig(num_envs=4, frames_per_batch=64, total_frames=256, features="one_hot", hidden=())
+        >>> curve = train_a2c(FourRoomsEnv, config, shaping=shaping, seed=0)
+        >>> curve.frames
+        [64, 128, 192, 256]
     """
     torch.manual_seed(seed)
     online = shaping is not None and config.online_potential and shaping.trained
@@ -469,7 +521,8 @@ def train_a2c(
     actor, critic = actor_critic(probe, observation_key, features=config.features, hidden=config.hidden,
                                  fourier_order=config.fourier_order)
     cap = episode_cap if episode_cap is not None else float(getattr(probe, "max_steps", math.nan))
-    probe.close()
+    if not probe.is_closed:  # a batched env that was never started (a SerialEnv from batched()) is closed already
+        probe.close()
     advantage = GAE(gamma=config.gamma, lmbda=config.gae_lambda, value_network=critic,
                     average_gae=config.normalize_advantage)
     loss = A2CLoss(actor, critic, entropy_coeff=config.entropy_coeff, critic_coeff=config.critic_coeff,
@@ -504,7 +557,7 @@ def train_a2c(
             potential_loss = math.nan
             if value_loss is not None and value_optimizer is not None:
                 real = smdp_transitions(data, keeper)
-                if real.numel():
+                if len(real):
                     value_optimizer.zero_grad(set_to_none=True)
                     out = value_loss(real)["loss_value"]
                     out.backward()

@@ -37,6 +37,11 @@ class A2CDomain:
         a2c: default settings.
         aggregation: SARSA-RS's ``g(s)`` (``None``: no SARSA-RS).
         candidates: RRS's candidate subgoals, from a seed.
+
+    Examples:
+        >>> domain = a2c_domain("four_rooms")
+        >>> domain.observation_key, domain.subgoal_key, domain.make_env(2).batch_size
+        ('observation', 'cell', torch.Size([2]))
     """
 
     name: str
@@ -53,14 +58,25 @@ class A2CDomain:
 
 
 def four_rooms_env(num_envs: int) -> EnvBase:
-    """``FourRoomsEnv(num_envs)`` with the paper's 1,000-step cap."""
+    """``FourRoomsEnv(num_envs)`` with the paper's 1,000-step cap.
+
+    Examples:
+        >>> env = four_rooms_env(3)
+        >>> env.batch_size, env.max_steps
+        (torch.Size([3]), 1000)
+    """
     from torchrl_subgoal.envs import FourRoomsEnv
 
     return FourRoomsEnv(num_envs)
 
 
 def pinball_env(num_envs: int) -> EnvBase:
-    """``PinBallEnv(num_envs)`` on the simple map, the paper's 10,000-step cap, seeded from torch."""
+    """``PinBallEnv(num_envs)`` on the simple map, the paper's 10,000-step cap, seeded from torch.
+
+    Examples:
+        >>> pinball_env(2).reset()["observation"].shape
+        torch.Size([2, 4])
+    """
     from torchrl_subgoal.envs import PinBallEnv
 
     return PinBallEnv(num_envs, "simple", seed=int(torch.randint(2**31 - 1, ())))

@@ -43,7 +43,7 @@ def smdp_transitions(
         ...                               observation_key="cell", write_transitions=True)
         >>> data = TransformedEnv(FourRoomsEnv(4, max_steps=10), t).rollout(30, break_when_any_done=False)
         >>> real = smdp_transitions(data)
-        >>> bool(real["mask"].all()), real.batch_dims, real.numel() == int(data["next", "smdp", "mask"].sum())
+        >>> bool(real["mask"].all()), real.batch_dims, len(real) == int(data["next", "smdp", "mask"].sum())
         (True, 1, True)
         >>> rebuilt = smdp_transitions(data, t)
         >>> torch.allclose(rebuilt["next", "reward"], real["next", "reward"])
@@ -79,8 +79,12 @@ def extend_transitions(
         ...                    ("next", "smdp", "subgoal_index"): torch.zeros(1, 2, 1, dtype=torch.long)}, [1, 2])
         >>> extend_transitions(buffer, data), len(buffer)
         (1, 1)
+        >>> none = data.clone().fill_(("next", "smdp", "mask"), False)  # a batch that closed no transition
+        >>> extend_transitions(buffer, none), len(buffer)
+        (0, 1)
     """
     real = smdp_transitions(data, transform, key=key)
-    if real.numel():
+    count = real.batch_size[0]  # (not real.numel(): a TensorDict of batch size [0] counts 1)
+    if count:
         buffer.extend(real)
-    return int(real.numel())
+    return count

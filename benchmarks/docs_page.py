@@ -1,0 +1,210 @@
+"""Run the benchmarks at a quick scale and write the documentation's benchmarks page.
+
+Each benchmark script (and two end-to-end reproductions at a small scale) runs
+in its own process, one after another, under ``nice``; the page records the
+machine (CPU model, cores, memory, the load average before and after each
+run, library versions, the date) and every script's printed output verbatim,
+with its command and wall time. A script that fails is reported on the page
+with its exit status and the end of its error output, never left out.
+
+    python benchmarks/docs_page.py docs/benchmarks.md       # `make bench-docs`
+    python benchmarks/docs_page.py out.md --only four_rooms_step
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import os
+import platform
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def clean(text: str) -> str:
+    """``text`` without terminal colour codes (TorchRL's log lines carry them)."""
+    return _ANSI.sub("", text)
+
+
+@dataclass(frozen=True)
+class Run:
+    """One command on the page.
+
+    Attributes:
+        name: short identifier (``--only``).
+        title: the section heading.
+        what: what it measures, one sentence.
+        args: the command after ``python``, relative to the repository root;
+            ``{tmp}`` is replaced by a fresh temporary directory.
+    """
+
+    name: str
+    title: str
+    what: str
+    args: tuple[str, ...]
+
+
+RUNS = (
+    Run("four_rooms_step", "Four-rooms env and the shaping transform",
+        "env-steps per second of `FourRoomsEnv(1000)` bare, wrapped, with the shaping transform, and the "
+        "TorchRL loop against the fused engine for SARSA + HRS.",
+        ("benchmarks/four_rooms_step.py", "--quick")),
+    Run("pinball_step", "PinBall physics and env",
+        "ball-steps per second of the batched PinBall physics (numba, torch) and of the TorchRL env loop, "
+        "beside the single-ball `pynball-rl` package.",
+        ("benchmarks/pinball_step.py", "--quick")),
+    Run("a2c_collection", "Collector throughput and the transform's cost in A2C",
+        "frames per second of TorchRL `Collector`s over the batched four-rooms env (in process and over a "
+        "`ParallelEnv`), and the time of one A2C iteration with and without the shaping transform.",
+        ("benchmarks/a2c_collection.py", "--quick")),
+    Run("finite_check", "The NaN/inf check of the transform",
+        "env-steps per second with and without the transform's finite-reward check.",
+        ("benchmarks/finite_check.py", "--steps", "200", "--repeats", "3")),
+    Run("pick_and_place_throughput", "Pick-and-place collection and DDPG steps",
+        "MuJoCo Fetch env-steps per second raw and through a shaped `Collector`, DDPG gradient steps per "
+        "second, and the projected time of one paper-scale learning.",
+        ("benchmarks/pick_and_place_throughput.py", "--quick", "--repeats", "1")),
+    Run("four_rooms_demo", "End to end: the four-rooms reproduction at `make demo` scale",
+        "wall time of `make demo`'s run (5 methods x 10 patterns x 10 learnings x 1,000 episodes, fused engine) "
+        "including the report, in one worker process (`make demo` uses 2).",
+        ("recipes/four_rooms.py", "--workers", "1", "--results", "{tmp}/four_rooms")),
+    Run("pinball_small", "End to end: a small PinBall reproduction",
+        "wall time of `recipes/pinball.py` at 1 learning per pattern (10 learners per method, 200 episodes), "
+        "in one worker process.",
+        ("recipes/pinball.py", "--learnings", "1", "--workers", "1", "--results", "{tmp}/pinball")),
+)
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _memory_gib() -> str:
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal"):
+                return f"{int(line.split()[1]) / 2**20:.0f} GiB"
+    except OSError:
+        pass
+    return "unknown"
+
+
+def _load() -> str:
+    try:
+        return " / ".join(f"{x:.1f}" for x in os.getloadavg())
+    except OSError:
+        return "unknown"
+
+
+def _version(package: str) -> str:
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return "not installed"
+
+
+def machine() -> list[str]:
+    """The machine table of the page."""
+    rows = [
+        ("CPU", _cpu_model()),
+        ("cores (logical, as the OS reports)", str(os.cpu_count())),
+        ("memory", _memory_gib()),
+        ("OS", f"{platform.system()} {platform.release()}"),
+        ("Python", platform.python_version()),
+        *((name, _version(name)) for name in ("torch", "torchrl", "tensordict", "numba", "mujoco")),
+    ]
+    return ["| | |", "|---|---|", *(f"| {k} | {v} |" for k, v in rows)]
+
+
+def run(item: Run, tmp: Path, timeout: float) -> list[str]:
+    """Run one command; its section of the page."""
+    args = [a.replace("{tmp}", str(tmp)) for a in item.args]
+    command = ["nice", "-n", "5", sys.executable, *args]
+    shown = "python " + " ".join(item.args).replace("{tmp}", "RESULTS")
+    print(f"[bench-docs] {shown}", file=sys.stderr, flush=True)
+    load_before = _load()
+    start = time.perf_counter()
+    try:
+        done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=timeout,
+                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        status, out, err = done.returncode, done.stdout, done.stderr
+    except subprocess.TimeoutExpired as exc:
+        status = None
+        out = exc.stdout.decode() if isinstance(exc.stdout, bytes) else (exc.stdout or "")
+        err = f"timed out after {timeout:.0f} s"
+    wall = time.perf_counter() - start
+    lines = [f"## {item.title}", "", item.what, "",
+             f"`{shown}`: wall time {wall:.0f} s, load average (1/5/15 min) {load_before} before, "
+             f"{_load()} after.", ""]
+    if status != 0:
+        tail = "\n".join(clean(err).strip().splitlines()[-15:])
+        lines += [f"**Failed** ({'timeout' if status is None else f'exit status {status}'}):", "",
+                  "```text", tail, "```", ""]
+    if out.strip():
+        lines += ["```text", clean(out).rstrip(), "```", ""]
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser.add_argument("output", type=Path, help="the Markdown page to write (docs/benchmarks.md)")
+    parser.add_argument("--only", default="", help="comma-separated run names (default: all)")
+    parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per run before it is stopped")
+    args = parser.parse_args(argv)
+    wanted = [w for w in args.only.split(",") if w]
+    unknown = sorted(set(wanted) - {r.name for r in RUNS})
+    if unknown:
+        parser.error(f"--only: unknown run(s) {unknown}; known: {[r.name for r in RUNS]}")
+    runs = [r for r in RUNS if not wanted or r.name in wanted]
+    started = dt.datetime.now(dt.timezone.utc)
+    head = [
+        "# Benchmarks",
+        "",
+        f"Generated by `make bench-docs` (`python benchmarks/docs_page.py docs/benchmarks.md`) on "
+        f"{started:%Y-%m-%d %H:%M} UTC: every benchmark under `benchmarks/` at its quick scale and two "
+        "end-to-end reproductions at a small scale, one after another, each in its own process under "
+        "`nice -n 5`. The output below is each script's, verbatim.",
+        "",
+        "!!! warning \"A shared, loaded machine\"",
+        "    These figures were measured on a machine shared with other engineers' jobs, and it was loaded "
+        "while they ran (see each run's load average: 2 logical cores, so a load above 2 means the runs "
+        "waited for a core). Absolute rates are pessimistic and noisy; compare the ratios *within* one "
+        "benchmark, whose set-ups are interleaved in one run. The reproduction pages give the figures "
+        "measured for their own claims.",
+        "",
+        "## Machine",
+        "",
+        *machine(),
+        "",
+    ]
+    body: list[str] = []
+    with tempfile.TemporaryDirectory(prefix="bench-docs-") as tmp:
+        for item in runs:
+            body += run(item, Path(tmp), args.timeout)
+    page = "\n".join([*head, *body]).rstrip() + "\n"
+    out = args.output
+    out.parent.mkdir(parents=True, exist_ok=True)
+    partial = out.with_suffix(out.suffix + ".partial")
+    partial.write_text(page)
+    partial.replace(out)  # atomically: a failed run never leaves half a page
+    print(f"[bench-docs] wrote {out}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
