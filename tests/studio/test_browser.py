@@ -33,6 +33,14 @@ def save_as(page: Any, name: str) -> None:
     expect(page.locator("#message")).to_contain_text("Saved", timeout=TIMEOUT_MS)
 
 
+def save_and_reload(page: Any, name: str, command: str) -> None:
+    """Save as ``name``, check the recipe ``command`` shown, reload the page (it reopens the file)."""
+    save_as(page, name)
+    expect(page.locator("#recipe")).to_contain_text(command)
+    page.reload()
+    page.wait_for_selector("body[data-ready=true]")
+
+
 def test_place_two_subgoals_save_reload_and_train_with_the_recipe(
     browser: Any, studio: Studio, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -41,10 +49,7 @@ def test_place_two_subgoals_save_reload_and_train_with_the_recipe(
     click_cell(page, 3, 6)
     click_cell(page, 7, 9)
     expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
-    save_as(page, "hallways")
-    expect(page.locator("#recipe")).to_contain_text(f"recipes/four_rooms.py --subgoals {folder.resolve()}/hallways.yaml")
-    page.reload()
-    page.wait_for_selector("body[data-ready=true]")
+    save_and_reload(page, "hallways", f"recipes/four_rooms.py --subgoals {folder.resolve()}/hallways.yaml")
     expect(page.locator("#subgoals li")).to_have_count(2, timeout=TIMEOUT_MS)
     assert subgoal_rows(page) == ["(3, 6)", "(7, 9)"]
     assert page.locator("#map-view g.subgoal").count() == 2
@@ -203,10 +208,7 @@ def test_pick_and_place_form_two_boxes_save_reload(browser: Any, studio: Studio)
     page.fill('[aria-label="margin of subgoal 1"]', "0.01")
     page.locator('[aria-label="margin of subgoal 1"]').press("Tab")
     expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
-    save_as(page, "grasp")
-    expect(page.locator("#recipe")).to_contain_text(f"recipes/pick_and_place.py --subgoals {folder.resolve()}/grasp.yaml")
-    page.reload()
-    page.wait_for_selector("body[data-ready=true]")
+    save_and_reload(page, "grasp", f"recipes/pick_and_place.py --subgoals {folder.resolve()}/grasp.yaml")
     expect(page.locator("#box-form .box-card")).to_have_count(2, timeout=TIMEOUT_MS)
     assert page.input_value("#domain") == "pick_and_place"
     assert page.input_value("#pattern-name") == "grasp"
