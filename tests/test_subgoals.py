@@ -22,7 +22,7 @@ from torchrl_subgoal import (
     load_patterns,
     save_patterns,
 )
-from torchrl_subgoal.subgoals import Predicate, SubgoalTables
+from torchrl_subgoal.subgoals import Predicate, SubgoalTables, file_description
 
 
 def write(tmp_path: Path, data: object, name: str = "subgoals.yaml") -> Path:
@@ -88,6 +88,25 @@ def test_file_round_trip(tmp_path: Path) -> None:
         assert loaded[name].predicates == original.predicates
         states = range(original.num_abstract_states)
         assert [loaded[name].successors(z) for z in states] == [original.successors(z) for z in states]
+
+
+def test_save_keeps_file_and_pattern_descriptions(tmp_path: Path) -> None:
+    path = write(tmp_path, {"description": "whole file", "patterns": {
+        "chain": {"description": "hallways first", "subgoals": [{"cell": [3, 6]}, {"cell": [7, 9]}]},
+        "named": {"description": "partial", "subgoals": {"a": {"cell": [3, 6]}, "b": {"cell": [7, 9]}},
+                  "order": []},
+        "plain": {"subgoals": [{"cell": [3, 6]}]}}})
+    loaded = load_patterns(path)
+    assert [s.description for s in loaded.values()] == ["hallways first", "partial", None]
+    again = tmp_path / "again.yaml"
+    save_patterns(again, loaded, description=file_description(path))
+    assert yaml.safe_load(again.read_text())["description"] == "whole file"
+    assert [s.description for s in load_patterns(again).values()] == ["hallways first", "partial", None]
+    assert "description" not in yaml.safe_load(again.read_text())["patterns"]["plain"]
+    with pytest.raises(SubgoalFileError, match=r"pattern 'p': description: expected text, got 3"):
+        load_patterns(write(tmp_path, {"patterns": {"p": {"description": 3, "subgoals": [{"cell": [3, 6]}]}}}))
+    with pytest.raises(SubgoalFileError, match=r"bad\.yaml: description: expected text"):
+        load_patterns(write(tmp_path, {"description": ["x"], "patterns": {"p": [{"cell": [3, 6]}]}}, "bad.yaml"))
 
 
 def test_shipped_participants_file() -> None:

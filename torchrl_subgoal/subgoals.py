@@ -55,6 +55,7 @@ __all__ = [
     "SubgoalFileError",
     "SubgoalSeries",
     "SubgoalTables",
+    "file_description",
     "load_patterns",
     "parse_text",
     "patterns_from_data",
@@ -562,6 +563,14 @@ def _dims(value: Any, where: str, n: int) -> tuple[int, ...]:
     return dims
 
 
+def _description(body: Mapping[str, Any], where: str) -> str | None:
+    """A pattern's or file's optional ``description``: text, kept when the file is saved again."""
+    value = body.get("description")
+    if value is not None and not isinstance(value, str):
+        raise SubgoalFileError(f"{where}: expected text, got {value!r}")
+    return value
+
+
 def _check_keys(body: Mapping[str, Any], allowed: set[str], where: str) -> None:
     unknown = set(body) - allowed
     if unknown:
@@ -689,6 +698,7 @@ class SubgoalSeries:
     names: tuple[str, ...] | None = None
     name: str = "pattern"
     source: str | None = field(default=None, compare=False)
+    description: str | None = field(default=None, compare=False)
 
     def __init__(
         self,
@@ -697,6 +707,7 @@ class SubgoalSeries:
         names: Sequence[str] | None = None,
         name: str = "pattern",
         source: str | None = None,
+        description: str | None = None,
     ) -> None:
         where = _where(source, name, "")
         preds = tuple(_as_predicate(p, f"{where}: subgoals[{i}]") for i, p in enumerate(predicates))
@@ -721,6 +732,7 @@ class SubgoalSeries:
         object.__setattr__(self, "names", tuple(names) if names is not None else None)
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "source", source)
+        object.__setattr__(self, "description", description)
         object.__setattr__(self, "_succ", self._covering())
 
     # ---------------------------------------------------------------- structure
@@ -802,10 +814,11 @@ class SubgoalSeries:
 
     def to_dict(self) -> dict[str, Any]:
         """The pattern as it appears in a subgoal file (``patterns: {name: <this>}``)."""
+        out: dict[str, Any] = {} if self.description is None else {"description": self.description}
         if self.order is None and self.names is None:
-            return {"subgoals": [p.to_dict() for p in self.predicates]}
+            return {**out, "subgoals": [p.to_dict() for p in self.predicates]}
         names = self.names or tuple(f"sg{i}" for i in range(len(self)))
-        out: dict[str, Any] = {"subgoals": {nm: p.to_dict() for nm, p in zip(names, self.predicates, strict=True)}}
+        out["subgoals"] = {nm: p.to_dict() for nm, p in zip(names, self.predicates, strict=True)}
         edges = self.order if self.order is not None else tuple((i, i + 1) for i in range(len(self) - 1))
         out["order"] = [[names[a], names[b]] for a, b in edges]
         return out
@@ -822,6 +835,7 @@ class SubgoalSeries:
         _check_keys(body, {"subgoals", "order", "description"}, where)
         if "subgoals" not in body:
             raise SubgoalFileError(f"{where}: missing field 'subgoals'")
+        description = _description(body, _where(source, name, "description"))
         subgoals = body["subgoals"]
         if isinstance(subgoals, list | Mapping) and len(subgoals) > MAX_SUBGOALS:
             raise SubgoalFileError(
@@ -835,7 +849,7 @@ class SubgoalSeries:
                     "name the subgoals (a mapping) to give a partial order"
                 )
             preds = [parse_predicate(s, _where(source, name, f"subgoals[{i}]")) for i, s in enumerate(subgoals)]
-            return cls(preds, name=name, source=source)
+            return cls(preds, name=name, source=source, description=description)
         if not isinstance(subgoals, Mapping):
             raise SubgoalFileError(f"{_where(source, name, 'subgoals')}: expected a list or a mapping")
         _unique(subgoals, _where(source, name, "subgoals"), "subgoal name")
@@ -859,7 +873,7 @@ class SubgoalSeries:
                 if str(p) not in index:
                     raise SubgoalFileError(f"{w}: unknown subgoal {p!r}; known: {names}")
             order.append((index[str(pair[0])], index[str(pair[1])]))
-        return cls(preds, order=order, names=names, name=name, source=source)
+        return cls(preds, order=order, names=names, name=name, source=source, description=description)
 
     @classmethod
     def from_file(
@@ -917,16 +931,20 @@ def _domain_check(domain: str) -> DomainCheck:
         from torchrl_subgoal.envs.pinball import check_subgoal as check_pinball
 
         return check_pinball
-    raise SubgoalFileError(f"unknown domain {domain!r}; known: four_rooms, pinball")
+    if domain == "pick_and_place":
+        from torchrl_subgoal.envs.fetch import check_subgoal as check_fetch
+
+        return check_fetch
+    raise SubgoalFileError(f"unknown domain {domain!r}; known: four_rooms, pinball, pick_and_place")
 
 
 def load_patterns(path: str | Path, *, domain: str | None = None) -> dict[str, SubgoalSeries]:
     """Load every named pattern of a subgoal file.
 
     The file holds ``patterns: {name: {subgoals: [...], order: [...]}}`` and
-    optionally ``domain: four_rooms`` (or ``pinball``), which checks every
-    subgoal against that domain's map (a cell in a wall or off the grid, a
-    circle off the table).
+    optionally ``domain: four_rooms`` (or ``pinball``, ``pick_and_place``), which
+    checks every subgoal against that domain's map (a cell in a wall or off the
+    grid, a circle off the table, a box entry outside the observation).
 
     Loading takes time linear in the file's size. Files larger than
     :data:`MAX_FILE_BYTES` (1 MiB) are refused, as are patterns of more than
@@ -966,6 +984,7 @@ def patterns_from_data(
         raise SubgoalFileError(f"{source}: expected a mapping with a 'patterns' field")
     _unique(data, source, "field")
     _check_keys(data, {"format", "domain", "observation_key", "description", "patterns"}, source)
+    _description(data, f"{source}: description")
     if "format" in data and data["format"] != FORMAT:
         raise SubgoalFileError(f"{source}: format: expected {FORMAT!r}, got {data['format']!r}")
     raw = data.get("patterns")
@@ -994,28 +1013,48 @@ def patterns_from_data(
 
 
 def save_patterns(
-    path: str | Path, patterns: Mapping[str, SubgoalSeries], *, domain: str | None = None
+    path: str | Path,
+    patterns: Mapping[str, SubgoalSeries],
+    *,
+    domain: str | None = None,
+    description: str | None = None,
 ) -> None:
     """Write patterns to a subgoal file that :func:`load_patterns` reads back.
 
+    Args:
+        path: the file to write (YAML).
+        patterns: name -> series; each series' ``description`` is written with it.
+        domain: the file's ``domain`` (checked when it is loaded), if given.
+        description: the file's ``description`` (see :func:`file_description`), if given.
+
     Examples:
-        >>> import os, tempfile
-        >>> path = os.path.join(tempfile.mkdtemp(), "mine.yaml")
-        >>> save_patterns(path, {"p": SubgoalSeries([State(24), State(35)])})
-        >>> print(open(path).read())
-        format: torchrl_subgoal/v1
-        patterns:
-          p:
-            subgoals:
-            - state: 24
-            - state: 35
-        <BLANKLINE>
+        >>> import tempfile, pathlib
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "mine.yaml"
+        >>> series = SubgoalSeries([Cell(3, 6)], name="p", description="the west hallway")
+        >>> save_patterns(path, {"p": series}, domain="four_rooms", description="my subgoals")
+        >>> load_patterns(path)["p"].description, file_description(path)
+        ('the west hallway', 'my subgoals')
     """
     data: dict[str, Any] = {"format": FORMAT}
     if domain is not None:
         data["domain"] = domain
+    if description is not None:
+        data["description"] = description
     data["patterns"] = {name: s.to_dict() for name, s in patterns.items()}
     Path(path).write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+def file_description(path: str | Path) -> str | None:
+    """The ``description`` field of a subgoal file (``None`` if it has none); the file must load.
+
+    Raises:
+        SubgoalFileError: as :func:`load_patterns`.
+    """
+    path = Path(path)
+    data = parse_text(_read_file(path), str(path))
+    patterns_from_data(data, str(path))
+    return _description(data, f"{path}: description")
 
 
 # --------------------------------------------------------------------------- batched evaluation

@@ -1,22 +1,54 @@
 """Screenshots of the studio for ``docs/studio.md``, taken in headless Chromium like the browser tests.
 
-    .venv/bin/python -m tests.studio.screenshots docs/images
+    .venv/bin/python -m tests.studio.screenshots docs/images                  # all
+    .venv/bin/python -m tests.studio.screenshots docs/images pick_and_place   # only the form
 """
 
 from __future__ import annotations
 
+import shutil
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 from playwright.sync_api import expect
 
 from tests.studio.browser import TIMEOUT_MS, chromium, click_cell, click_map, live_studio, open_page
+from torchrl_subgoal.envs import fetch
 
 
-def main(out: Path) -> None:
+def pick_and_place(browser: Any, url: str, folder: Path, out: Path) -> None:
+    """The form: the participants' file opened, a second pattern being written."""
+    shutil.copy(fetch.PARTICIPANTS_FILE, folder / "pick_and_place_participants.yaml")
+    page = open_page(browser, f"{url}?file=pick_and_place_participants.yaml")
+    expect(page.locator("#box-form .box-card")).to_have_count(2, timeout=TIMEOUT_MS)
+    page.click("#add-pattern")
+    page.fill("#pattern-name", "grasp_then_lift")
+    page.press("#pattern-name", "Enter")
+    page.check('#box-form .components input[value="finger_joints"]')
+    page.click("#add-box")
+    page.uncheck('#box-form .components input[value="object_relative_position"]')
+    page.uncheck('#box-form .components input[value="finger_joints"]')
+    page.check('#box-form .components input[value="object_position"]')
+    page.click("#add-box")
+    for j, value in enumerate(("0", "0", "0", "0.02", "0.02")):
+        page.fill(f'[aria-label="{"object_relative_position" if j < 3 else "finger_joints"}[{j % 3}] of subgoal 1"]',
+                  value)
+    for j, value in enumerate(("1.3", "0.75", "0.6")):
+        page.fill(f'[aria-label="object_position[{j}] of subgoal 2"]', value)
+    page.fill('[aria-label="margin of subgoal 2"]', "0.03, 0.03, 0.05")
+    page.press('[aria-label="margin of subgoal 2"]', "Tab")
+    expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
+    page.screenshot(path=out / "studio_pick_and_place.png", full_page=True)
+
+
+def main(out: Path, only: str = "") -> None:
     out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as folder, live_studio(Path(folder)) as (url, _), chromium() as browser:
+        pick_and_place(browser, url, Path(folder), out)
+        if only == "pick_and_place":
+            return
         page = open_page(browser, url)
         # four-rooms: two patterns, the second being edited
         for cell in ((6, 2), (10, 6)):
@@ -66,4 +98,4 @@ def main(out: Path) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1] if len(sys.argv) > 1 else "docs/images"))
+    main(Path(sys.argv[1] if len(sys.argv) > 1 else "docs/images"), sys.argv[2] if len(sys.argv) > 2 else "")

@@ -78,7 +78,7 @@ def test_save_open_round_trip_with_names_partial_order_and_several_patterns(clie
     assert patterns["named_chain"].names == ("a", "sg2") and patterns["named_chain"].is_chain
     opened = client.get("/api/files/mine.yaml").json
     assert opened["domain"] == "four_rooms"
-    assert opened["patterns"][0] == {"name": "chain", "order": None,
+    assert opened["patterns"][0] == {"name": "chain", "order": None, "description": None,
                                      "subgoals": [{"name": None, "cell": [3, 6]}, {"name": None, "cell": [7, 9]}]}
     assert opened["patterns"][1]["order"] == [["west", "door"], ["east", "door"]]
     assert client.put("/api/files/again.yaml", json={"domain": "four_rooms", "patterns": opened["patterns"]}).status_code == 200
@@ -139,7 +139,7 @@ def test_state_subgoals_open_as_cells(client: FlaskClient, app: Flask) -> None:
      "four-rooms subgoals are cells or states, not circle"),
     ({"domain": "pinball", "patterns": [{"name": "p", "subgoals": [{"cell": [3, 6]}]}]},
      "pinball subgoals are circles over (x, y), not cell"),
-    ({"domain": "chess", "patterns": []}, "request: domain: expected one of ['four_rooms', 'pinball'], got 'chess'"),
+    ({"domain": "chess", "patterns": []}, "request: domain: expected one of ['four_rooms', 'pick_and_place', 'pinball'], got 'chess'"),
     (pinball((0.5, 0.5, 0.04), map_="moon"), "request: map: expected one of ['simple', 'hard'], got 'moon'"),
     ({"domain": "four_rooms", "patterns": []}, "request: patterns: expected a non-empty list"),
     ({"domain": "four_rooms", "patterns": {"p": []}}, "request: patterns: expected a non-empty list"),
@@ -206,9 +206,9 @@ def test_open_missing_and_malformed_files(client: FlaskClient, app: Flask) -> No
     broken = client.get("/api/files/broken.yaml")
     assert broken.status_code == 422
     assert broken.json["error"] == "broken.yaml: pattern 'p': subgoals[0].cell: (0, 0) is a wall"
-    (folder / "boxes.yaml").write_text("patterns: {p: {subgoals: [{box: {centre: [0.1], margin: 0.1}}]}}\n")
-    boxes = client.get("/api/files/boxes.yaml")
-    assert boxes.status_code == 422 and "fit none of the studio's domains" in boxes.json["error"]
+    (folder / "calls.yaml").write_text("patterns: {p: {subgoals: [{call: 'tests.dict_env:at_door'}]}}\n")
+    calls = client.get("/api/files/calls.yaml")
+    assert calls.status_code == 422 and "fit none of the studio's domains" in calls.json["error"]
     (folder / "junk.yaml").write_text(": : :\n\t[")
     junk = client.get("/api/files/junk.yaml")
     assert junk.status_code == 422 and junk.json["error"].startswith("junk.yaml: not valid YAML/JSON")

@@ -17,6 +17,7 @@ from playwright.sync_api import expect
 from tests.recipes.test_recipes import recipe
 from tests.studio.browser import TIMEOUT_MS, click_cell, click_map, open_page
 from torchrl_subgoal import load_patterns
+from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.subgoals import Cell, Circle
 
 Studio = tuple[str, Flask, Path]
@@ -32,6 +33,14 @@ def save_as(page: Any, name: str) -> None:
     expect(page.locator("#message")).to_contain_text("Saved", timeout=TIMEOUT_MS)
 
 
+def save_and_reload(page: Any, name: str, command: str) -> None:
+    """Save as ``name``, check the recipe ``command`` shown, reload the page (it reopens the file)."""
+    save_as(page, name)
+    expect(page.locator("#recipe")).to_contain_text(command)
+    page.reload()
+    page.wait_for_selector("body[data-ready=true]")
+
+
 def test_place_two_subgoals_save_reload_and_train_with_the_recipe(
     browser: Any, studio: Studio, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -40,10 +49,7 @@ def test_place_two_subgoals_save_reload_and_train_with_the_recipe(
     click_cell(page, 3, 6)
     click_cell(page, 7, 9)
     expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
-    save_as(page, "hallways")
-    expect(page.locator("#recipe")).to_contain_text(f"recipes/four_rooms.py --subgoals {folder.resolve()}/hallways.yaml")
-    page.reload()
-    page.wait_for_selector("body[data-ready=true]")
+    save_and_reload(page, "hallways", f"recipes/four_rooms.py --subgoals {folder.resolve()}/hallways.yaml")
     expect(page.locator("#subgoals li")).to_have_count(2, timeout=TIMEOUT_MS)
     assert subgoal_rows(page) == ["(3, 6)", "(7, 9)"]
     assert page.locator("#map-view g.subgoal").count() == 2
@@ -174,3 +180,42 @@ def test_pinball_circles_on_the_hard_map_and_the_recipe(
             "--results", str(tmp_path / "results")]
     assert recipe("pinball").main(args) == 0
     capsys.readouterr()
+
+
+def test_pick_and_place_form_two_boxes_save_reload(browser: Any, studio: Studio) -> None:
+    """The form needs no MuJoCo (it is built from ``fetch.COMPONENTS``), so this runs without the fetch extra."""
+    url, _, folder = studio
+    page = open_page(browser, url)
+    page.select_option("#domain", "pick_and_place")
+    expect(page.locator("#box-form")).to_be_visible()
+    expect(page.locator("#map-view")).to_be_hidden()
+    expect(page.locator("#try")).to_be_hidden()
+    expect(page.locator("#try-note")).to_contain_text("too slow for a click")
+    page.click("#add-box")  # the default component: object_relative_position, centre 0, margin 0.01
+    page.check('#box-form .components input[value="finger_joints"]')
+    page.click("#add-box")
+    expect(page.locator("#box-form .box-card")).to_have_count(2)
+    page.fill('[aria-label="finger_joints[0] of subgoal 2"]', "0.02")
+    page.fill('[aria-label="finger_joints[1] of subgoal 2"]', "0.02")
+    page.locator('[aria-label="finger_joints[1] of subgoal 2"]').press("Tab")
+    page.fill("#pattern-name", "grasp")
+    page.locator("#pattern-name").press("Tab")
+    expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
+    page.fill('[aria-label="margin of subgoal 1"]', "-0.01")  # an invalid margin: the loader's message
+    page.locator('[aria-label="margin of subgoal 1"]').press("Tab")
+    expect(page.locator("#message")).to_contain_text("subgoals[0].box.margin: must be non-negative",
+                                                     timeout=TIMEOUT_MS)
+    page.fill('[aria-label="margin of subgoal 1"]', "0.01")
+    page.locator('[aria-label="margin of subgoal 1"]').press("Tab")
+    expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
+    save_and_reload(page, "grasp", f"recipes/pick_and_place.py --subgoals {folder.resolve()}/grasp.yaml")
+    expect(page.locator("#box-form .box-card")).to_have_count(2, timeout=TIMEOUT_MS)
+    assert page.input_value("#domain") == "pick_and_place"
+    assert page.input_value("#pattern-name") == "grasp"
+    assert subgoal_rows(page) == ["object_relative_position = [0, 0, 0] ± 0.01",
+                                  "object_relative_position + finger_joints = [0, 0, 0, 0.02, 0.02] ± 0.01"]
+    assert page.input_value('[aria-label="finger_joints[1] of subgoal 2"]') == "0.02"
+
+    patterns = fetch.human_patterns(str(folder / "grasp.yaml"))  # what the recipe reads
+    assert patterns["grasp"].predicates == load_patterns(fetch.PARTICIPANTS_FILE)["participants"].predicates
+    assert len(fetch.random_patterns(patterns["grasp"], 2, seed=0)) == 2  # and its RRS patterns from it

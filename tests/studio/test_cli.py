@@ -28,7 +28,7 @@ def test_serves_on_loopback_and_stops_on_ctrl_c(tmp_path: Path) -> None:
         assert line.startswith("Subgoal studio at http://127.0.0.1:"), (line, proc.stderr and proc.stderr.read())
         url = line.split()[3]
         with urllib.request.urlopen(f"{url}api/domains", timeout=60) as response:
-            assert [d["name"] for d in json.load(response)] == ["four_rooms", "pinball"]
+            assert [d["name"] for d in json.load(response)] == ["four_rooms", "pinball", "pick_and_place"]
         with urllib.request.urlopen(url, timeout=60) as response:
             assert "<title>Subgoal studio" in response.read().decode()
         assert (tmp_path / "files").is_dir()

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from torchrl_subgoal.subgoals import Box, StateAggregation, SubgoalSeries, load_patterns
+from torchrl_subgoal.subgoals import Box, Predicate, StateAggregation, SubgoalSeries, load_patterns
 
 __all__ = [
     "COMPONENTS",
@@ -38,7 +38,9 @@ __all__ = [
     "PARTICIPANTS_FILE",
     "SUBGOAL_MARGIN",
     "FetchUnavailableError",
+    "check_subgoal",
     "component_dims",
+    "components_of",
     "human_patterns",
     "make_fetch_env",
     "random_patterns",
@@ -83,6 +85,48 @@ def component_dims(*names: str) -> tuple[int, ...]:
     if unknown:
         raise KeyError(f"unknown observation component(s) {unknown}; known: {list(COMPONENTS)}")
     return tuple(d for n in names for d in range(COMPONENTS[n].start, COMPONENTS[n].stop))
+
+
+def components_of(dims: tuple[int, ...] | list[int]) -> tuple[str, ...] | None:
+    """The whole components whose entries, in order, are ``dims``; ``None`` if there are none such.
+
+    The inverse of :func:`component_dims`.
+
+    Examples:
+        >>> components_of((6, 7, 8, 9, 10))
+        ('object_relative_position', 'finger_joints')
+        >>> components_of((6, 7)) is None
+        True
+    """
+    names: list[str] = []
+    i = 0
+    while i < len(dims):
+        match = next((n for n, part in COMPONENTS.items() if part.start == dims[i]
+                      and tuple(dims[i:i + part.stop - part.start]) == tuple(range(part.start, part.stop))), None)
+        if match is None:
+            return None
+        names.append(match)
+        i += COMPONENTS[match].stop - COMPONENTS[match].start
+    return tuple(names)
+
+
+def check_subgoal(predicate: Predicate) -> str | None:
+    """Why ``predicate`` is not a valid pick-and-place subgoal, or ``None``.
+
+    A pick-and-place subgoal is a box over entries of the 25-d observation.
+    Used by subgoal files that declare ``domain: pick_and_place``.
+
+    Examples:
+        >>> check_subgoal(Box((0.0,), (0.01,), (30,)))
+        'box entries [30] lie outside the 25-d observation (entries 0 to 24)'
+    """
+    if not isinstance(predicate, Box):
+        return f"pick-and-place subgoals are boxes over observation entries, not {predicate.kind}"
+    outside = [d for d in predicate.box_dims if d >= OBSERVATION_SIZE]
+    if outside:
+        return (f"box entries {outside} lie outside the {OBSERVATION_SIZE}-d observation "
+                f"(entries 0 to {OBSERVATION_SIZE - 1})")
+    return None
 
 
 def _version_tuple(version: str) -> tuple[int, int]:

@@ -67,6 +67,7 @@ __all__ = [
     "PinBallPhysics",
     "check_subgoal",
     "draw_map",
+    "point_in_polygon",
 ]
 
 #: Meaning of the five discrete actions, by index.
@@ -190,7 +191,7 @@ class PinBallConfig:
                     f"{source}, line {lines['start']}: the ball at start ({sx}, {sy}) overlaps "
                     f"the obstacle of line {number}"
                 )
-            if _point_in_polygon((tx, ty), vertices):
+            if point_in_polygon((tx, ty), vertices):
                 raise ValueError(
                     f"{source}, line {lines['target']}: the target centre ({tx}, {ty}) lies "
                     f"inside the obstacle of line {number}"
@@ -198,8 +199,18 @@ class PinBallConfig:
         return cls(ball_radius, (tx, ty, tr), (sx, sy), tuple(polygons), source)
 
 
-def _point_in_polygon(point: tuple[float, float], vertices: Sequence[tuple[float, float]]) -> bool:
-    """Even-odd rule: does a horizontal ray from ``point`` cross the boundary an odd number of times."""
+def point_in_polygon(point: tuple[float, float], vertices: Sequence[tuple[float, float]]) -> bool:
+    """Whether ``point`` lies inside the polygon ``vertices`` (even-odd rule).
+
+    Args:
+        point: ``(x, y)``.
+        vertices: the polygon's corners in order (closed implicitly).
+
+    Examples:
+        >>> square = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
+        >>> point_in_polygon((0.5, 0.5), square), point_in_polygon((1.5, 0.5), square)
+        (True, False)
+    """
     x, y = point
     inside = False
     for (ax, ay), (bx, by) in zip(vertices, [*vertices[1:], vertices[0]], strict=True):
@@ -212,7 +223,7 @@ def _circle_hits_polygon(
     centre: tuple[float, float], radius: float, vertices: Sequence[tuple[float, float]]
 ) -> bool:
     """Whether a circle overlaps a polygon (centre inside, or an edge closer than ``radius``)."""
-    if _point_in_polygon(centre, vertices):
+    if point_in_polygon(centre, vertices):
         return True
     x, y = centre
     for (ax, ay), (bx, by) in zip(vertices, [*vertices[1:], vertices[0]], strict=True):

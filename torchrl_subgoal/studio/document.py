@@ -29,7 +29,7 @@ from typing import Any
 
 import yaml
 
-from torchrl_subgoal.studio.domains import Domain
+from torchrl_subgoal.studio.domains import Domain, FormError
 from torchrl_subgoal.subgoals import (
     FORMAT,
     SubgoalFileError,
@@ -120,6 +120,7 @@ class Drawing:
     domain: Domain
     map: str
     patterns: dict[str, SubgoalSeries]
+    description: str | None = None
 
 
 def _expect(condition: bool, message: str) -> None:
@@ -127,12 +128,13 @@ def _expect(condition: bool, message: str) -> None:
         raise RequestError(message)
 
 
-def _pattern_body(index: int, raw: Any) -> tuple[str, dict[str, Any]]:
+def _pattern_body(index: int, raw: Any, domain: Domain) -> tuple[str, dict[str, Any]]:
     """One request pattern as the file's ``patterns: {name: body}`` entry."""
     where = f"request: patterns[{index}]"
     _expect(isinstance(raw, Mapping), f"{where}: expected an object with name, subgoals and order")
-    unknown = set(raw) - {"name", "subgoals", "order"}
-    _expect(not unknown, f"{where}: unknown field(s) {sorted(unknown)}; allowed: name, subgoals, order")
+    unknown = set(raw) - {"name", "subgoals", "order", "description"}
+    _expect(not unknown, f"{where}: unknown field(s) {sorted(unknown)}; allowed: name, subgoals, order, description")
+    described = {"description": raw["description"]} if raw.get("description") is not None else {}
     name = raw.get("name")
     _expect(isinstance(name, str) and name.strip() != "", f"{where}.name: expected a non-empty string")
     subgoals = raw.get("subgoals")
@@ -144,18 +146,22 @@ def _pattern_body(index: int, raw: Any) -> tuple[str, dict[str, Any]]:
         _expect(label is None or (isinstance(label, str) and label.strip() != ""),
                 f"{where}.subgoals[{j}].name: expected a non-empty string or null")
         names.append(label)
-        predicates.append({k: v for k, v in sg.items() if k != "name"})
+        try:
+            predicates.append(domain.from_page({k: v for k, v in sg.items() if k != "name"}, f"{where}.subgoals[{j}]"))
+        except FormError as exc:
+            raise RequestError(str(exc)) from None
     order = raw.get("order")
     _expect(order is None or isinstance(order, list), f"{where}.order: expected null (a chain) or a list of pairs")
     if order is None and not any(names):
-        return name, {"subgoals": predicates}
+        return name, {**described, "subgoals": predicates}
     full = [label or f"sg{j + 1}" for j, label in enumerate(names)]
     seen: set[str] = set()
     for label in full:
         _expect(label not in seen, f"request: pattern {name!r}: the subgoal name {label!r} is used twice")
         seen.add(label)
     chain = [[a, b] for a, b in itertools.pairwise(full)]
-    return name, {"subgoals": dict(zip(full, predicates, strict=True)), "order": chain if order is None else order}
+    return name, {**described, "subgoals": dict(zip(full, predicates, strict=True)),
+                  "order": chain if order is None else order}
 
 
 def _load(data: Mapping[str, Any], source: str, domain: str) -> dict[str, SubgoalSeries]:
@@ -189,8 +195,9 @@ def read_drawing(data: Any, domains: Mapping[str, Domain], *, source: str = "dra
         torchrl_subgoal.studio.document.RequestError: drawing.yaml: pattern 'p': subgoals[0].cell: (0, 6) is a wall
     """
     _expect(isinstance(data, Mapping), "request: expected a JSON object with domain, map and patterns")
-    unknown = set(data) - {"domain", "map", "patterns", "file"}
-    _expect(not unknown, f"request: unknown field(s) {sorted(unknown)}; allowed: domain, map, patterns, file")
+    unknown = set(data) - {"domain", "map", "patterns", "file", "description"}
+    _expect(not unknown,
+            f"request: unknown field(s) {sorted(unknown)}; allowed: domain, map, patterns, file, description")
     domain = domains.get(str(data.get("domain")))
     _expect(domain is not None, f"request: domain: expected one of {sorted(domains)}, got {data.get('domain')!r}")
     assert domain is not None
@@ -202,10 +209,11 @@ def read_drawing(data: Any, domains: Mapping[str, Domain], *, source: str = "dra
     _expect(isinstance(raw, list) and len(raw) > 0, "request: patterns: expected a non-empty list of patterns")
     bodies: dict[str, Any] = {}
     for i, pattern in enumerate(raw):
-        name, body = _pattern_body(i, pattern)
+        name, body = _pattern_body(i, pattern, domain)
         _expect(name not in bodies, f"request: patterns: the name {name!r} is used by two patterns; rename one")
         bodies[name] = body
-    patterns = _load({"format": FORMAT, "domain": domain.name, "patterns": bodies}, source, domain.name)
+    described = {"description": data["description"]} if data.get("description") is not None else {}
+    patterns = _load({"format": FORMAT, "domain": domain.name, **described, "patterns": bodies}, source, domain.name)
     if domain.map_check is not None:
         for name, series in patterns.items():
             for j, predicate in enumerate(series.predicates):
@@ -213,13 +221,13 @@ def read_drawing(data: Any, domains: Mapping[str, Domain], *, source: str = "dra
                 if problem:
                     label = f"subgoals.{series.names[j]}" if series.names else f"subgoals[{j}]"
                     raise RequestError(f"{source}: pattern {name!r}: {label}.{predicate.kind}: {problem}")
-    return Drawing(domain, map_name, patterns)
+    return Drawing(domain, map_name, patterns, described.get("description"))
 
 
 def save_drawing(drawing: Drawing, path: Path) -> None:
     """Write the drawing's patterns to ``path`` with :func:`save_patterns` (atomically)."""
     tmp = path.with_name(f".{path.name}.tmp")
-    save_patterns(tmp, drawing.patterns, domain=drawing.domain.name)
+    save_patterns(tmp, drawing.patterns, domain=drawing.domain.name, description=drawing.description)
     os.replace(tmp, path)
 
 
@@ -234,16 +242,20 @@ def infer_domain(patterns: Mapping[str, SubgoalSeries], domains: Mapping[str, Do
                        f"{sorted(domains)}", status=422)
 
 
-def to_document(patterns: Mapping[str, SubgoalSeries], domain: Domain) -> list[dict[str, Any]]:
-    """Patterns as the page edits them (the inverse of :func:`read_drawing`)."""
+def to_document(patterns: Mapping[str, SubgoalSeries], domain: Domain, source: str) -> list[dict[str, Any]]:
+    """Patterns as the page edits them (the inverse of :func:`read_drawing`); ``source`` names the file."""
     out = []
     for name, series in patterns.items():
         names: Sequence[str | None] = series.names or [None] * len(series)
-        subgoals = [{"name": label, **domain.drawable(p).to_dict()}
-                    for label, p in zip(names, series.predicates, strict=True)]
+        subgoals = []
+        for j, (label, p) in enumerate(zip(names, series.predicates, strict=True)):
+            try:
+                subgoals.append({"name": label, **domain.to_page(p)})
+            except FormError as exc:
+                raise RequestError(f"{source}: pattern {name!r}: subgoals[{j}]: {exc}", status=422) from None
         order = None
         if series.order is not None:
             full = series.names or [f"sg{j + 1}" for j in range(len(series))]
             order = [[full[a], full[b]] for a, b in series.order]
-        out.append({"name": name, "subgoals": subgoals, "order": order})
+        out.append({"name": name, "subgoals": subgoals, "order": order, "description": series.description})
     return out

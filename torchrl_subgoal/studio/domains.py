@@ -3,7 +3,7 @@
 A :class:`Domain` is everything the studio needs to edit one environment's
 subgoals; the page is driven by what it serves (``geometry()["kind"]`` picks
 the drawing: ``"grid"`` for cells, ``"table"`` for circles on a continuous
-map). The maps come from the environments' own definitions
+map, ``"form"`` for boxes over named observation components). The maps come from the environments' own definitions
 (:mod:`torchrl_subgoal.envs.four_rooms`' ``LAYOUT``, PinBall's configuration
 loader), never a copy. Adding a domain is one more :class:`Domain` in
 :func:`default_domains`, one builder in :mod:`torchrl_subgoal.studio.training`
@@ -18,12 +18,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from torchrl_subgoal.envs import four_rooms
+from torchrl_subgoal.envs import fetch, four_rooms
 from torchrl_subgoal.envs import pinball as pinball_env
 from torchrl_subgoal.envs.pinball import PinBallConfig
-from torchrl_subgoal.subgoals import Cell, Circle, Predicate, State
+from torchrl_subgoal.subgoals import Box, Cell, Circle, Predicate, State
 
-__all__ = ["Domain", "Limit", "default_domains"]
+__all__ = ["Domain", "FormError", "Limit", "default_domains"]
 
 
 @dataclass(frozen=True)
@@ -57,8 +57,11 @@ class Domain:
         map_check: an extra check of one subgoal on the chosen map, or ``None``.
         limits: bounds of the "Try it" settings ``episodes``, ``learners``, ``max_steps``.
         recipe: the recipe that trains with a saved file.
-        drawable: a predicate as the page draws it (four-rooms: a state number
-            becomes its cell); the identity by default.
+        to_page: a loaded predicate as the page edits it (four-rooms: a state
+            number becomes its cell); its file form by default.
+        from_page: a subgoal the page sent (without its name) as the file's
+            predicate, and where it is (for messages); the identity by default.
+        try_note: why "Try it" is off for this domain (it is on when ``limits`` is given).
     """
 
     name: str
@@ -69,12 +72,15 @@ class Domain:
     map_check: Callable[[Predicate, str], str | None] | None = None
     limits: Mapping[str, Limit] = field(default_factory=dict)
     recipe: str = ""
-    drawable: Callable[[Predicate], Predicate] = lambda predicate: predicate
+    to_page: Callable[[Predicate], dict[str, Any]] = lambda predicate: predicate.to_dict()
+    from_page: Callable[[dict[str, Any], str], dict[str, Any]] = lambda subgoal, where: subgoal
+    try_note: str = ""
 
     def describe(self) -> dict[str, Any]:
         """What ``/api/domains`` says about this domain."""
         return {
             "name": self.name, "title": self.title, "maps": list(self.maps), "recipe": self.recipe,
+            "try_note": self.try_note,
             "limits": {k: {"default": v.default, "min": v.low, "max": v.high} for k, v in self.limits.items()},
         }
 
@@ -86,10 +92,56 @@ def _four_rooms_geometry(map_name: str) -> dict[str, Any]:
     }
 
 
-def _cell_of_state(predicate: Predicate) -> Predicate:
+def _cell_of_state(predicate: Predicate) -> dict[str, Any]:
     if isinstance(predicate, State):
-        return Cell(*four_rooms.free_cells()[predicate.state])
-    return predicate
+        return Cell(*four_rooms.free_cells()[predicate.state]).to_dict()
+    return predicate.to_dict()
+
+
+class FormError(ValueError):
+    """A subgoal the page sent (or a file holds) that the form cannot express; the message says where."""
+
+
+def _fetch_geometry(map_name: str) -> dict[str, Any]:
+    return {
+        "kind": "form", "observation_size": fetch.OBSERVATION_SIZE, "default_margin": fetch.SUBGOAL_MARGIN,
+        "components": [{"name": n, "start": s.start, "size": s.stop - s.start} for n, s in fetch.COMPONENTS.items()],
+    }
+
+
+def _box_to_page(predicate: Predicate) -> dict[str, Any]:
+    """A box as ``{"box": {"components", "centre", "margin"}}`` (a single margin when all are equal)."""
+    body = predicate.to_dict()
+    if not isinstance(predicate, Box):
+        return body
+    names = fetch.components_of(predicate.box_dims)
+    if names is None:
+        raise FormError(f"box entries {list(predicate.box_dims)} are not whole observation components "
+                        f"({', '.join(fetch.COMPONENTS)}); the form edits whole components, edit this file by hand")
+    box = body["box"]
+    return {"box": {"components": list(names), "centre": box["centre"], "margin": box["margin"]}}
+
+
+def _box_from_page(subgoal: dict[str, Any], where: str) -> dict[str, Any]:
+    """``{"box": {"components": [...], ...}}`` as the file's ``{"box": {"dims": [...], ...}}``."""
+    box = subgoal.get("box")
+    if not isinstance(box, Mapping) or "components" not in box:
+        return subgoal
+    names = box["components"]
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise FormError(f"{where}.box.components: expected a non-empty list of component names, got {names!r}")
+    if "dims" in box or "slice" in box:
+        raise FormError(f"{where}.box: give 'components' or 'dims'/'slice', not both")
+    try:
+        dims = fetch.component_dims(*names)
+    except KeyError as exc:
+        raise FormError(f"{where}.box.components: {exc.args[0]}") from None
+    centre = box.get("centre")
+    if isinstance(centre, list) and len(centre) != len(dims):
+        raise FormError(f"{where}.box.centre: {len(centre)} values, but {', '.join(names)} "
+                        f"{'has' if len(names) == 1 else 'have'} {len(dims)} coordinates; give one per coordinate")
+    rest = {k: v for k, v in box.items() if k != "components"}
+    return {**subgoal, "box": {**rest, "dims": list(dims)}}
 
 
 @functools.lru_cache(maxsize=32)
@@ -113,7 +165,7 @@ def _pinball_map_check(maps: Mapping[str, str]) -> Callable[[Predicate, str], st
         cfg = _load_map(maps[map_name])
         x, y = predicate.centre[:2]
         for i, polygon in enumerate(cfg.polygons):
-            if pinball_env._point_in_polygon((x, y), polygon):
+            if pinball_env.point_in_polygon((x, y), polygon):
                 return (f"centre ({x:g}, {y:g}) lies inside obstacle {i + 1} of the {map_name!r} map; "
                         "move it to where the ball can go")
         return None
@@ -121,13 +173,23 @@ def _pinball_map_check(maps: Mapping[str, str]) -> Callable[[Predicate, str], st
     return check
 
 
+TRY_NOTE_FETCH = (
+    "Not offered for pick-and-place: one epoch of DDPG in MuJoCo took about 10 minutes on a shared "
+    "2-core machine (docs/pick_and_place.md), far too slow for a click. Save the file and run the "
+    "recipe command shown under File."
+)
+
+
 def default_domains(pinball_maps: Mapping[str, str | Path] | None = None) -> dict[str, Domain]:
-    """Four-rooms and PinBall (maps ``simple``, ``hard`` and ``pinball_maps``: name -> file).
+    """Four-rooms, PinBall (maps ``simple``, ``hard`` and ``pinball_maps``: name -> file), pick-and-place.
+
+    Pick-and-place needs no MuJoCo here: its form is built from
+    :data:`torchrl_subgoal.envs.fetch.COMPONENTS`.
 
     Examples:
         >>> domains = default_domains()
         >>> sorted(domains), list(domains["pinball"].maps)
-        (['four_rooms', 'pinball'], ['simple', 'hard'])
+        (['four_rooms', 'pick_and_place', 'pinball'], ['simple', 'hard'])
         >>> domains["four_rooms"].geometry("")["rows"][0]
         'wwwwwwwwwwwww'
     """
@@ -142,7 +204,7 @@ def default_domains(pinball_maps: Mapping[str, str | Path] | None = None) -> dic
             "four_rooms", "Four rooms", four_rooms.check_subgoal, _four_rooms_geometry,
             limits={"episodes": Limit(300, 1, 2000), "learners": Limit(20, 1, 200),
                     "max_steps": Limit(1000, 50, 1000)},
-            recipe="recipes/four_rooms.py", drawable=_cell_of_state,
+            recipe="recipes/four_rooms.py", to_page=_cell_of_state,
         ),
         "pinball": Domain(
             "pinball", "PinBall", pinball_env.check_subgoal, lambda m: _pinball_geometry(maps[m]), maps,
@@ -150,5 +212,10 @@ def default_domains(pinball_maps: Mapping[str, str | Path] | None = None) -> dic
             limits={"episodes": Limit(30, 1, 100), "learners": Limit(5, 1, 10),
                     "max_steps": Limit(10_000, 100, 10_000)},
             recipe="recipes/pinball.py",
+        ),
+        "pick_and_place": Domain(
+            "pick_and_place", "Pick and place", fetch.check_subgoal, _fetch_geometry,
+            recipe="recipes/pick_and_place.py", to_page=_box_to_page, from_page=_box_from_page,
+            try_note=TRY_NOTE_FETCH,
         ),
     }

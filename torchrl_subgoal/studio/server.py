@@ -48,7 +48,7 @@ from torchrl_subgoal.studio.document import (
 from torchrl_subgoal.studio.domains import Domain, default_domains
 from torchrl_subgoal.studio.jobs import JobError, Jobs
 from torchrl_subgoal.studio.training import TrySettings, try_pattern
-from torchrl_subgoal.subgoals import SubgoalFileError, load_patterns
+from torchrl_subgoal.subgoals import SubgoalFileError, file_description, load_patterns
 
 __all__ = ["create_app", "listen", "main", "serve"]
 
@@ -155,11 +155,12 @@ def create_app(
         path = _existing(root, name)
         try:
             patterns = load_patterns(path)
+            description = file_description(path)
         except SubgoalFileError as exc:
             raise RequestError(str(exc).replace(str(path), path.name), status=422) from None
         domain = infer_domain(patterns, studio.domains, path.name)
         return jsonify(file=path.name, path=str(path), domain=domain.name, recipe=_recipe(domain, path),
-                       patterns=to_document(patterns, domain))
+                       description=description, patterns=to_document(patterns, domain, path.name))
 
     @app.get("/files/<path:name>")
     def download(name: str) -> Response:
@@ -186,6 +187,8 @@ def create_app(
         if name not in drawing.patterns:
             raise RequestError(f"pattern: expected one of {list(drawing.patterns)}, got {name!r}")
         domain = drawing.domain
+        if not domain.limits:
+            raise RequestError(f"Try it: {domain.try_note or 'not offered for ' + domain.title}")
         given = {k: data.get(k, limit.default) for k, limit in domain.limits.items()}
         try:
             values = {k: domain.limits[k].check(v, k) for k, v in given.items()}

@@ -21,6 +21,7 @@ const S = {
   validateTimer: null,
   job: null,              // the running "Try it": {id, domain, pattern}
   results: {},            // domain/pattern -> {result, signature}
+  newComponents: null,    // form: the components a new box subgoal covers
 };
 
 class ApiError extends Error {
@@ -55,6 +56,9 @@ const doc = () => S.docs[S.domain];
 const pattern = () => doc().patterns[doc().current];
 const fullName = (p, i) => p.subgoals[i].name || `sg${i + 1}`;
 const isGrid = () => S.geometry && S.geometry.kind === "grid";
+const isForm = () => S.geometry && S.geometry.kind === "form";     // boxes over named components
+const isTable = () => S.geometry && S.geometry.kind === "table";
+const canTry = () => Object.keys(S.domains[S.domain].limits).length > 0;
 
 function newPattern(d) {
   const taken = new Set(d ? d.patterns.map((p) => p.name) : []);
@@ -80,12 +84,13 @@ function toRequest(p) {
       return out;
     }),
     order: p.partial ? p.edges.map(([a, b]) => [fullName(p, a), fullName(p, b)]) : null,
+    description: p.description || null,  // not edited here; kept from the file
   };
 }
 
 function fromDocument(p) {
   const subgoals = p.subgoals.map((s) => Object.assign({}, s, { name: s.name || null }));
-  const model = { name: p.name, subgoals, partial: p.order !== null, edges: [] };
+  const model = { name: p.name, subgoals, partial: p.order !== null, edges: [], description: p.description };
   if (p.order) {
     const names = subgoals.map((s, i) => fullName(model, i));
     model.edges = p.order.map(([a, b]) => [names.indexOf(a), names.indexOf(b)]);
@@ -94,7 +99,8 @@ function fromDocument(p) {
 }
 
 function drawing(patterns) {
-  return { domain: S.domain, map: S.map, file: doc().file, patterns: patterns.map(toRequest) };
+  return { domain: S.domain, map: S.map, file: doc().file, description: doc().description || null,
+    patterns: patterns.map(toRequest) };
 }
 
 const signature = (p) => JSON.stringify(toRequest(p));
@@ -157,13 +163,15 @@ function insidePolygon(x, y, poly) {
 
 // ------------------------------------------------------------------ drawing the map
 
-function el(name, attrs, parent, text) {
-  const node = document.createElementNS(SVG_NS, name);
+function fill(node, attrs, parent, text) {
   for (const [k, v] of Object.entries(attrs || {})) node.setAttribute(k, v);
   if (text !== undefined) node.textContent = text;
   if (parent) parent.appendChild(node);
   return node;
 }
+// an SVG element; html() makes an HTML one
+const el = (name, attrs, parent, text) => fill(document.createElementNS(SVG_NS, name), attrs, parent, text);
+const html = (name, attrs, parent, text) => fill(document.createElement(name), attrs, parent, text);
 
 function cellSize() {
   const g = S.geometry;
@@ -184,7 +192,13 @@ function renderMap() {
   svg.replaceChildren();
   svg.setAttribute("viewBox", `0 0 ${VIEW} ${VIEW}`);
   const g = S.geometry;
+  svg.toggleAttribute("hidden", Boolean(isForm()));
+  $("box-form").hidden = !isForm();
   if (!g) return;
+  if (isForm()) {
+    renderForm();
+    return;
+  }
   const defs = el("defs", {}, svg);
   const marker = el("marker", { id: "head", viewBox: "0 0 10 10", refX: 9, refY: 5, markerWidth: 7, markerHeight: 7,
     orient: "auto-start-reverse" }, defs);
@@ -253,6 +267,10 @@ function renderMap() {
 
 function where(s) {
   if (s.cell) return `(${s.cell[0]}, ${s.cell[1]})`;
+  if (s.box) {
+    const m = Array.isArray(s.box.margin) ? `[${s.box.margin.join(", ")}]` : s.box.margin;
+    return `${s.box.components.join(" + ")} = [${s.box.centre.join(", ")}] ± ${m}`;
+  }
   const [x, y] = s.circle.centre;
   return `(${x.toFixed(3)}, ${y.toFixed(3)}) r ${s.circle.radius}`;
 }
@@ -282,6 +300,119 @@ function toModel(event) {
 function moveTo(s, at) {
   if (s.cell) s.cell = at.cell;
   else s.circle.centre = at.centre;
+}
+
+// ------------------------------------------------------------------ the box form (pick-and-place)
+
+const componentSize = (name) => S.geometry.components.find((c) => c.name === name).size;
+
+// "0.01" -> 0.01, "0.01, 0.02" -> [0.01, 0.02]; anything else is sent as typed (the server says what is wrong)
+function parseMargin(text) {
+  const parts = text.split(/[\s,]+/).filter((x) => x !== "");
+  const numbers = parts.map(Number);
+  if (parts.length === 0 || numbers.some(Number.isNaN)) return text;
+  return numbers.length === 1 ? numbers[0] : numbers;
+}
+
+function newBox() {
+  const components = S.newComponents.slice();
+  if (components.length === 0) {
+    sayError("Tick at least one observation component for the new subgoal.");
+    return;
+  }
+  const size = components.reduce((n, c) => n + componentSize(c), 0);
+  pattern().subgoals.push({ name: null, box: { components, centre: new Array(size).fill(0),
+    margin: S.geometry.default_margin } });
+  S.selected = pattern().subgoals.length - 1;
+  changed();
+}
+
+// a field edit: the model changes, the form keeps its inputs (and the focus); the server checks it
+function edited() {
+  renderPanels();
+  scheduleValidate();
+}
+
+function renderForm() {
+  const form = $("box-form");
+  form.replaceChildren();
+  const g = S.geometry;
+  if (S.newComponents === null) S.newComponents = g.components.length > 2 ? [g.components[2].name] : [];
+  const add = html("fieldset", { class: "new-box" }, form);
+  html("legend", {}, add, "New subgoal: a box over these observation components");
+  const boxes = document.createElement("div");
+  boxes.className = "components";
+  for (const c of g.components) {
+    const label = document.createElement("label");
+    const check = document.createElement("input");
+    check.type = "checkbox";
+    check.value = c.name;
+    check.checked = S.newComponents.includes(c.name);
+    check.addEventListener("change", () => {
+      S.newComponents = g.components.map((x) => x.name).filter((n) =>
+        n === c.name ? check.checked : S.newComponents.includes(n));
+    });
+    label.append(check, ` ${c.name} `);
+    const dims = document.createElement("small");
+    dims.textContent = c.size > 1 ? `[${c.start}–${c.start + c.size - 1}]` : `[${c.start}]`;
+    label.append(dims);
+    boxes.appendChild(label);
+  }
+  add.appendChild(boxes);
+  const addButton = button("+ Subgoal", "add a box subgoal over the ticked components, at the end of the order", newBox);
+  addButton.id = "add-box";
+  add.appendChild(addButton);
+
+  const p = pattern();
+  p.subgoals.forEach((s, i) => {
+    const card = html("fieldset", { class: i === S.selected ? "box-card selected" : "box-card", "data-index": i }, form);
+    html("legend", {}, card, `${i + 1}. ${fullName(p, i)}`);
+    const table = document.createElement("table");
+    let k = 0;
+    for (const name of s.box.components) {
+      const tr = document.createElement("tr");
+      const th = document.createElement("th");
+      th.textContent = name;
+      tr.appendChild(th);
+      const size = g.components.some((c) => c.name === name) ? componentSize(name) : 0;
+      for (let j = 0; j < size; j += 1) {
+        const index = k + j;
+        const td = document.createElement("td");
+        const input = document.createElement("input");
+        input.type = "number";
+        input.step = "0.01";
+        input.className = "box-value";
+        input.value = s.box.centre[index] ?? "";
+        input.setAttribute("aria-label", `${name}[${j}] of subgoal ${i + 1}`);
+        input.addEventListener("change", () => {
+          const v = parseFloat(input.value);
+          s.box.centre[index] = Number.isNaN(v) ? null : v;
+          S.selected = i;
+          edited();
+        });
+        td.appendChild(input);
+        tr.appendChild(td);
+      }
+      k += size;
+      table.appendChild(tr);
+    }
+    card.appendChild(table);
+    const row = document.createElement("div");
+    row.className = "row";
+    const label = document.createElement("label");
+    const margin = document.createElement("input");
+    margin.className = "box-margin";
+    margin.value = Array.isArray(s.box.margin) ? s.box.margin.join(", ") : String(s.box.margin);
+    margin.title = "one margin for every coordinate, or one per coordinate separated by commas";
+    margin.setAttribute("aria-label", `margin of subgoal ${i + 1}`);
+    margin.addEventListener("change", () => { s.box.margin = parseMargin(margin.value); S.selected = i; edited(); });
+    label.append("margin ±", margin);
+    row.appendChild(label);
+    card.appendChild(row);
+  });
+  if (p.subgoals.length === 0) {
+    html("p", { class: "hint" }, form, "No subgoals yet: tick components above and press “+ Subgoal”.");
+  }
 }
 
 function newSubgoal(at) {
@@ -398,7 +529,7 @@ function renderPanels() {
     name.addEventListener("change", () => { s.name = name.value.trim() || null; changed(); });
     const at = document.createElement("span");
     at.className = "where";
-    at.textContent = s.cell ? where(s) : `(${s.circle.centre[0].toFixed(3)}, ${s.circle.centre[1].toFixed(3)})`;
+    at.textContent = s.circle ? `(${s.circle.centre[0].toFixed(3)}, ${s.circle.centre[1].toFixed(3)})` : where(s);
     li.append(name, " ", at, " ");
     if (s.circle) {
       const radius = document.createElement("input");
@@ -419,7 +550,7 @@ function renderPanels() {
     list.appendChild(li);
   });
 
-  $("radius-row").hidden = isGrid();
+  $("radius-row").hidden = !isTable();
   $("partial").checked = p.partial;
   $("order-panel").hidden = !p.partial;
   const edges = $("edges");
@@ -438,11 +569,13 @@ function renderPanels() {
   }
 
   const running = S.job !== null;
-  $("try").disabled = running;
+  $("try").disabled = running || !canTry();
   $("cancel").hidden = !running;
   $("hint").textContent = isGrid()
     ? "Click a cell to add the next subgoal · drag to move · right-click to remove. S: start, G: goal; shaded: hallways."
-    : "Click to add the next subgoal circle · drag to move · right-click to remove. Blue: start, red: target.";
+    : isForm()
+      ? `A subgoal is reached where each ticked component's coordinates lie within target ± margin (the ${S.geometry.observation_size}-d observation's entries in brackets). Reorder or remove on the right.`
+      : "Click to add the next subgoal circle · drag to move · right-click to remove. Blue: start, red: target.";
 }
 
 function render() {
@@ -489,7 +622,7 @@ async function openFile(name) {
     const data = await api("GET", `/api/files/${encodeURIComponent(name)}`);
     if (data.domain !== S.domain) await setDomain(data.domain);
     S.docs[data.domain] = { file: data.file, patterns: data.patterns.map(fromDocument), current: 0,
-      saved: data.file, recipe: data.recipe };
+      saved: data.file, recipe: data.recipe, description: data.description };
     S.selected = null;
     history.replaceState(null, "", `?file=${encodeURIComponent(data.file)}`);
     render();
@@ -505,7 +638,7 @@ async function openFile(name) {
 async function loadGeometry() {
   const query = new URLSearchParams({ domain: S.domain, map: S.map });
   S.geometry = await api("GET", `/api/geometry?${query}`);
-  if (!isGrid()) $("radius").value = S.geometry.default_radius;
+  if (isTable()) $("radius").value = S.geometry.default_radius;
 }
 
 async function setDomain(name) {
@@ -519,10 +652,16 @@ async function setDomain(name) {
   for (const key of ["episodes", "learners"]) {
     const input = $(key);
     const limit = info.limits[key];
+    input.disabled = !limit;
+    if (!limit) continue;
     input.min = limit.min;
     input.max = limit.max;
     input.value = limit.default;
   }
+  $("episodes").closest(".row").hidden = Object.keys(info.limits).length === 0;
+  $("try").closest(".row").hidden = Object.keys(info.limits).length === 0;
+  $("try-note").textContent = info.try_note ||
+    "A short learning with this pattern against the same learner without shaping (same seeds).";
   S.selected = null;
   await loadGeometry();
 }
