@@ -1050,6 +1050,13 @@ def file_description(path: str | Path) -> str | None:
 
     Raises:
         SubgoalFileError: as :func:`load_patterns`.
+
+    Examples:
+        >>> import tempfile, pathlib
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "mine.yaml"
+        >>> save_patterns(path, {"p": SubgoalSeries([State(3)])}, description="drawn by hand")
+        >>> file_description(path)
+        'drawn by hand'
     """
     path = Path(path)
     data = parse_text(_read_file(path), str(path))

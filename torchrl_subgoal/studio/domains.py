@@ -99,7 +99,14 @@ def _cell_of_state(predicate: Predicate) -> dict[str, Any]:
 
 
 class FormError(ValueError):
-    """A subgoal the page sent (or a file holds) that the form cannot express; the message says where."""
+    """A subgoal the page sent (or a file holds) that the form cannot express; the message says where.
+
+    Examples:
+        >>> _box_from_page({"box": {"components": []}}, "patterns.p.subgoals[0]")
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.studio.domains.FormError: patterns.p.subgoals[0].box.components: expected a non-empty list of component names, got []
+    """
 
 
 def _fetch_geometry(map_name: str) -> dict[str, Any]:
