@@ -282,7 +282,11 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
 def build_patterns(cfg: Config) -> dict[str, dict[str, Any]]:
     """The human pattern(s) and one random pattern per learning (RRS)."""
     human = fetch.human_patterns(cfg.subgoals)
-    rand = fetch.random_patterns(next(iter(human.values())), cfg.learnings, seed=cfg.seed)
+    first = next(iter(human))
+    try:
+        rand = fetch.random_patterns(human[first], cfg.learnings, seed=cfg.seed)
+    except ValueError as exc:
+        raise ConfigError(f"{cfg.subgoals}: pattern {first!r}: {exc}") from None
     return {"human": dict(human), "random": {p.name: p for p in rand}, "none": {}}
 
 

@@ -172,3 +172,16 @@ def test_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert "--shaping: not valid JSON" in capsys.readouterr().err
     assert pick_and_place.main(["--envs", "6", "--collector-workers", "4", "--results", str(tmp_path)]) == 2
     assert "--envs: 6 envs do not split evenly over --collector-workers 4 x --env-processes 0" in capsys.readouterr().err
+
+
+def test_a_pattern_rrs_cannot_randomise_is_one_line_naming_the_file(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    # a first pattern over gripper velocities: a valid file, but RRS has no range to draw its centres from
+    path = tmp_path / "velocities.yaml"
+    path.write_text("format: torchrl_subgoal/v1\npatterns:\n  moving:\n    subgoals:\n"
+                    "    - box: {centre: [0, 0, 0], margin: 0.01, slice: [20, 23]}\n")
+    pick_and_place = recipe("pick_and_place")
+    assert pick_and_place.main(["--subgoals", str(path), "--results", str(tmp_path / "out")]) == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]  # (gymnasium-robotics may warn on import before it)
+    assert last.startswith(f"error: {path}: pattern 'moving': RRS has no range")
+    assert "'gripper_velocity'" in last and not (tmp_path / "out").exists()

@@ -242,7 +242,7 @@ def random_patterns(human: SubgoalSeries, num_patterns: int, seed: int) -> list[
         boxes = []
         for predicate in human.predicates:
             if not isinstance(predicate, Box):
-                raise TypeError(f"random_patterns needs box subgoals, got {type(predicate).__name__}")
+                raise ValueError(f"random_patterns needs box subgoals, got {type(predicate).__name__}")
             low = torch.tensor([RANDOM_CENTRE_RANGE[_component_of(d)][0] for d in predicate.box_dims])
             high = torch.tensor([RANDOM_CENTRE_RANGE[_component_of(d)][1] for d in predicate.box_dims])
             centre = low + (high - low) * torch.rand(len(predicate.box_dims), generator=generator)
@@ -264,9 +264,10 @@ def _component_of(dim: int) -> str:
     for name, part in COMPONENTS.items():
         if part.start <= dim < part.stop:
             if name not in RANDOM_CENTRE_RANGE:
-                raise KeyError(f"no random range for observation component {name!r} (entry {dim})")
+                raise ValueError(f"RRS has no range to draw random centres from for observation component {name!r} "
+                                 f"(entry {dim}); it draws over {', '.join(RANDOM_CENTRE_RANGE)}")
             return name
-    raise IndexError(f"entry {dim} is outside the {OBSERVATION_SIZE}-d observation")
+    raise ValueError(f"entry {dim} is outside the {OBSERVATION_SIZE}-d observation")
 
 
 def three_state_aggregation(near: float = 0.05) -> StateAggregation:
