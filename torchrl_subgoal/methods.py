@@ -42,6 +42,11 @@ class Method:
             ``"naive"`` (fixed ``η``), ``"aggregation"`` (learned over ``g(s)``)
             or ``"none"``.
         subgoals: which patterns it uses: ``"human"``, ``"random"`` or ``"none"``.
+
+    Examples:
+        >>> method = Method("HRS", "subgoals", "human")
+        >>> method.shaping, method.subgoals
+        ('subgoals', 'human')
     """
 
     name: str
@@ -50,7 +55,12 @@ class Method:
 
 
 def paper_methods(baseline: str) -> dict[str, Method]:
-    """The five methods of the paper, with ``baseline`` the unshaped agent's name."""
+    """The five methods of the paper, with ``baseline`` the unshaped agent's name.
+
+    Examples:
+        >>> list(paper_methods("SARSA"))
+        ['HRS', 'RRS', 'SARSA', 'NRS', 'SARSA-RS']
+    """
     methods = [
         Method("HRS", "subgoals", "human"),
         Method("RRS", "subgoals", "random"),
@@ -64,7 +74,17 @@ def paper_methods(baseline: str) -> dict[str, Method]:
 def random_patterns(
     candidates: Sequence[Predicate], num_patterns: int, num_subgoals: int, seed: int
 ) -> list[SubgoalSeries]:
-    """``num_patterns`` random chains (RRS), reproducible from ``seed``."""
+    """``num_patterns`` random chains (RRS), reproducible from ``seed``.
+
+    Examples:
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> patterns = random_patterns([Cell(1, 1), Cell(2, 2), Cell(3, 3)], num_patterns=2, num_subgoals=2, seed=0)
+        >>> [p.name for p in patterns], [len(p) for p in patterns]
+        (['random_1', 'random_2'], [2, 2])
+        >>> [p.to_dict() for p in patterns] == [p.to_dict() for p in random_patterns(
+        ...     [Cell(1, 1), Cell(2, 2), Cell(3, 3)], num_patterns=2, num_subgoals=2, seed=0)]
+        True
+    """
     generator = torch.Generator().manual_seed(seed)
     return [
         SubgoalSeries.random(candidates, num_subgoals, generator, name=f"random_{i + 1}")
@@ -91,6 +111,15 @@ def shaping_parts(
     ``batch_shape`` is the potential's: the env batch for one table per env (one
     learner per env, as the SARSA recipes), ``()`` for one table shared by every
     env (one learner stepping many envs, as A2C).
+
+    Examples:
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> print(shaping_parts(Method("SARSA", "none", "none"), (2,)))
+        None
+        >>> series = SubgoalSeries([Cell(4, 9)], name="alice")
+        >>> subgoals, potential, options = shaping_parts(Method("HRS", "subgoals", "human"), (2,), patterns=[series])
+        >>> [s.name for s in subgoals], type(potential).__name__, sorted(options)
+        (['alice'], 'TabularPotential', ['observation_key', 'pattern_index', 'start_potential', 'zero_terminal_potential'])
     """
     if method.shaping == "none":
         return None

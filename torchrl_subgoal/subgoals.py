@@ -234,7 +234,13 @@ def _unique(mapping: Any, where: str, what: str) -> None:
 
 @dataclass(frozen=True)
 class Region:
-    """A predicate compiled over an observation of ``size`` entries (see module doc)."""
+    """A predicate compiled over an observation of ``size`` entries (see module doc).
+
+    Examples:
+        >>> region = Cell(4, 9).region(2)
+        >>> region.lo.tolist(), region.hi.tolist()
+        ([4.0, 9.0], [4.0, 9.0])
+    """
 
     lo: torch.Tensor
     hi: torch.Tensor
@@ -250,6 +256,11 @@ class Predicate:
     (the built-ins: override :meth:`region` and :meth:`dims`), or is a
     *condition* on the step's TensorDict: override :meth:`__call__` to return
     a boolean mask of the batch (see :class:`Condition`).
+
+    Examples:
+        >>> cell = Cell(4, 9)
+        >>> isinstance(cell, Predicate), cell.compiled, cell.to_dict()
+        (True, True, {'cell': [4, 9]})
     """
 
     kind: str = "predicate"
@@ -578,7 +589,16 @@ def _check_keys(body: Mapping[str, Any], allowed: set[str], where: str) -> None:
 
 
 def parse_predicate(spec: Any, where: str) -> Predicate:
-    """Build a predicate from its file form; ``where`` prefixes error messages."""
+    """Build a predicate from its file form; ``where`` prefixes error messages.
+
+    Examples:
+        >>> parse_predicate({"cell": [4, 9]}, "alice.yaml: subgoals[0]").to_dict()
+        {'cell': [4, 9]}
+        >>> parse_predicate({"cell": [4]}, "alice.yaml: subgoals[0]")
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.subgoals.SubgoalFileError: alice.yaml: subgoals[0].cell: expected [row, col], got [4]
+    """
     if not isinstance(spec, Mapping):
         raise SubgoalFileError(f"{where}: expected a mapping such as {{cell: [4, 9]}}, got {spec!r}")
     _unique(spec, where, "field")

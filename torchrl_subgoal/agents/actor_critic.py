@@ -32,6 +32,11 @@ class ActorCriticConfig:
             TD error (the paper's text); ``"action"``: a critic ``Q(s, a)`` per
             action learned by SARSA and an actor step scaled by ``Q(s, a)``
             (the authors' released agent).
+
+    Examples:
+        >>> config = ActorCriticConfig(actor_lr=0.01, critic_lr=0.01, gamma=0.99, value_lr=0.1)
+        >>> config.order, config.critic, config.normalize_lr
+        (3, 'state', False)
     """
 
     actor_lr: float
@@ -59,7 +64,14 @@ AC_PRESETS: dict[str, ActorCriticConfig] = {
 
 
 def fourier_coefficients(order: int, dim: int) -> torch.Tensor:
-    """Every ``c ∈ {0..order}^dim`` in lexicographic order, ``[(order+1)^dim, dim]`` (Konidaris et al. 2011)."""
+    """Every ``c ∈ {0..order}^dim`` in lexicographic order, ``[(order+1)^dim, dim]`` (Konidaris et al. 2011).
+
+    Examples:
+        >>> fourier_coefficients(1, 2).tolist()
+        [[0.0, 0.0], [0.0, 1.0], [1.0, 0.0], [1.0, 1.0]]
+        >>> fourier_coefficients(3, 4).shape
+        torch.Size([256, 4])
+    """
     return torch.tensor(list(itertools.product(range(order + 1), repeat=dim)), dtype=torch.float64)
 
 

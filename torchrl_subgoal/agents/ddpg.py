@@ -73,6 +73,11 @@ class DDPGConfig:
         clip_positive: clip targets above at 0 (the authors' ``clip_pos_returns``).
         norm_clip: normalised observations are clipped to ``±norm_clip``.
         norm_eps: the normaliser's smallest standard deviation.
+
+    Examples:
+        >>> config = DDPGConfig(hidden=(64, 64))
+        >>> config.hidden, config.gamma, config.clip_return
+        ((64, 64), 0.98, 50.0)
     """
 
     hidden: tuple[int, ...] = (256, 256, 256)
@@ -92,7 +97,14 @@ class DDPGConfig:
 
 
 def mlp(in_features: int, out_features: int, hidden: Sequence[int]) -> MLP:
-    """A ReLU MLP with ``hidden`` layers (TorchRL's :class:`~torchrl.modules.MLP`)."""
+    """A ReLU MLP with ``hidden`` layers (TorchRL's :class:`~torchrl.modules.MLP`).
+
+    Examples:
+        >>> import torch
+        >>> net = mlp(3, 2, (8, 8))
+        >>> net(torch.zeros(5, 3)).shape
+        torch.Size([5, 2])
+    """
     return MLP(in_features=in_features, out_features=out_features, num_cells=list(hidden),
                activation_class=nn.ReLU)
 
@@ -152,6 +164,18 @@ class ClippedTD0Estimator(TD0Estimator):
         low: lower bound of the target (``None``: none).
         high: upper bound of the target (``None``: none).
         **kwargs: :class:`~torchrl.objectives.value.TD0Estimator`'s arguments.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from tensordict.nn import TensorDictModule
+        >>> value = TensorDictModule(torch.nn.Linear(2, 1), in_keys=["observation"], out_keys=["state_value"])
+        >>> estimator = ClippedTD0Estimator(low=-1.0, high=0.0, gamma=0.9, value_network=value)
+        >>> td = TensorDict({"observation": torch.zeros(4, 2), "next": {
+        ...     "observation": torch.zeros(4, 2), "reward": torch.full((4, 1), -5.0),
+        ...     "done": torch.zeros(4, 1, dtype=torch.bool), "terminated": torch.zeros(4, 1, dtype=torch.bool)}}, [4])
+        >>> estimator.value_estimate(estimator(td)).flatten().tolist()  # -5 + 0.9 V(s') clipped to [-1, 0]
+        [-1.0, -1.0, -1.0, -1.0]
     """
 
     def __init__(self, *, low: float | None, high: float | None, **kwargs: Any) -> None:

@@ -147,7 +147,16 @@ def run_episodes_fused(
     *,
     progress: Callable[[int], None] | None = None,
 ) -> EpisodeRecords:
-    """Same as ``run_episodes(env, agent, episodes)`` (see the module doc), compiled."""
+    """Same as ``run_episodes(env, agent, episodes)`` (see the module doc), compiled.
+
+    Examples:
+        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> env = FourRoomsEnv(num_envs=8)
+        >>> agent = SoftmaxSarsa(8, env.num_states, 4, SARSA_PRESETS["released"], seed=0)
+        >>> run_episodes_fused(env, agent, 3).steps.shape
+        torch.Size([8, 3])
+    """
     base = env.base_env if isinstance(env, TransformedEnv) else env
     if base.device.type != "cpu":
         raise TypeError("the fused engine runs on the CPU")
@@ -169,7 +178,17 @@ def run_four_rooms_fused(
     progress: Callable[[int], None] | None = None,
     block: int = 2048,
 ) -> EpisodeRecords:
-    """The fused engine for four-rooms with SARSA (see :func:`run_episodes_fused`)."""
+    """The fused engine for four-rooms with SARSA (see :func:`run_episodes_fused`).
+
+    Examples:
+        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> env = FourRoomsEnv(num_envs=8)
+        >>> agent = SoftmaxSarsa(8, env.num_states, 4, SARSA_PRESETS["released"], seed=0)
+        >>> records = run_four_rooms_fused(env, agent, 3)
+        >>> records.steps.shape, bool((records.steps > 0).all())
+        (torch.Size([8, 3]), True)
+    """
     base, shaping = _unwrap(env, FourRoomsEnv)
     td = agent.act(env.reset())  # the same start as the TorchRL loop, tables compiled
     n = max(1, base.batch_size.numel())
@@ -306,7 +325,17 @@ def run_pinball_fused(
     block: int = 1024,
 ) -> EpisodeRecords:
     """The fused engine for :class:`~torchrl_subgoal.envs.PinBallEnv` with a
-    :class:`~torchrl_subgoal.agents.FourierActorCritic` (see :func:`run_episodes_fused`)."""
+    :class:`~torchrl_subgoal.agents.FourierActorCritic` (see :func:`run_episodes_fused`).
+
+    Examples:
+        >>> from torchrl_subgoal.agents import AC_PRESETS
+        >>> env = PinBallEnv(4, seed=0, max_steps=50)
+        >>> spec = env.observation_spec["observation"]
+        >>> agent = FourierActorCritic(4, spec.low[0], spec.high[0], 5, AC_PRESETS["released"], seed=0)
+        >>> records = run_pinball_fused(env, agent, 2)
+        >>> records.steps.shape, bool((records.steps <= 50).all())
+        (torch.Size([4, 2]), True)
+    """
     base, shaping = _unwrap(env, PinBallEnv)
     if base.physics.backend != "numba":
         raise TypeError("the fused engine needs PinBall's numba physics backend")

@@ -24,6 +24,10 @@ class SarsaConfig:
         gamma: discount ``γ``.
         temperature: softmax temperature ``τ`` (``π(a|s) ∝ exp(Q(s,a)/τ)``).
         value_lr: learning rate ``α_v`` of the subgoal potential.
+
+    Examples:
+        >>> SarsaConfig(lr=0.1, gamma=0.99, temperature=0.1, value_lr=0.1).temperature
+        0.1
     """
 
     lr: float

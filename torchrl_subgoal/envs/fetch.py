@@ -71,7 +71,15 @@ _MUJOCO_RANGE = ((3, 3), (3, 12))  # >= 3.3, < 3.12
 
 
 class FetchUnavailableError(ImportError):
-    """The ``fetch`` extra (MuJoCo, gymnasium-robotics) is missing or has a broken version."""
+    """The ``fetch`` extra (MuJoCo, gymnasium-robotics) is missing or has a broken version.
+
+    Examples:
+        >>> try:
+        ...     raise FetchUnavailableError("pick-and-place needs MuJoCo")
+        ... except ImportError as exc:
+        ...     print(exc)
+        pick-and-place needs MuJoCo
+    """
 
 
 def component_dims(*names: str) -> tuple[int, ...]:
@@ -139,6 +147,13 @@ def require_fetch() -> ModuleType:
 
     Raises:
         FetchUnavailableError: naming the install command.
+
+    Examples:
+        >>> INSTALL_HINT  # what the error tells to run when the extra is missing
+        "pip install 'torchrl_subgoal[fetch]'  (or `make install` in a checkout)"
+        >>> gymnasium = require_fetch()  # doctest: +SKIP
+        >>> ENV_ID in gymnasium.registry  # doctest: +SKIP
+        True
     """
     try:
         import gymnasium
@@ -219,7 +234,13 @@ def make_fetch_env(goal_seed: int, *, device: str | torch.device = "cpu", **kwar
 
 
 def human_patterns(path: str = PARTICIPANTS_FILE) -> dict[str, SubgoalSeries]:
-    """The participants' subgoal series (all five gave the same): gripper at the object, then grasped."""
+    """The participants' subgoal series (all five gave the same): gripper at the object, then grasped.
+
+    Examples:
+        >>> patterns = human_patterns()
+        >>> len(patterns) >= 1, [len(series) for series in patterns.values()][0]
+        (True, 2)
+    """
     return load_patterns(path)
 
 

@@ -40,7 +40,13 @@ SIZE = (len(_ROWS), len(_ROWS[0]))
 
 
 def free_cells() -> list[tuple[int, int]]:
-    """Free cells in row-major order; index = state number ((1,1) is 0, (11,11) is 103)."""
+    """Free cells in row-major order; index = state number ((1,1) is 0, (11,11) is 103).
+
+    Examples:
+        >>> cells = free_cells()
+        >>> len(cells), cells[0], cells[-1]
+        (104, (1, 1), (11, 11))
+    """
     return [(r, c) for r in range(SIZE[0]) for c in range(SIZE[1]) if _ROWS[r][c] != "w"]
 
 
@@ -68,12 +74,27 @@ def _room(cell: tuple[int, int]) -> int:
 
 
 def room_aggregation() -> StateAggregation:
-    """``g(s)`` = room of state ``s``: the SARSA-RS baseline's aggregation (4 abstract states)."""
+    """``g(s)`` = room of state ``s``: the SARSA-RS baseline's aggregation (4 abstract states).
+
+    Examples:
+        >>> aggregation = room_aggregation()
+        >>> aggregation.num_states
+        4
+    """
     return StateAggregation(torch.tensor([_room(c) for c in _CELLS]), num_states=4)
 
 
 def check_subgoal(predicate: Predicate) -> str | None:
-    """Why ``predicate`` is not a valid four-rooms subgoal, or ``None``."""
+    """Why ``predicate`` is not a valid four-rooms subgoal, or ``None``.
+
+    Examples:
+        >>> check_subgoal(Cell(0, 0))
+        '(0, 0) is a wall'
+        >>> print(check_subgoal(Cell(4, 9)))
+        None
+        >>> check_subgoal(State(200))
+        'state 200 is not one of the 104 free states'
+    """
     if isinstance(predicate, Cell):
         r, c = predicate.row, predicate.col
         if not (0 <= r < SIZE[0] and 0 <= c < SIZE[1]):
@@ -248,7 +269,12 @@ class FourRoomsEnv(EnvBase):
 
 
 def state_of(cell: tuple[int, int]) -> int:
-    """State number of a free cell."""
+    """State number of a free cell.
+
+    Examples:
+        >>> state_of((1, 1)), state_of((11, 11))
+        (0, 103)
+    """
     return _STATE[cell]
 
 
@@ -258,6 +284,13 @@ def draw_map(ax: Any, patterns: Mapping[str, SubgoalSeries | Sequence[tuple[int,
     Cells chosen by several patterns are shaded darker; each subgoal is marked
     with its position in the series (1, 2, ...), as in the paper's figures of
     the participants' subgoals.
+
+    Examples:
+        >>> from matplotlib.figure import Figure
+        >>> ax = Figure().subplots()
+        >>> draw_map(ax, {"alice": [(4, 9), (10, 9)]})
+        >>> len(ax.images)
+        1
     """
     import matplotlib.colors as mcolors
     import numpy as np

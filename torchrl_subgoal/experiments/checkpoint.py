@@ -42,12 +42,28 @@ TRANSITIONS_DIR = "transitions"
 
 
 def rng_states() -> dict[str, Any]:
-    """The global random states of torch, numpy and Python."""
+    """The global random states of torch, numpy and Python.
+
+    Examples:
+        >>> states = rng_states()
+        >>> first = torch.rand(2)
+        >>> restore_rng_states(states)
+        >>> torch.equal(torch.rand(2), first)
+        True
+    """
     return {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
 
 
 def restore_rng_states(states: dict[str, Any]) -> None:
-    """Inverse of :func:`rng_states`."""
+    """Inverse of :func:`rng_states`.
+
+    Examples:
+        >>> states = rng_states()
+        >>> first = np.random.rand(), random.random()
+        >>> restore_rng_states(states)
+        >>> (np.random.rand(), random.random()) == first
+        True
+    """
     torch.set_rng_state(states["torch"])
     np.random.set_state(states["numpy"])
     random.setstate(states["python"])

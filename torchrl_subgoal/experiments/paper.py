@@ -20,7 +20,12 @@ CITATION = (
 
 @dataclass(frozen=True)
 class PaperStat:
-    """A mean and its standard deviation across learnings, as printed in the paper."""
+    """A mean and its standard deviation across learnings, as printed in the paper.
+
+    Examples:
+        >>> PaperStat(mean=12.5, sd=3.0)
+        PaperStat(mean=12.5, sd=3.0)
+    """
 
     mean: float
     sd: float
@@ -40,6 +45,11 @@ class PaperResults:
         learnings: independent learnings per method behind the numbers, when the paper says.
         notes: findings the paper states in words.
         source: the citation.
+
+    Examples:
+        >>> paper = PaperResults("four_rooms", "steps", 1, {100.0: {"HRS": PaperStat(10.0, 2.0)}})
+        >>> paper.time_to_threshold[100.0]["HRS"].mean, paper.asymptotic
+        (10.0, {})
     """
 
     domain: str

@@ -31,7 +31,12 @@ MapHook = Callable[[Axes, Mapping[str, Any], Mapping[str, Any]], None]
 
 @dataclass(frozen=True)
 class FigureFile:
-    """A written figure, or why it was not drawn."""
+    """A written figure, or why it was not drawn.
+
+    Examples:
+        >>> FigureFile(None, "no subgoal patterns").note
+        'no subgoal patterns'
+    """
 
     path: Path | None
     note: str = ""
@@ -159,6 +164,13 @@ def plot_pattern_maps(
 
     Returns:
         The figure, or ``FigureFile(None, note)`` saying why no map was drawn.
+
+    Examples:
+        >>> import tempfile
+        >>> folder = Path(tempfile.mkdtemp())
+        >>> figure = plot_pattern_maps("four_rooms", {"alice": [{"cell": [4, 9]}]}, folder / "maps.png")
+        >>> figure.path.name, figure.path.exists()
+        ('maps.png', True)
     """
     hook = _MAP_HOOKS.get(domain)
     if hook is None:

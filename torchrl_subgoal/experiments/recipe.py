@@ -47,7 +47,14 @@ RECIPE_ERRORS = (ConfigError, SubgoalFileError, ResultsError, ChunkFailedError)
 
 
 def fail(exc: BaseException) -> int:
-    """Print ``exc`` as one line on stderr; the exit code: 1 for a failed chunk, else 2 (a user error)."""
+    """Print ``exc`` as one line on stderr; the exit code: 1 for a failed chunk, else 2 (a user error).
+
+    Examples:
+        >>> fail(ValueError("runs.yaml: episodes: must be >= 1"))  # prints "error: ..." on stderr
+        2
+        >>> fail(ChunkFailedError("chunk HRS/00000 failed"))
+        1
+    """
     print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
     return 1 if isinstance(exc, ChunkFailedError) else 2
 
@@ -55,7 +62,15 @@ def fail(exc: BaseException) -> int:
 def pattern_sets(
     human: Mapping[str, SubgoalSeries], candidates: Sequence[Predicate], num_random: int, seed: int
 ) -> PatternSets:
-    """The patterns by kind: ``human`` (as given), ``random`` (RRS, seeded, as long as the longest human one)."""
+    """The patterns by kind: ``human`` (as given), ``random`` (RRS, seeded, as long as the longest human one).
+
+    Examples:
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> human = {"alice": SubgoalSeries([Cell(4, 9), Cell(10, 9)], name="alice")}
+        >>> sets = pattern_sets(human, [Cell(1, 1), Cell(2, 2), Cell(3, 3)], num_random=2, seed=0)
+        >>> list(sets["human"]), list(sets["random"]), len(sets["random"]["random_1"])
+        (['alice'], ['random_1', 'random_2'], 2)
+    """
     num_subgoals = max(len(p) for p in human.values())
     if num_subgoals > len(candidates):
         longest = max(human.values(), key=len)
@@ -70,12 +85,26 @@ def pattern_sets(
 
 
 def pattern_config(patterns: PatternSets) -> dict[str, Any]:
-    """Every pattern a sweep may use, as stored in its configuration (read back by :func:`chunk_patterns`)."""
+    """Every pattern a sweep may use, as stored in its configuration (read back by :func:`chunk_patterns`).
+
+    Examples:
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> sets = pattern_sets({"alice": SubgoalSeries([Cell(4, 9)], name="alice")}, [Cell(1, 1)], 1, seed=0)
+        >>> sorted(pattern_config(sets))
+        ['alice', 'random_1']
+    """
     return {n: s.to_dict() for kind in ("human", "random") for n, s in patterns[kind].items()}
 
 
 def pattern_sources(patterns: PatternSets) -> dict[str, str]:
-    """Where each pattern came from (its subgoal file), so a chunk's errors can name it."""
+    """Where each pattern came from (its subgoal file), so a chunk's errors can name it.
+
+    Examples:
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> human = {"alice": SubgoalSeries([Cell(4, 9)], name="alice", source="alice.yaml")}
+        >>> pattern_sources(pattern_sets(human, [Cell(1, 1)], 1, seed=0))
+        {'alice': 'alice.yaml', 'random_1': 'random patterns (seed 0)'}
+    """
     return {n: s.source for kind in ("human", "random") for n, s in patterns[kind].items() if s.source}
 
 
@@ -88,6 +117,12 @@ def check_patterns(patterns: PatternSets, env: EnvBase, observation_key: str) ->
 
     Raises:
         SubgoalFileError: naming the file, the pattern and the field.
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> sets = pattern_sets({"alice": SubgoalSeries([Cell(4, 9)], name="alice")}, [Cell(1, 1)], 1, seed=0)
+        >>> check_patterns(sets, FourRoomsEnv(), "cell")  # fits: nothing raised
     """
     series = [s for kind in ("human", "random") for s in patterns[kind].values()]
     if not series:
@@ -103,7 +138,16 @@ def method_specs(
 ) -> list[MethodSpec]:
     """Learners of the methods ``names`` (a recipe's ``--methods``): every pattern
     ``learnings`` times; methods without patterns get as many learnings in all, of
-    one pseudo-pattern ``"none"``. An unknown name is a :class:`ConfigError`."""
+    one pseudo-pattern ``"none"``. An unknown name is a :class:`ConfigError`.
+
+    Examples:
+        >>> from torchrl_subgoal.methods import paper_methods
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> sets = pattern_sets({"alice": SubgoalSeries([Cell(4, 9)], name="alice")}, [Cell(1, 1)], 1, seed=0)
+        >>> specs = method_specs(paper_methods("SARSA"), ["HRS", "SARSA"], sets, learnings=3)
+        >>> [(s.name, s.patterns, s.learnings_per_pattern) for s in specs]
+        [('HRS', ('alice',), 3), ('SARSA', ('none',), 3)]
+    """
     specs = []
     for name, method in methods.items():
         kind = method.subgoals
@@ -118,7 +162,16 @@ def method_specs(
 
 
 def chunk_patterns(chunk: Chunk, config: Mapping[str, Any]) -> tuple[list[SubgoalSeries], torch.Tensor]:
-    """The chunk's subgoal series (from the sweep's configuration) and each learner's index into them."""
+    """The chunk's subgoal series (from the sweep's configuration) and each learner's index into them.
+
+    Examples:
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> sets = pattern_sets({"alice": SubgoalSeries([Cell(4, 9)], name="alice")}, [Cell(1, 1)], 1, seed=0)
+        >>> chunk = Chunk("HRS", 0, (("alice", 0), ("alice", 1)), seed=1)
+        >>> series, index = chunk_patterns(chunk, {"patterns": pattern_config(sets)})
+        >>> [s.name for s in series], index.tolist()
+        (['alice'], [0, 0])
+    """
     names = sorted({pattern for pattern, _ in chunk.learners})
     sources = config.get("pattern_sources") or {}
     series = [SubgoalSeries.from_dict(config["patterns"][n], name=n, source=sources.get(n))
@@ -147,6 +200,13 @@ def sweep_and_report(
         ResultsError: the results directory cannot be used (not ours, another experiment,
             busy, unwritable).
         ChunkFailedError: a chunk failed; the message says what was saved and what to do.
+
+    Examples:
+        >>> sweep_and_report("four_rooms", "results/demo", [], print, {}, seed=-1, chunk_size=1, episodes=1,
+        ...                  overwrite=False, backend="local", workers=0)  # settings are checked before anything runs
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --seed: must be >= 0, got -1
     """
     from torchrl_subgoal.experiments.report import write_report
 

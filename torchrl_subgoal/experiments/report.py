@@ -129,7 +129,13 @@ class ReportSpec:
 
 @dataclass(frozen=True)
 class ReportOutput:
-    """What :func:`write_report` produced."""
+    """What :func:`write_report` produced.
+
+    Examples:
+        >>> output = ReportOutput("# Report", {"domain": "four_rooms"}, ())
+        >>> output.summary["domain"], output.files
+        ('four_rooms', ())
+    """
 
     markdown: str
     summary: dict[str, Any]
@@ -343,6 +349,15 @@ def render_markdown(
         paper: the paper's numbers for the domain, shown beside ours (or None).
         figures: caption -> relative image path.
         notes: extra lines for the notes section (e.g. why a figure is missing).
+
+    Examples:
+        >>> from torchrl_subgoal.experiments.store import EpisodeTable, MethodResults, Results
+        >>> table = EpisodeTable(np.array([[9, 5, 3], [8, 4, 2]]), np.zeros((2, 3)), np.ones((2, 3), bool))
+        >>> method = MethodResults("HRS", np.array(["alice", "alice"]), np.array([0, 1]), table)
+        >>> summary = summarize(Results(Path("results/demo"), "four_rooms", {}, {"HRS": method}), n_boot=100)
+        >>> markdown = render_markdown(summary, None, {})
+        >>> markdown.splitlines()[0], "| HRS | 5.17 (0.707) |" in markdown
+        ('# Report: four_rooms', True)
     """
     metric, window = summary["metric"], summary["window"]
     direction = "falls below" if summary["lower_is_better"] else "rises above"
@@ -519,7 +534,13 @@ def _check_output_dir(out: Path) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console entry point: ``torchrl-subgoal-report RESULTS_DIR [--out DIR]``."""
+    """Console entry point: ``torchrl-subgoal-report RESULTS_DIR [--out DIR]``.
+
+    Examples:
+        >>> import tempfile
+        >>> main([tempfile.mkdtemp()])  # an empty directory: a one-line error on stderr
+        2
+    """
     parser = OneLineParser(
         prog="torchrl-subgoal-report",
         description="Write report.md, summary.json and plots for a sweep's results directory.",

@@ -56,26 +56,57 @@ METRICS = ("steps", "return", "success")
 
 
 class ResultsError(Exception):
-    """Base class of the errors raised about a results directory."""
+    """Base class of the errors raised about a results directory.
+
+    Examples:
+        >>> try:
+        ...     raise DomainMismatchError("results/x holds pinball, not four_rooms")
+        ... except ResultsError as exc:
+        ...     print(exc)
+        results/x holds pinball, not four_rooms
+    """
 
 
 class ConfigMismatchError(ResultsError):
-    """A sweep was started into a directory holding a different experiment."""
+    """A sweep was started into a directory holding a different experiment.
+
+    Examples:
+        >>> issubclass(ConfigMismatchError, ResultsError), str(ConfigMismatchError("config differs: seed"))
+        (True, 'config differs: seed')
+    """
 
 
 class DomainMismatchError(ResultsError):
-    """A results directory belongs to another domain than the one asked for."""
+    """A results directory belongs to another domain than the one asked for.
+
+    Examples:
+        >>> issubclass(DomainMismatchError, ResultsError), str(DomainMismatchError("domain is pinball"))
+        (True, 'domain is pinball')
+    """
 
 
 class UnknownMethodError(ResultsError, KeyError):
-    """A method name is not part of the sweep or results directory."""
+    """A method name is not part of the sweep or results directory.
+
+    Examples:
+        >>> str(UnknownMethodError("unknown method 'XYZ'"))  # not quoted as a KeyError's would be
+        "unknown method 'XYZ'"
+        >>> issubclass(UnknownMethodError, KeyError)
+        True
+    """
 
     def __str__(self) -> str:  # KeyError would quote the whole message
         return str(self.args[0]) if self.args else ""
 
 
 class CorruptChunkError(ResultsError):
-    """A chunk file exists but cannot be trusted (unreadable, wrong identity or size)."""
+    """A chunk file exists but cannot be trusted (unreadable, wrong identity or size).
+
+    Examples:
+        >>> error = CorruptChunkError(Path("chunks/HRS/00000.npz"), "wrong size")
+        >>> str(error), error.reason
+        ('corrupt chunk file chunks/HRS/00000.npz: wrong size', 'wrong size')
+    """
 
     def __init__(self, path: Path, reason: str) -> None:
         super().__init__(f"corrupt chunk file {path}: {reason}")
@@ -84,7 +115,12 @@ class CorruptChunkError(ResultsError):
 
 
 class IncompleteResultsError(ResultsError):
-    """Some chunks of the sweep have not been computed yet."""
+    """Some chunks of the sweep have not been computed yet.
+
+    Examples:
+        >>> issubclass(IncompleteResultsError, ResultsError), str(IncompleteResultsError("2 chunks missing"))
+        (True, '2 chunks missing')
+    """
 
 
 @dataclass(frozen=True)
@@ -219,7 +255,12 @@ class EpisodeTable:
 
 @dataclass(frozen=True)
 class ChunkStatus:
-    """State of one planned chunk in the store."""
+    """State of one planned chunk in the store.
+
+    Examples:
+        >>> ChunkStatus("corrupt", "wrong size")
+        ChunkStatus(state='corrupt', reason='wrong size')
+    """
 
     state: Literal["done", "missing", "corrupt"]
     reason: str = ""
@@ -234,6 +275,12 @@ class MethodResults:
         patterns: pattern name of each learner, shape ``[n_learners]``.
         learnings: learning index of each learner within its pattern.
         table: the episode records, one row per learner.
+
+    Examples:
+        >>> table = EpisodeTable(np.full((2, 3), 7), np.zeros((2, 3)), np.ones((2, 3), bool))
+        >>> results = MethodResults("HRS", np.array(["alice", "alice"]), np.array([0, 1]), table)
+        >>> results.name, results.table.n_learners
+        ('HRS', 2)
     """
 
     name: str
@@ -254,6 +301,13 @@ class Results:
         missing: names of planned chunks not (yet) in the store, when loaded with
             ``allow_incomplete=True``.
         manifest: the whole ``config.json``.
+
+    Examples:
+        >>> table = EpisodeTable(np.full((2, 3), 7), np.zeros((2, 3)), np.ones((2, 3), bool))
+        >>> method = MethodResults("HRS", np.array(["alice", "alice"]), np.array([0, 1]), table)
+        >>> results = Results(Path("results/four_rooms"), "four_rooms", {}, {"HRS": method})
+        >>> results.to_frame().shape[0]  # one row per learner and episode
+        6
     """
 
     root: Path
@@ -677,7 +731,13 @@ def _manifest_problem(data: Mapping[str, Any]) -> str | None:
 
 
 def planned_chunks(manifest: Mapping[str, Any]) -> list[Chunk]:
-    """The chunk layout recorded in a ``config.json``."""
+    """The chunk layout recorded in a ``config.json``.
+
+    Examples:
+        >>> chunk = Chunk("HRS", 0, (("alice", 0),), seed=7)
+        >>> planned_chunks({"chunks": [chunk.to_json()]}) == [chunk]
+        True
+    """
     return [Chunk.from_json(item) for item in manifest["chunks"]]
 
 

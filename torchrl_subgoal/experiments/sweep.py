@@ -65,6 +65,17 @@ class RunChunk(Protocol):
     It trains every learner of ``chunk`` (seeding all randomness from ``chunk.seed``)
     and returns their per-episode records, one row per learner in ``chunk.learners``
     order. ``progress(k)`` reports ``k`` more learner-episodes finished.
+
+    Examples:
+        >>> def run_chunk(chunk, config, progress):  # a RunChunk: every learner takes 7 steps per episode
+        ...     episodes = config["episodes"]
+        ...     progress(chunk.n_learners * episodes)
+        ...     shape = (chunk.n_learners, episodes)
+        ...     return EpisodeTable(np.full(shape, 7), np.zeros(shape), np.ones(shape, bool))
+        >>> done = []
+        >>> table = run_chunk(Chunk("HRS", 0, (("alice", 0), ("alice", 1)), seed=1), {"episodes": 3}, done.append)
+        >>> table.n_learners, table.n_episodes, done
+        (2, 3, [6])
     """
 
     def __call__(
@@ -73,11 +84,25 @@ class RunChunk(Protocol):
 
 
 class ChunkFailedError(RuntimeError):
-    """``run_chunk`` raised (or its worker died); finished chunks are kept for a re-run."""
+    """``run_chunk`` raised (or its worker died); finished chunks are kept for a re-run.
+
+    Examples:
+        >>> issubclass(ChunkFailedError, RuntimeError), str(ChunkFailedError("HRS/00000: worker died"))
+        (True, 'HRS/00000: worker died')
+    """
 
 
 class CorruptChunkWarning(UserWarning):
-    """A stored chunk was corrupt; it is moved aside and recomputed."""
+    """A stored chunk was corrupt; it is moved aside and recomputed.
+
+    Examples:
+        >>> import warnings
+        >>> with warnings.catch_warnings(record=True) as caught:
+        ...     warnings.simplefilter("always")
+        ...     warnings.warn("chunk HRS/00000 moved aside", CorruptChunkWarning)
+        >>> caught[0].category.__name__
+        'CorruptChunkWarning'
+    """
 
 
 @dataclass(frozen=True)
@@ -148,6 +173,11 @@ def chunk_seed(seed: int, method: str, index: int) -> int:
 
     Derived with :class:`numpy.random.SeedSequence` from the sweep seed, a stable hash of
     the method name, and the chunk index.
+
+    Examples:
+        >>> seed = chunk_seed(0, "HRS", 0)
+        >>> seed == chunk_seed(0, "HRS", 0), seed != chunk_seed(0, "HRS", 1), 0 <= seed < 2**63
+        (True, True, True)
     """
     sequence = np.random.SeedSequence(entropy=seed, spawn_key=(_name_key(method), index))
     return int(sequence.generate_state(1, np.uint64)[0] >> np.uint64(1))

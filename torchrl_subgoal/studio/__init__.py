@@ -22,7 +22,12 @@ __all__ = ["main"]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Serve the studio (see :func:`torchrl_subgoal.studio.server.main`); a clear error without Flask."""
+    """Serve the studio (see :func:`torchrl_subgoal.studio.server.main`); a clear error without Flask.
+
+    Examples:
+        >>> main(["--max-jobs", "0"])  # a one-line error on stderr
+        2
+    """
     try:
         from torchrl_subgoal.studio.server import main as serve_main
     except ImportError as exc:

@@ -46,7 +46,13 @@ _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,79}")
 
 
 class RequestError(ValueError):
-    """A bad request: the page shows the message; ``status`` is the HTTP code."""
+    """A bad request: the page shows the message; ``status`` is the HTTP code.
+
+    Examples:
+        >>> error = RequestError("alice.yaml: not a subgoal file", status=422)
+        >>> str(error), error.status
+        ('alice.yaml: not a subgoal file', 422)
+    """
 
     def __init__(self, message: str, status: int = 400) -> None:
         super().__init__(message)
@@ -105,7 +111,14 @@ def file_name(name: str) -> str:
 
 
 def file_path(folder: Path, name: str) -> Path:
-    """``folder / file_name(name)``, checked to lie inside ``folder``."""
+    """``folder / file_name(name)``, checked to lie inside ``folder``.
+
+    Examples:
+        >>> import tempfile
+        >>> folder = Path(tempfile.mkdtemp())
+        >>> file_path(folder, "alice") == folder.resolve() / "alice.yaml"
+        True
+    """
     root = folder.resolve()
     path = (root / file_name(name)).resolve()
     if path.parent != root:
@@ -115,7 +128,16 @@ def file_path(folder: Path, name: str) -> Path:
 
 @dataclass
 class Drawing:
-    """A checked drawing: its domain, map and patterns, ready to save or train."""
+    """A checked drawing: its domain, map and patterns, ready to save or train.
+
+    Examples:
+        >>> from torchrl_subgoal.studio.domains import default_domains
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> series = SubgoalSeries([Cell(4, 9)], name="alice")
+        >>> drawing = Drawing(default_domains()["four_rooms"], "", {"alice": series}, "a hallway")
+        >>> drawing.domain.name, list(drawing.patterns)
+        ('four_rooms', ['alice'])
+    """
 
     domain: Domain
     map: str
@@ -225,14 +247,33 @@ def read_drawing(data: Any, domains: Mapping[str, Domain], *, source: str = "dra
 
 
 def save_drawing(drawing: Drawing, path: Path) -> None:
-    """Write the drawing's patterns to ``path`` with :func:`save_patterns` (atomically)."""
+    """Write the drawing's patterns to ``path`` with :func:`save_patterns` (atomically).
+
+    Examples:
+        >>> from torchrl_subgoal.studio.domains import default_domains
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> from torchrl_subgoal.subgoals import load_patterns
+        >>> drawing = Drawing(default_domains()["four_rooms"], "", {"alice": SubgoalSeries([Cell(4, 9)], name="alice")})
+        >>> path = Path(tempfile.mkdtemp()) / "alice.yaml"
+        >>> save_drawing(drawing, path)
+        >>> load_patterns(path)["alice"].to_dict()
+        {'subgoals': [{'cell': [4, 9]}]}
+    """
     tmp = path.with_name(f".{path.name}.tmp")
     save_patterns(tmp, drawing.patterns, domain=drawing.domain.name, description=drawing.description)
     os.replace(tmp, path)
 
 
 def infer_domain(patterns: Mapping[str, SubgoalSeries], domains: Mapping[str, Domain], source: str) -> Domain:
-    """The first domain whose map check accepts every subgoal of ``patterns``."""
+    """The first domain whose map check accepts every subgoal of ``patterns``.
+
+    Examples:
+        >>> from torchrl_subgoal.studio.domains import default_domains
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> patterns = {"alice": SubgoalSeries([Cell(4, 9)], name="alice")}
+        >>> infer_domain(patterns, default_domains(), "alice.yaml").name
+        'four_rooms'
+    """
     predicates = [p for series in patterns.values() for p in series.predicates]
     for domain in domains.values():
         if all(domain.check_subgoal(p) is None for p in predicates):
@@ -243,7 +284,15 @@ def infer_domain(patterns: Mapping[str, SubgoalSeries], domains: Mapping[str, Do
 
 
 def to_document(patterns: Mapping[str, SubgoalSeries], domain: Domain, source: str) -> list[dict[str, Any]]:
-    """Patterns as the page edits them (the inverse of :func:`read_drawing`); ``source`` names the file."""
+    """Patterns as the page edits them (the inverse of :func:`read_drawing`); ``source`` names the file.
+
+    Examples:
+        >>> from torchrl_subgoal.studio.domains import default_domains
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> patterns = {"alice": SubgoalSeries([Cell(4, 9)], name="alice")}
+        >>> to_document(patterns, default_domains()["four_rooms"], "alice.yaml")
+        [{'name': 'alice', 'subgoals': [{'name': None, 'cell': [4, 9]}], 'order': None, 'description': None}]
+    """
     out = []
     for name, series in patterns.items():
         names: Sequence[str | None] = series.names or [None] * len(series)

@@ -28,7 +28,17 @@ __all__ = ["Domain", "FormError", "Limit", "default_domains"]
 
 @dataclass(frozen=True)
 class Limit:
-    """Bounds of one "Try it" setting: the page's default and the server's accepted range."""
+    """Bounds of one "Try it" setting: the page's default and the server's accepted range.
+
+    Examples:
+        >>> episodes = Limit(default=100, low=1, high=1000)
+        >>> episodes.check(50, "episodes")
+        50
+        >>> episodes.check(0, "episodes")
+        Traceback (most recent call last):
+        ...
+        ValueError: episodes: must be from 1 to 1000, got 0
+    """
 
     default: int
     low: int
@@ -62,6 +72,12 @@ class Domain:
         from_page: a subgoal the page sent (without its name) as the file's
             predicate, and where it is (for messages); the identity by default.
         try_note: why "Try it" is off for this domain (it is on when ``limits`` is given).
+
+    Examples:
+        >>> from torchrl_subgoal.envs.four_rooms import check_subgoal
+        >>> domain = Domain("four_rooms", "Four rooms", check_subgoal, lambda map_name: {})
+        >>> domain.describe()["name"], domain.check_subgoal(Cell(0, 0))
+        ('four_rooms', '(0, 0) is a wall')
     """
 
     name: str

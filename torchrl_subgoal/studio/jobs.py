@@ -20,11 +20,30 @@ Work = Callable[[Callable[[int], None]], dict[str, Any]]
 
 
 class Cancelled(Exception):
-    """Raised inside a job's progress callback once the job was cancelled."""
+    """Raised inside a job's progress callback once the job was cancelled.
+
+    Examples:
+        >>> job = Job("1", "alice", total=10)
+        >>> def progress(k):
+        ...     if job.cancel.is_set():
+        ...         raise Cancelled
+        >>> job.cancel.set()
+        >>> try:
+        ...     progress(1)
+        ... except Cancelled:
+        ...     print("stopped")
+        stopped
+    """
 
 
 class JobError(RuntimeError):
-    """A job cannot start (``status`` 409: this pattern is already training; 429: too many jobs)."""
+    """A job cannot start (``status`` 409: this pattern is already training; 429: too many jobs).
+
+    Examples:
+        >>> error = JobError("pattern 'alice' is already training", status=409)
+        >>> error.status
+        409
+    """
 
     def __init__(self, message: str, status: int) -> None:
         super().__init__(message)
@@ -33,7 +52,14 @@ class JobError(RuntimeError):
 
 @dataclass
 class Job:
-    """One background learning and what the page polls."""
+    """One background learning and what the page polls.
+
+    Examples:
+        >>> job = Job("1", "alice", total=10, done=5)
+        >>> status = job.status()
+        >>> status["state"], status["progress"]
+        ('running', 0.5)
+    """
 
     id: str
     key: str

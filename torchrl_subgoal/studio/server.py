@@ -57,7 +57,15 @@ DEFAULT_PORT = 8765
 
 
 class Studio:
-    """The state behind one app: save folder, domains, jobs."""
+    """The state behind one app: save folder, domains, jobs.
+
+    Examples:
+        >>> import tempfile
+        >>> from torchrl_subgoal.studio.jobs import Jobs
+        >>> studio = Studio(Path(tempfile.mkdtemp()), default_domains(), Jobs(max_running=1))
+        >>> "four_rooms" in studio.domains
+        True
+    """
 
     def __init__(self, folder: Path, domains: Mapping[str, Domain], jobs: Jobs) -> None:
         self.folder = folder
@@ -257,6 +265,12 @@ def serve(app: Flask, host: str = "127.0.0.1", port: int = 0) -> BaseWSGIServer:
 
     Raises:
         OSError: when ``host:port`` cannot be bound (in use, unknown host).
+
+    Examples:
+        >>> server = serve(Flask("demo"))  # a free port on 127.0.0.1
+        >>> server.port > 0
+        True
+        >>> server.server_close()
     """
     family = select_address_family(host, port)
     with socket.socket(family, socket.SOCK_STREAM) as sock:  # bound here: werkzeug would exit the process
@@ -270,6 +284,12 @@ def listen(app: Flask, host: str, port: int | None) -> BaseWSGIServer:
 
     Raises:
         OSError: naming the host and port when the server cannot listen.
+
+    Examples:
+        >>> server = listen(Flask("demo"), "127.0.0.1", 0)
+        >>> server.port > 0
+        True
+        >>> server.server_close()
     """
     for candidate in [port] if port is not None else [DEFAULT_PORT, 0]:
         try:
@@ -288,7 +308,12 @@ def _pinball_maps(values: Sequence[str]) -> dict[str, str]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``torchrl-subgoal studio`` / ``python -m torchrl_subgoal.studio``: serve the studio until Ctrl-C."""
+    """``torchrl-subgoal studio`` / ``python -m torchrl_subgoal.studio``: serve the studio until Ctrl-C.
+
+    Examples:
+        >>> main(["--max-jobs", "0"])  # a one-line error on stderr
+        2
+    """
     parser = argparse.ArgumentParser(
         prog="torchrl-subgoal studio",
         description="Subgoal studio: draw subgoal series on the map, save subgoal files, try them.",

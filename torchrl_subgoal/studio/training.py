@@ -51,6 +51,11 @@ class TrySettings:
         learners: independent learners per method (the batch).
         seed: seed of the envs and learners (the same for both methods).
         max_steps: episode cap (``None``: the domain's default).
+
+    Examples:
+        >>> settings = TrySettings(episodes=50, learners=4)
+        >>> settings.seed, settings.max_steps
+        (0, None)
     """
 
     episodes: int
@@ -61,7 +66,13 @@ class TrySettings:
 
 @dataclass
 class Curve:
-    """Steps per episode, mean and standard error over the learners, one entry per episode."""
+    """Steps per episode, mean and standard error over the learners, one entry per episode.
+
+    Examples:
+        >>> curve = Curve.of(torch.tensor([[3, 5], [5, 7]]), torch.tensor([[True, True], [False, True]]))
+        >>> curve.mean, curve.sem, curve.success
+        ([4.0, 6.0], [1.0, 1.0], 0.75)
+    """
 
     mean: list[float]
     sem: list[float]
@@ -88,6 +99,12 @@ class TryResult:
         potential_sem: its standard error over learners.
         settings: the settings of the run.
         seconds: wall time of both runs.
+
+    Examples:
+        >>> curve = Curve([4.0, 6.0], [1.0, 1.0], 1.0)
+        >>> result = TryResult(curve, curve, potential=[0.0, 0.5], potential_sem=[0.0, 0.1])
+        >>> result.to_json()["shaped"]["mean"]
+        [4.0, 6.0]
     """
 
     shaped: Curve
