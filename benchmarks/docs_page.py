@@ -81,6 +81,11 @@ RUNS = (
         "wall time of `recipes/pinball.py` at 1 learning per pattern (10 learners per method, 200 episodes), "
         "in one worker process.",
         ("recipes/pinball.py", "--learnings", "1", "--workers", "1", "--results", "{tmp}/pinball")),
+    Run("reproduction_speed", "End to end: the four-rooms reproduction at the paper's scale",
+        "wall time, CPU time, cores busy, learner-steps per second and the share of wall time after 99% of the "
+        "learner-episodes of `recipes/four_rooms.py --learnings 100` (5 methods x 1,000 learnings x 1,000 "
+        "episodes, 2 workers, report included).",
+        ("benchmarks/reproduction_speed.py", "--domains", "four_rooms")),
 )
 
 
