@@ -185,10 +185,9 @@ def main(argv: list[str] | None = None) -> int:
         "end-to-end reproductions at a small scale, one after another, each in its own process under "
         "`nice -n 5`. The output below is each script's, verbatim.",
         "",
-        "!!! warning \"A shared, loaded machine\"",
-        "    These figures were measured on a machine shared with other engineers' jobs, and it was loaded "
-        "while they ran (see each run's load average: 2 logical cores, so a load above 2 means the runs "
-        "waited for a core). Absolute rates are pessimistic and noisy; compare the ratios *within* one "
+        "!!! warning \"A shared machine\"",
+        "    These figures were measured on a machine shared with other engineers' jobs: check each run's "
+        "load average (2 logical cores, so a load above 2 means the runs waited for a core). Absolute rates are pessimistic and noisy; compare the ratios *within* one "
         "benchmark, whose set-ups are interleaved in one run. The reproduction pages give the figures "
         "measured for their own claims.",
         "",
