@@ -156,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
             "subgoal_file": cfg.subgoals,
             "patterns": pattern_config(patterns),
             "pattern_sources": pattern_sources(patterns),
-            "report": {"metric": "steps", "thresholds": [3000, 2000, 1000, 500], "window": 10,
+            "report": {"metric": "steps", "thresholds": [3000, 2000, 1000, 500], "window": min(10, cfg.episodes),
                        "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes], "map": {"config": cfg.map}},
         }
         return sweep_and_report("pinball", cfg.results, specs, run_chunk, config, seed=cfg.seed,

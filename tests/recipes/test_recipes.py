@@ -150,3 +150,12 @@ def test_four_rooms_step_cost_and_library_conventions(tmp_path: Path) -> None:
     config = json.loads((tmp_path / "config.json").read_text())["config"]
     assert (config["reward"], config["zero_terminal_potential"], config["start_potential"]) == (
         "step-cost", True, "nonpositive")
+
+
+def test_pinball_shorter_than_the_report_window(tmp_path: Path) -> None:
+    # fewer episodes than the 10-episode moving average: the report smooths over what there is
+    pinball = recipe("pinball")
+    args = ["--methods", "AC", "--learnings", "1", "--episodes", "2", "--max-steps", "50", "--workers", "0"]
+    assert pinball.main([*args, "--results", str(tmp_path)]) == 0
+    assert json.loads((tmp_path / "config.json").read_text())["config"]["report"]["window"] == 2
+    assert (tmp_path / "report.md").exists()
