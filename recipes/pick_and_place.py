@@ -75,7 +75,7 @@ from torchrl_subgoal.experiments.recipe import (
     sweep_and_report,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_parts
-from torchrl_subgoal.training import EnvFactory, Shaping, batched, shaped_env, smdp_transitions
+from torchrl_subgoal.training import EnvFactory, Shaping, shaped_env, smdp_transitions
 
 METHODS = paper_methods(baseline="DDPG")
 #: epochs, cycles per epoch, env steps per cycle, gradient steps per cycle, test episodes, DDPG settings.
@@ -185,7 +185,7 @@ def make_collector(goal_seed: int, shaping: Shaping | None, value_lr: float | No
                    config: Mapping[str, Any], device: torch.device) -> Collector | MultiSyncCollector:
     """A MultiSyncCollector of ``collector_workers`` processes sharing V, or a Collector in this process."""
     workers = config["collector_workers"]
-    factory = EnvFactory(shaped_env, make_env=batched(partial(fetch.make_fetch_env, goal_seed)),
+    factory = EnvFactory(shaped_env, make_env=partial(fetch.make_fetch_envs, goal_seed), episode_stats=False,
                          num_envs=config["envs"] // max(workers, 1), env_workers=config["env_processes"],
                          shaping=shaping, potential=shaping.potential if shaping is not None else None,
                          gamma=agent.config.gamma, value_lr=value_lr)

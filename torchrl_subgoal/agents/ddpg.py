@@ -9,9 +9,10 @@
   target of a −1/0 reward to ``[−1/(1−γ), 0]``), plus an L2 penalty on the
   actor's actions (``action_l2``);
 * :class:`~torchrl.objectives.SoftUpdate` with Polyak 0.95, once per cycle;
-* exploration: Gaussian noise of s.d. 0.2 (:class:`~torchrl.modules.AdditiveGaussianModule`),
-  then with probability 0.3 a uniformly random action
-  (:class:`~torchrl.modules.EGreedyModule`);
+* exploration: Gaussian noise of s.d. 0.2, clipped to the action bounds, then with
+  probability 0.3 a uniformly random action (:class:`GaussianOrRandom`, what TorchRL's
+  ``AdditiveGaussianModule`` then ``EGreedyModule`` do, in one module without their
+  per-step spec work);
 * a TorchRL :class:`~torchrl.data.ReplayBuffer` of the DDPG keys only.
 
 :class:`DDPGAgent` holds them all and exposes what a training loop needs:
@@ -34,11 +35,12 @@ from tensordict.nn import TensorDictModule, TensorDictSequential
 from torch import nn
 from torchrl.data import Bounded, LazyTensorStorage, ReplayBuffer
 from torchrl.data.replay_buffers import RandomSampler
-from torchrl.modules import MLP, Actor, AdditiveGaussianModule, EGreedyModule, ValueOperator
+from torchrl.envs.utils import ExplorationType, exploration_type
+from torchrl.modules import MLP, Actor, ValueOperator
 from torchrl.objectives import DDPGLoss, SoftUpdate
 from torchrl.objectives.value import TD0Estimator
 
-__all__ = ["ClippedTD0Estimator", "DDPGAgent", "DDPGConfig", "RunningNorm", "mlp"]
+__all__ = ["ClippedTD0Estimator", "DDPGAgent", "DDPGConfig", "GaussianOrRandom", "RunningNorm", "mlp"]
 
 OBSERVATION = "observation"
 NORMALIZED = "observation_normalized"
@@ -157,6 +159,48 @@ class RunningNorm(nn.Module):
         return ((x - self.mean) / self.std).clamp(-self.clip, self.clip)
 
 
+class GaussianOrRandom(nn.Module):
+    """Exploration around a deterministic action: ``clip(a + σ·N(0, 1))``, replaced with probability
+    ``eps`` by a uniform random action; under a deterministic exploration type, ``a`` unchanged.
+
+    The authors' exploration (and TorchRL's ``AdditiveGaussianModule`` followed by
+    ``EGreedyModule``) in three tensor operations per step.
+
+    Args:
+        low: lower action bounds, ``[action_size]``.
+        high: upper action bounds.
+        sigma: s.d. of the Gaussian noise, in action units.
+        eps: probability of a uniform random action.
+
+    Examples:
+        >>> explore = GaussianOrRandom(-torch.ones(2), torch.ones(2), sigma=0.2, eps=0.3)
+        >>> actions = explore(torch.zeros(1000, 2))
+        >>> bool((actions.abs() <= 1).all()), round(float((actions == 0).float().mean()), 1)
+        (True, 0.0)
+        >>> from torchrl.envs import ExplorationType, set_exploration_type
+        >>> with set_exploration_type(ExplorationType.DETERMINISTIC):
+        ...     explore(torch.zeros(1, 2)).tolist()
+        [[0.0, 0.0]]
+    """
+
+    low: torch.Tensor
+    high: torch.Tensor
+
+    def __init__(self, low: torch.Tensor, high: torch.Tensor, sigma: float, eps: float) -> None:
+        super().__init__()
+        self.register_buffer("low", torch.as_tensor(low, dtype=torch.float32).clone())
+        self.register_buffer("high", torch.as_tensor(high, dtype=torch.float32).clone())
+        self.sigma, self.eps = float(sigma), float(eps)
+
+    def forward(self, action: torch.Tensor) -> torch.Tensor:
+        if exploration_type() not in (ExplorationType.RANDOM, None):
+            return action
+        noisy = torch.minimum(torch.maximum(action + self.sigma * torch.randn_like(action), self.low), self.high)
+        uniform = self.low + (self.high - self.low) * torch.rand_like(action)
+        random = torch.rand((*action.shape[:-1], 1), device=action.device) < self.eps
+        return torch.where(random, uniform, noisy)
+
+
 class ClippedTD0Estimator(TD0Estimator):
     """TorchRL's TD(0) estimator with the target clipped to ``[low, high]``.
 
@@ -227,14 +271,11 @@ class DDPGAgent(nn.Module):
         self.critic = ValueOperator(_QNet(mlp(observation_size + action_size, 1, config.hidden)),
                                     in_keys=[NORMALIZED, "action"])
         self.greedy = TensorDictSequential(normalize, self.actor)
-        self.policy = TensorDictSequential(
-            normalize,
-            self.actor,
-            AdditiveGaussianModule(action_spec, sigma_init=config.noise_eps, sigma_end=config.noise_eps,
-                                   annealing_num_steps=1, device=self.device),
-            EGreedyModule(action_spec, eps_init=config.random_eps, eps_end=config.random_eps,
-                          annealing_num_steps=1, device=self.device),
-        )
+        # one module call per step: normaliser, actor network and exploration on the observation
+        explore = GaussianOrRandom(action_spec.space.low, action_spec.space.high, config.noise_eps,
+                                   config.random_eps)
+        self.policy = TensorDictModule(nn.Sequential(self.norm, self.actor.module, explore),
+                                       in_keys=[OBSERVATION], out_keys=["action"])
         self.loss = DDPGLoss(self.actor, self.critic, delay_actor=True, delay_value=True)
         high = 0.0 if config.clip_positive else None
         low = -config.clip_return if config.clip_return is not None else None
@@ -249,6 +290,8 @@ class DDPGAgent(nn.Module):
                                                 lr=config.actor_lr)
         self.critic_optimizer = torch.optim.Adam(self.loss.value_network_params.values(True, True),
                                                  lr=config.critic_lr)
+        # DDPGLoss trains the modules' own parameters (``loss.value_network_params`` are these tensors)
+        self._critic_parameters = list(self.critic.module.named_parameters())
         self.replay = ReplayBuffer(
             storage=LazyTensorStorage(config.buffer_size, device=self.device),
             sampler=RandomSampler(),
@@ -263,23 +306,31 @@ class DDPGAgent(nn.Module):
         self.replay.extend(flat)
 
     def update(self) -> dict[str, float]:
-        """One Adam step of critic and actor on a replay sample; returns the two losses."""
+        """One Adam step of critic and actor on a replay sample; returns the two losses.
+
+        The critic's loss is :class:`~torchrl.objectives.DDPGLoss`'s (its clipped TD(0)
+        target through the target networks). The actor's loss is DDPGLoss's
+        ``−mean Q(o, π(o))`` (the critic's parameters detached) plus the L2 penalty
+        on the same ``π(o)``, computed here with one actor pass for both.
+        """
         batch = self.replay.sample()
-        batch.set(NORMALIZED, self.norm(batch[OBSERVATION]))
+        observation = self.norm(batch[OBSERVATION])
+        batch.set(NORMALIZED, observation)
         batch.set(("next", NORMALIZED), self.norm(batch["next", OBSERVATION]))
-        losses = self.loss(batch)
-        loss_actor = losses["loss_actor"]
+        loss_value = self.loss.loss_value(batch)[0]
+        action = self.actor.module(observation)
+        detached = {name: p.detach() for name, p in self._critic_parameters}
+        loss_actor = -torch.func.functional_call(self.critic.module, detached, (observation, action)).mean()
         if self.config.action_l2:
-            action = self.actor(batch.select(NORMALIZED))["action"]
             loss_actor = loss_actor + self.config.action_l2 * action.square().mean()
         # the actor's loss reads the critic through detached parameters and the critic's loss
         # reads no actor parameter: one backward pass gives each optimiser its own gradients
         self.critic_optimizer.zero_grad(set_to_none=True)
         self.actor_optimizer.zero_grad(set_to_none=True)
-        (losses["loss_value"] + loss_actor).backward()
+        (loss_value + loss_actor).backward()
         self.critic_optimizer.step()
         self.actor_optimizer.step()
-        return {"loss_value": losses["loss_value"].item(), "loss_actor": loss_actor.item()}
+        return {"loss_value": loss_value.item(), "loss_actor": loss_actor.item()}
 
     def soft_update(self) -> None:
         """Move the target networks towards the online ones (Polyak averaging)."""
@@ -287,8 +338,7 @@ class DDPGAgent(nn.Module):
 
     def training_state(self) -> dict[str, Any]:
         """Networks, targets, normaliser and optimiser states (not the replay buffer)."""
-        # the target estimator's gamma is a lazily created buffer: configuration, not state
-        modules = {k: v for k, v in self.state_dict().items() if "_value_estimator." not in k}
+        modules = {k: v for k, v in self.state_dict().items() if not _alias(k)}
         return {
             "modules": modules,
             "actor_optimizer": self.actor_optimizer.state_dict(),
@@ -298,13 +348,20 @@ class DDPGAgent(nn.Module):
     def load_training_state(self, state: dict[str, Any]) -> None:
         """Inverse of :meth:`training_state`."""
         try:
-            missing, unexpected = self.load_state_dict(state["modules"], strict=False)
+            missing, unexpected = self.load_state_dict({k: v for k, v in state["modules"].items() if not _alias(k)},
+                                                       strict=False)
         except (RuntimeError, ValueError) as exc:
             raise ValueError(f"training state does not fit this agent: {exc}") from None
-        if unexpected or any("_value_estimator." not in k for k in missing):
+        if unexpected or any(not _alias(k) for k in missing):
             raise ValueError(f"training state does not fit this agent: missing {missing}, unexpected {unexpected}")
         self.actor_optimizer.load_state_dict(state["actor_optimizer"])
         self.critic_optimizer.load_state_dict(state["critic_optimizer"])
+
+
+def _alias(key: str) -> bool:
+    """State-dict entries that are not state of their own: the policies' views of the normaliser and
+    actor (saved under ``norm.`` and ``actor.``) and the target estimator's lazily created gamma."""
+    return key.startswith(("policy.", "greedy.")) or "_value_estimator." in key
 
 
 class _QNet(nn.Module):

@@ -27,6 +27,9 @@ from typing import Any
 
 import numpy as np
 import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Binary, Bounded, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
 
 from torchrl_subgoal.subgoals import Box, Predicate, StateAggregation, SubgoalSeries, load_patterns
 
@@ -37,12 +40,14 @@ __all__ = [
     "OBSERVATION_SIZE",
     "PARTICIPANTS_FILE",
     "SUBGOAL_MARGIN",
+    "FetchEnvs",
     "FetchUnavailableError",
     "check_subgoal",
     "component_dims",
     "components_of",
     "human_patterns",
     "make_fetch_env",
+    "make_fetch_envs",
     "random_patterns",
     "require_fetch",
     "three_state_aggregation",
@@ -228,6 +233,84 @@ def make_fetch_env(goal_seed: int, *, device: str | torch.device = "cpu", **kwar
     reader = default_info_dict_reader(["is_success"], spec=[Binary(n=1, shape=(1,), dtype=torch.bool)])
     env.set_info_dict_reader(reader)
     return env
+
+
+def make_fetch_envs(goal_seed: int, num_envs: int, *, device: str | torch.device = "cpu") -> Any:
+    """``num_envs`` single-goal FetchPickAndPlace envs stepped together in this process, one TorchRL env.
+
+    The same task as ``num_envs`` copies of :func:`make_fetch_env` in a ``SerialEnv``
+    (same keys, specs, goal and object start, 50-step truncation, bitwise the same
+    observations for the same actions), without their per-env TorchRL plumbing: one
+    step is one loop over the gymnasium envs and one TensorDict (the collectors'
+    fast path; see docs/pick_and_place.md, "Throughput").
+
+    Args:
+        goal_seed: draws the goal and the object's start (the same for every env and episode).
+        num_envs: envs in the batch (``batch_size == [num_envs]``).
+        device: where the env's TensorDicts live.
+
+    Examples:
+        >>> env = make_fetch_envs(goal_seed=3, num_envs=2)  # doctest: +SKIP
+        >>> env.rollout(5)["next", "is_success"].shape  # doctest: +SKIP
+        torch.Size([2, 5, 1])
+    """
+    return FetchEnvs(goal_seed, num_envs, device=device)
+
+
+class FetchEnvs(EnvBase):
+    """``num_envs`` single-goal FetchPickAndPlace envs as one batched TorchRL env (:func:`make_fetch_envs`)."""
+
+    def __init__(self, goal_seed: int, num_envs: int, device: str | torch.device = "cpu") -> None:
+        super().__init__(device=device, batch_size=torch.Size([num_envs]))
+        gymnasium = require_fetch()
+        self.goal_seed = int(goal_seed)
+        self.envs = [gymnasium.make(ENV_ID, goal_seed=goal_seed) for _ in range(num_envs)]
+        n = (num_envs,)
+        self.observation_spec = Composite(
+            observation=Unbounded((*n, OBSERVATION_SIZE), dtype=torch.float32, device=self.device),
+            is_success=Binary(n=1, shape=(*n, 1), dtype=torch.bool, device=self.device), shape=n)
+        space = self.envs[0].action_space
+        self.action_spec = Bounded(torch.as_tensor(space.low).expand(*n, -1).clone(),
+                                   torch.as_tensor(space.high).expand(*n, -1).clone(),
+                                   shape=(*n, space.shape[0]), dtype=torch.float32, device=self.device)
+        self.reward_spec = Unbounded((*n, 1), dtype=torch.float32, device=self.device)
+        self.done_spec = Composite({key: Categorical(2, (*n, 1), dtype=torch.bool, device=self.device)
+                                    for key in ("done", "terminated", "truncated")}, shape=n)
+        self._observation = np.zeros((num_envs, OBSERVATION_SIZE), dtype=np.float32)
+        self._success = np.zeros((num_envs, 1), dtype=bool)
+
+    def _out(self, **extra: torch.Tensor) -> TensorDictBase:
+        return TensorDict({"observation": torch.from_numpy(self._observation.copy()),
+                           "is_success": torch.from_numpy(self._success.copy()), **extra},
+                          batch_size=self.batch_size, device=self.device)
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
+        mask = None if tensordict is None else tensordict.get("_reset", None)
+        which = range(len(self.envs)) if mask is None else mask.reshape(-1).nonzero().flatten().tolist()
+        for i in which:
+            self._observation[i], _ = self.envs[i].reset()
+            self._success[i] = False
+        false = torch.zeros((*self.batch_size, 1), dtype=torch.bool, device=self.device)
+        return self._out(done=false, terminated=false.clone(), truncated=false.clone())
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        actions = tensordict.get("action").detach().cpu().numpy()
+        n = len(self.envs)
+        reward = np.empty((n, 1), dtype=np.float32)
+        terminated, truncated = np.empty((n, 1), dtype=bool), np.empty((n, 1), dtype=bool)
+        for i, env in enumerate(self.envs):
+            self._observation[i], reward[i], terminated[i], truncated[i], info = env.step(actions[i])
+            self._success[i] = info["is_success"]
+        term, trunc = torch.from_numpy(terminated), torch.from_numpy(truncated)
+        return self._out(reward=torch.from_numpy(reward), done=term | trunc, terminated=term, truncated=trunc)
+
+    def _set_seed(self, seed: int | None) -> None:
+        """Nothing to seed: every reset draws the goal and object start of ``goal_seed``."""
+
+    def close(self, *, raise_if_closed: bool = True) -> None:
+        for env in self.envs:
+            env.close()
+        super().close(raise_if_closed=raise_if_closed)
 
 
 # --------------------------------------------------------------------------- subgoals

@@ -227,11 +227,15 @@ def shaped_env(
     gamma: float = 0.99,
     value_lr: float | None = None,
     reward_scale: float = 1.0,
-) -> TransformedEnv:
+    episode_stats: bool = True,
+) -> EnvBase:
     """The env one collecting process steps: ``num_envs`` envs (in ``env_workers`` processes), then
     on the outer env a reward scaling, the shaping transform, a step counter and the episode's env return.
 
     ``potential`` is this process's view of the shaping potential (by default ``shaping.potential``).
+    ``episode_stats=False`` leaves out the step counter and the episode return (``"step_count"``,
+    ``"episode_return"``), for a caller that reads neither: two transforms less on every step; with
+    no other transform either, the env itself is returned.
 
     Examples:
         >>> from torchrl_subgoal import Cell, SubgoalSeries, TabularPotential
@@ -246,7 +250,7 @@ def shaped_env(
         base: EnvBase = ParallelEnv(env_workers, functools.partial(make_env, num_envs // env_workers))
     else:
         base = make_env(num_envs)
-    transforms: list[Any] = [StepCounter()]
+    transforms: list[Any] = [StepCounter()] if episode_stats else []
     if reward_scale != 1.0:
         transforms.append(RewardScaling(loc=0.0, scale=reward_scale))
     reward_key: NestedKey = "reward"
@@ -254,8 +258,9 @@ def shaped_env(
         transform = shaping.transform(potential if potential is not None else shaping.potential, gamma, value_lr)
         transforms.append(transform)
         reward_key = transform.env_reward_key
-    transforms.append(RewardSum(in_keys=[reward_key], out_keys=[EPISODE_RETURN]))
-    return TransformedEnv(base, Compose(*transforms))
+    if episode_stats:
+        transforms.append(RewardSum(in_keys=[reward_key], out_keys=[EPISODE_RETURN]))
+    return TransformedEnv(base, Compose(*transforms)) if transforms else base
 
 
 class FourierFeatures(nn.Module):
