@@ -11,9 +11,16 @@ Measures, in one run (the machine is shared: compare the ratios, not the absolut
   env each, and of 2 workers of 3 envs each (the paper preset's 6 envs, beside a
   ``Collector`` here over the same 6 envs), each worker
   stepping its envs through the shaping transform with the shared potential
-  (``--collector-workers`` in the recipe);
-* DDPG gradient steps per second (critic + actor, batch 256 and the paper preset's
-  1,536, 3 × 256 hidden units, ``torch.set_num_threads(1)`` unless ``--threads``);
+  (``--collector-workers`` in the recipe); the 1-env, 2 × 1 and 2 × 3 layouts also with the
+  previous stack (a ``SerialEnv`` of ``GymEnv`` s, a step counter and an episode return, TorchRL's
+  exploration modules) beside the recipe's (:func:`~torchrl_subgoal.envs.fetch.make_fetch_envs`,
+  the shaping transform alone, the one-module exploring policy);
+* DDPG gradient steps per CPU second (critic + actor, batch 256 and the paper preset's
+  1,536, 3 × 256 hidden units, ``torch.set_num_threads(1)`` unless ``--threads``), beside the
+  update as it was before (``DDPGLoss.forward`` + a second actor pass for the L2 penalty,
+  single-tensor Adam) and a hand-written torch step of the same arithmetic (the floor);
+  the single-core matmul GFLOP/s of the layers' shape and the FLOPs of one step give the
+  FLOP floor of the gradient steps of a learning;
 * from these, the projected wall time of one learning on one core, every part run one
   after another in one process: the paper preset (the authors' 6 workers' data: 3×10^6
   env steps, 4×10^5 gradient steps of 1,536) and one worker's share of it (5×10^5 env
@@ -35,6 +42,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import copy
 import cProfile
 import os
 import pstats
@@ -44,7 +52,11 @@ from functools import partial
 
 import torch
 from tensordict import TensorDict
+from tensordict.nn import TensorDictModule, TensorDictSequential
+from torch import nn
 from torchrl.collectors import Collector, MultiSyncCollector
+from torchrl.data import Bounded
+from torchrl.modules import AdditiveGaussianModule, EGreedyModule
 
 from torchrl_subgoal import NeuralPotential
 from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, mlp
@@ -76,19 +88,31 @@ def raw_rate(steps: int) -> float:
     return rate
 
 
-def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: int, repeats: int) -> float:
+def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: int, repeats: int,
+                   generic: bool = False) -> float:
     """Env steps/s of a ``MultiSyncCollector`` of ``collector_workers`` processes (0: a ``Collector`` here)
-    stepping ``envs`` envs each (in ``env_workers`` ParallelEnv processes, 0: in the collecting process)."""
+    stepping ``envs`` envs each (in ``env_workers`` ParallelEnv processes, 0: in the collecting process).
+
+    The recipe's stack: :func:`fetch.make_fetch_envs`, the shaping transform alone, the agent's
+    one-module exploring policy. ``generic``: the stack the recipe used before (a ``SerialEnv`` of
+    ``GymEnv`` s, a step counter and an episode return beside the shaping transform, TorchRL's
+    ``AdditiveGaussianModule`` and ``EGreedyModule``), same networks and potential.
+    """
     series = fetch.human_patterns()["participants"]
     shaping = Shaping([series], NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, (256, 256, 256))))
-    factory = EnvFactory(shaped_env, make_env=batched(partial(fetch.make_fetch_env, 0)), num_envs=envs,
-                         env_workers=env_workers, shaping=shaping, potential=shaping.potential, gamma=0.98)
+    make_env = batched(partial(fetch.make_fetch_env, 0)) if generic else partial(fetch.make_fetch_envs, 0)
+    factory = EnvFactory(shaped_env, make_env=make_env, num_envs=envs, env_workers=env_workers, shaping=shaping,
+                         potential=shaping.potential, gamma=0.98, episode_stats=generic)
     spec = fetch.make_fetch_env(0).action_spec_unbatched
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, spec, DDPGConfig(buffer_size=1000))
+    policy = agent.policy if not generic else TensorDictSequential(
+        TensorDictModule(agent.norm, in_keys=["observation"], out_keys=["observation_normalized"]), agent.actor,
+        AdditiveGaussianModule(spec, sigma_init=0.2, sigma_end=0.2, annealing_num_steps=1),
+        EGreedyModule(spec, eps_init=0.3, eps_end=0.3, annealing_num_steps=1))
     frames = 50 * envs * max(collector_workers, 1)
-    collector = (Collector(factory(), agent.policy, frames_per_batch=frames, total_frames=-1,
+    collector = (Collector(factory(), policy, frames_per_batch=frames, total_frames=-1,
                            auto_register_policy_transforms=False) if collector_workers == 0 else
-                 MultiSyncCollector([factory] * collector_workers, agent.policy, frames_per_batch=frames,
+                 MultiSyncCollector([factory] * collector_workers, policy, frames_per_batch=frames,
                                     total_frames=-1, cat_results="stack", auto_register_policy_transforms=False))
     batches = iter(collector)
     next(batches)  # warm-up: workers started, first reset done
@@ -109,7 +133,7 @@ def profile_collector(steps: int) -> None:
     """Shares of a one-process collector's time (1 env, HRS shaping, exploring policy)."""
     series = fetch.human_patterns()["participants"]
     shaping = Shaping([series], NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, (256, 256, 256))))
-    env = shaped_env(batched(partial(fetch.make_fetch_env, 0)), 1, shaping=shaping, gamma=0.98)
+    env = shaped_env(partial(fetch.make_fetch_envs, 0), 1, shaping=shaping, gamma=0.98, episode_stats=False)
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, env.action_spec_unbatched, DDPGConfig(buffer_size=1000))
     explore = agent.policy.forward
 
@@ -132,6 +156,7 @@ def profile_collector(steps: int) -> None:
     parts = {
         "policy (actor 3x256 + exploration)": lambda f, n: n == "policy_forward",
         "shaping transform (+ neural potential)": lambda f, n: n == "_step" and f.endswith("torchrl_subgoal/transform.py"),
+        "batched Fetch env (make_fetch_envs)": lambda f, n: n == "_step" and f.endswith("envs/fetch.py"),
         "gymnasium-robotics step (incl. MuJoCo)": lambda f, n: n == "step" and f.endswith(
             "gymnasium_robotics/envs/robot_env.py"),
         "MuJoCo mj_step": lambda f, n: "mj_step" in n,
@@ -142,9 +167,7 @@ def profile_collector(steps: int) -> None:
         print(f"  {label:42s} {100 * cumulative / total:5.1f}%")
 
 
-def update_rate(updates: int, repeats: int, batch_size: int, threads: int) -> float:
-    torch.set_num_threads(threads)  # a MultiSyncCollector's shutdown hands its workers' threads back
-    spec = fetch.make_fetch_env(0).action_spec_unbatched
+def _filled_agent(batch_size: int, spec: Bounded) -> DDPGAgent:
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, spec, DDPGConfig(buffer_size=20_000, batch_size=batch_size))
     n = 10_000
     agent.extend(TensorDict({
@@ -152,18 +175,104 @@ def update_rate(updates: int, repeats: int, batch_size: int, threads: int) -> fl
         "next": {"observation": torch.randn(n, fetch.OBSERVATION_SIZE), "reward": -torch.ones(n, 1),
                  "done": torch.zeros(n, 1, dtype=torch.bool), "terminated": torch.zeros(n, 1, dtype=torch.bool)},
     }, [n]))
+    return agent
+
+
+def _previous_update(agent: DDPGAgent) -> Callable[[], None]:
+    """The update as it was before (for the side-by-side timing): ``DDPGLoss.forward`` (actor and
+    critic losses), a second actor pass for the L2 penalty, single-tensor Adam."""
+    actor_opt = torch.optim.Adam(agent.loss.actor_network_params.values(True, True), lr=1e-3, foreach=False)
+    critic_opt = torch.optim.Adam(agent.loss.value_network_params.values(True, True), lr=1e-3, foreach=False)
+
+    def update() -> None:
+        batch = agent.replay.sample()
+        batch.set("observation_normalized", agent.norm(batch["observation"]))
+        batch.set(("next", "observation_normalized"), agent.norm(batch["next", "observation"]))
+        losses = agent.loss(batch)
+        action = agent.actor(batch.select("observation_normalized"))["action"]
+        critic_opt.zero_grad(set_to_none=True)
+        actor_opt.zero_grad(set_to_none=True)
+        (losses["loss_value"] + losses["loss_actor"] + action.square().mean()).backward()
+        critic_opt.step()
+        actor_opt.step()
+
+    return update
+
+
+def _hand_written_update(batch_size: int) -> Callable[[], None]:
+    """The floor: the same networks, targets, clip, penalty and fused Adam in plain torch, no TorchRL."""
+    def net(inputs: int, outputs: int) -> nn.Module:
+        return mlp(inputs, outputs, (256, 256, 256))
+
+    actor, critic = net(fetch.OBSERVATION_SIZE, 4), net(fetch.OBSERVATION_SIZE + 4, 1)
+    target_actor, target_critic = copy.deepcopy(actor).requires_grad_(False), copy.deepcopy(critic).requires_grad_(False)
+    actor_opt = torch.optim.Adam(actor.parameters(), lr=1e-3, fused=True)
+    critic_opt = torch.optim.Adam(critic.parameters(), lr=1e-3, fused=True)
+    n = 10_000
+    obs, act, next_obs = torch.randn(n, fetch.OBSERVATION_SIZE), torch.rand(n, 4) * 2 - 1, torch.randn(n, 25)
+    reward, terminated = -torch.ones(n, 1), torch.zeros(n, 1)
+
+    def update() -> None:
+        i = torch.randint(0, n, (batch_size,))
+        o, a, o2 = obs[i], act[i], next_obs[i]
+        with torch.no_grad():
+            q_next = target_critic(torch.cat([o2, torch.tanh(target_actor(o2))], -1))
+            target = (reward[i] + 0.98 * (1 - terminated[i]) * q_next).clamp(-50.0, 0.0)
+        loss_value = (critic(torch.cat([o, a], -1)) - target).square().mean()
+        pi = torch.tanh(actor(o))
+        detached = {k: v.detach() for k, v in critic.named_parameters()}
+        q_pi = torch.func.functional_call(critic, detached, (torch.cat([o, pi], -1),))
+        critic_opt.zero_grad(set_to_none=True)
+        actor_opt.zero_grad(set_to_none=True)
+        (loss_value - q_pi.mean() + pi.square().mean()).backward()
+        critic_opt.step()
+        actor_opt.step()
+
+    return update
+
+
+def update_rates(updates: int, repeats: int, batch_size: int, threads: int) -> dict[str, float]:
+    """Gradient steps per CPU second (this process's CPU time: on a shared machine, what one core costs)
+    of the agent's update, the previous update and the hand-written floor, interleaved."""
+    torch.set_num_threads(threads)  # a MultiSyncCollector's shutdown hands its workers' threads back
+    spec = fetch.make_fetch_env(0).action_spec_unbatched
+    agent = _filled_agent(batch_size, spec)
+    steps = {"agent.update": agent.update, "previous update": _previous_update(_filled_agent(batch_size, spec)),
+             "hand-written torch step": _hand_written_update(batch_size)}
+    rates: dict[str, float] = {}
+    for step in steps.values():
+        for _ in range(5):
+            step()
+    for _ in range(repeats):  # interleaved, so that a change of load hits all three alike
+        for name, step in steps.items():
+            start = time.process_time()
+            for i in range(updates):
+                step()
+                if name == "agent.update" and i % 40 == 39:
+                    agent.soft_update()
+            rates[name] = max(rates.get(name, 0.0), updates / (time.process_time() - start))
+    return rates
+
+
+def matmul_gflops(rows: int, repeats: int = 200) -> float:
+    """Single-thread fp32 GFLOP per CPU second of ``[rows, 256] @ [256, 256]``, the layers' shape."""
+    x, w = torch.randn(rows, 256), torch.randn(256, 256)
     for _ in range(10):
-        agent.update()
+        x @ w
+    start = time.process_time()
+    for _ in range(repeats):
+        x @ w
+    return 2 * rows * 256 * 256 * repeats / (time.process_time() - start) / 1e9
 
-    def run() -> float:
-        start = time.perf_counter()
-        for i in range(updates):
-            agent.update()
-            if i % 40 == 39:
-                agent.soft_update()
-        return updates / (time.perf_counter() - start)
 
-    return best(run, repeats)
+def update_flops(batch_size: int, hidden: int = 256) -> float:
+    """Floating-point operations of one gradient step (matmuls only): 2 actor and 3 critic forward
+    passes (target actor and critic on o', critic on (o, a), actor on o, critic on (o, π(o))), the
+    critic's backward through weights and activations (2×), the actor loss's backward through the
+    critic's activations only (1×) and the actor's weights and activations (2×)."""
+    actor = fetch.OBSERVATION_SIZE * hidden + 2 * hidden * hidden + hidden * 4
+    critic = (fetch.OBSERVATION_SIZE + 4) * hidden + 2 * hidden * hidden + hidden
+    return 2.0 * batch_size * (4 * actor + 6 * critic)
 
 
 def main() -> None:
@@ -182,22 +291,33 @@ def main() -> None:
     raw = best(lambda: raw_rate(steps), args.repeats)
     print(f"raw gymnasium env, 1 process:        {raw:8.0f} env-steps/s  (1.00x)")
     rates = {}
-    for name, collector_workers, env_workers, envs in (
-        ("Collector, this process, 1 env", 0, 0, 1),
-        ("Collector over ParallelEnv(2), shaping here", 0, 2, 2),
-        ("MultiSyncCollector, 1 worker x 1 env", 1, 0, 1),
-        ("MultiSyncCollector, 2 workers x 1 env", 2, 0, 1),
-        ("Collector, this process, 6 envs", 0, 0, 6),
-        ("MultiSyncCollector, 2 workers x 3 envs", 2, 0, 3),
+    for name, collector_workers, env_workers, envs, generic in (
+        ("Collector, this process, 1 env", 0, 0, 1, False),
+        ("Collector, this process, 1 env, previous stack", 0, 0, 1, True),
+        ("Collector over ParallelEnv(2), shaping here", 0, 2, 2, False),
+        ("MultiSyncCollector, 1 worker x 1 env", 1, 0, 1, False),
+        ("MultiSyncCollector, 2 workers x 1 env", 2, 0, 1, False),
+        ("MultiSyncCollector, 2 workers x 1 env, previous stack", 2, 0, 1, True),
+        ("Collector, this process, 6 envs", 0, 0, 6, False),
+        ("MultiSyncCollector, 2 workers x 3 envs", 2, 0, 3, False),
+        ("MultiSyncCollector, 2 workers x 3 envs, previous stack", 2, 0, 3, True),
     ):
-        rate = rates[name] = collector_rate(collector_workers, env_workers, envs, steps, args.repeats)
-        print(f"{name + ', HRS shaping:':56s} {rate:8.0f} env-steps/s  ({rate / raw:.2f}x raw)")
+        rate = rates[name] = collector_rate(collector_workers, env_workers, envs, steps, args.repeats, generic)
+        print(f"{name + ', HRS shaping:':66s} {rate:8.0f} env-steps/s  ({rate / raw:.2f}x raw)")
     updates = {}
     for batch in (256, 1536):
-        rate = updates[batch] = update_rate((200 if args.quick else 600) * 256 // batch, args.repeats, batch,
-                                            args.threads)
-        print(f"DDPG gradient steps, batch {batch}, {args.threads} thread(s): {rate:6.1f} steps/s "
-              f"({1e3 / rate:.1f} ms each)")
+        rates_b = update_rates((200 if args.quick else 600) * 256 // batch, args.repeats, batch, args.threads)
+        updates[batch] = rates_b["agent.update"]
+        flop = update_flops(batch)
+        gflops = matmul_gflops(batch)
+        print(f"DDPG gradient steps, batch {batch}, {args.threads} thread(s): " + "; ".join(
+            f"{name} {1e3 / rate:.1f} ms" for name, rate in rates_b.items())
+            + f" (agent.update {rates_b['previous update'] / rates_b['agent.update']:.2f}x the previous "
+            f"time, {rates_b['hand-written torch step'] / rates_b['agent.update']:.2f}x the hand-written)")
+        print(f"  FLOP floor: {flop / 1e9:.2f} GFLOP per step / {gflops:.0f} GFLOP/s single-thread matmul "
+              f"[{batch}x256]@[256x256] = {1e3 * flop / gflops / 1e9:.1f} ms")
+        floor_minutes = GRADIENT_STEPS * flop / gflops / 1e9 / 60
+        print(f"  {GRADIENT_STEPS:.0e} gradient steps of {batch} at that floor: {floor_minutes:.0f} min on one core")
     one_core = rates["Collector, this process, 1 env"]
     for preset, env_steps, batch in (("paper (6 workers' data)", 3_000_000, 1536), ("paper-1worker", 500_000, 256)):
         env_seconds = (env_steps + TEST_STEPS) / one_core
