@@ -97,3 +97,31 @@ def test_training_state_round_trip() -> None:
     assert torch.equal(a.norm.mean, b.norm.mean)
     with pytest.raises(ValueError, match="does not fit"):
         DDPGAgent(7, SPEC, DDPGConfig(hidden=(16, 16))).load_training_state(a.training_state())
+
+
+def test_update_gradients_equal_ddpg_loss_plus_the_action_penalty() -> None:
+    """One actor pass for Q and the L2 penalty gives DDPGLoss's gradients plus the penalty's."""
+    a = agent(action_l2=1.0)
+    a.extend(batch(64))
+    torch.manual_seed(3)
+    sample = a.replay.sample()
+    a.replay.sample = lambda: sample.clone()  # type: ignore[method-assign]
+    reference = sample.clone()
+    reference.set("observation_normalized", a.norm(reference["observation"]))
+    reference.set(("next", "observation_normalized"), a.norm(reference["next", "observation"]))
+    losses = a.loss(reference)
+    penalty = a.actor(reference.select("observation_normalized"))["action"].square().mean()
+    params = list(a.loss.actor_network_params.values(True, True)) + list(a.loss.value_network_params.values(True, True))
+    expected = torch.autograd.grad(losses["loss_value"] + losses["loss_actor"] + penalty, params)
+    captured: list[torch.Tensor] = []
+    for optimizer in (a.critic_optimizer, a.actor_optimizer):  # read the gradients the update steps with
+        optimizer.step = lambda *args, o=optimizer, **kw: captured.extend(  # type: ignore[method-assign]
+            p.grad.clone() for g in o.param_groups for p in g["params"])
+    got = a.update()
+    assert got["loss_value"] == pytest.approx(losses["loss_value"].item(), abs=1e-6)
+    assert got["loss_actor"] == pytest.approx((losses["loss_actor"] + penalty).item(), abs=1e-6)
+    by_ptr = {p.data_ptr(): g for p, g in zip(
+        [p for o in (a.critic_optimizer, a.actor_optimizer) for g in o.param_groups for p in g["params"]],
+        captured, strict=True)}
+    for p, e in zip(params, expected, strict=True):
+        assert torch.allclose(by_ptr[p.data_ptr()], e, atol=1e-6, rtol=1e-5)

@@ -6,6 +6,7 @@ from importlib import metadata
 
 import pytest
 import torch
+from tensordict import TensorDict
 
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.subgoals import SubgoalTables
@@ -105,3 +106,36 @@ def test_mujoco_312_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(fetch.metadata, "version", lambda name: "3.12.0" if name == "mujoco" else real(name))
     with pytest.raises(fetch.FetchUnavailableError, match=r"mujoco 3.12.0 is installed.*<3.12"):
         fetch.require_fetch()
+
+
+def test_batched_envs_equal_a_serial_env_of_single_envs() -> None:
+    """``make_fetch_envs`` is the task of ``SerialEnv(make_fetch_env)``: same specs, bitwise the same
+    data for the same actions, through time-outs and the collectors' partial resets."""
+    from functools import partial
+
+    from torchrl.envs.utils import check_env_specs
+
+    from torchrl_subgoal.training import batched
+
+    serial = batched(partial(fetch.make_fetch_env, 5))(3)
+    envs = fetch.make_fetch_envs(5, 3)
+    check_env_specs(envs)
+    assert envs.full_observation_spec == serial.full_observation_spec
+    assert envs.full_done_spec == serial.full_done_spec and envs.action_spec == serial.action_spec
+    actions = torch.rand(120, 3, 4, generator=torch.Generator().manual_seed(0)) * 2 - 1
+
+    def roll(env) -> TensorDict:  # type: ignore[no-untyped-def]
+        td, steps = env.reset(), []
+        for t in range(120):  # 2.4 episodes: two time-outs and their resets
+            td["action"] = actions[t]
+            full, td = env.step_and_maybe_reset(td)
+            steps.append(full.clone())
+        return torch.stack(steps, 1)
+
+    a, b = roll(serial), roll(envs)
+    assert set(a.keys(True, True)) == set(b.keys(True, True))
+    for key in a.keys(True, True):
+        assert torch.equal(a[key], b[key]), key
+    assert b["next", "truncated"].sum() == 6
+    serial.close()
+    envs.close()
