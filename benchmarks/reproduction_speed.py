@@ -56,8 +56,9 @@ FIGURES = ("wall_s", "sweep_wall_s", "cpu_s", "cores_busy", "learner_steps_per_s
 ENGINE_FIGURES = ("cpu_ns_per_learner_step", "learner_steps")
 
 
-def measure_engine(domain: str) -> dict[str, float]:
-    """CPU time per recorded learner-step of the fused engine on one batch (after a compiling run)."""
+def measure_engine(domain: str, batch_size: int | None = None) -> dict[str, float]:
+    """CPU time per recorded learner-step of the fused engine on one batch (after a compiling run) of
+    ``batch_size`` learners (default 100 for four-rooms, 50 for PinBall)."""
     import torch
 
     from torchrl_subgoal.agents import (
@@ -80,7 +81,7 @@ def measure_engine(domain: str) -> dict[str, float]:
         return table, FourierActorCritic(n, spec.low[0], spec.high[0], 5, AC_PRESETS["released"], seed=1), 3
 
     run_episodes(*batch(2)[:2], 1, engine="fused")  # compiles or loads the kernels
-    env, agent, episodes = batch(100 if domain == "four_rooms" else 50)
+    env, agent, episodes = batch(batch_size or (100 if domain == "four_rooms" else 50))
     cpu = time.process_time()
     records = run_episodes(env, agent, episodes, engine="fused")
     cpu = time.process_time() - cpu
@@ -167,12 +168,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repeats", type=int, default=1, help="runs per side; the table shows the medians")
     parser.add_argument("--against", metavar="DIR", help="also run the package of this checkout, alternating")
     parser.add_argument("--engine", action="store_true", help="the fused engine's CPU time per learner-step only")
+    parser.add_argument("--batch", type=int, metavar="N", help="--engine: learners per batch (default: 100 for "
+                        "four-rooms, 50 for PinBall; the recipes' chunks are 100 and 10)")
     parser.add_argument("--measure", metavar="DOMAIN", help=argparse.SUPPRESS)  # one run, JSON out (internal)
     parser.add_argument("recipe_args", nargs="*", help=argparse.SUPPRESS)
     opts = parser.parse_args(argv)
     if opts.measure:
-        figures = measure_engine(opts.measure) if opts.recipe_args == ["engine"] else measure(opts.measure,
-                                                                                             opts.recipe_args)
+        if opts.recipe_args[:1] == ["engine"]:
+            figures = measure_engine(opts.measure, *map(int, opts.recipe_args[1:]))
+        else:
+            figures = measure(opts.measure, opts.recipe_args)
         print(json.dumps(figures))
         return
     domains = [d.strip() for d in opts.domains.split(",") if d.strip()]
@@ -185,7 +190,7 @@ def main(argv: list[str] | None = None) -> None:
     if opts.against is not None:
         sides = {"against": opts.against, "this checkout": None}
     if opts.engine:
-        _engine_table(domains, sides, opts.repeats)
+        _engine_table(domains, sides, opts.repeats, opts.batch)
         return
     scale = "quick" if opts.quick else "paper"
     print(f"{scale} scale, 2 workers, median of {opts.repeats} run(s) per side; {os.cpu_count()} CPUs\n")
@@ -214,18 +219,20 @@ def _alternate(domain: str, args: list[str], sides: dict[str, str | None], repea
     return {label: {k: median(r[k] for r in rs) for k in figures} for label, rs in runs.items()}
 
 
-def _engine_table(domains: list[str], sides: dict[str, str | None], repeats: int) -> None:
-    print(f"fused engine, one process, median of {repeats} run(s) per side\n")
+def _engine_table(domains: list[str], sides: dict[str, str | None], repeats: int, batch: int | None) -> None:
+    size = f", batches of {batch} learners" if batch else ""
+    print(f"fused engine, one process, median of {repeats} run(s) per side{size}\n")
     print("| engine | CPU ns per learner-step | learner-steps |")
     print("|---|---|---|")
     for domain in domains:
-        medians = _alternate(domain, ["engine"], sides, repeats, ENGINE_FIGURES)
+        medians = _alternate(domain, ["engine", *([str(batch)] if batch else [])], sides, repeats, ENGINE_FIGURES)
         for label in sides:
             m = medians[label]
             print(f"| {domain} ({label}) | {m['cpu_ns_per_learner_step']:.0f} | {m['learner_steps']:.0f} |", flush=True)
         if len(sides) == 2:
             ratio = medians["this checkout"]["cpu_ns_per_learner_step"] / medians["against"]["cpu_ns_per_learner_step"]
             print(f"| {domain}: this / against | {ratio:.2f}x | |", flush=True)
+
 
 if __name__ == "__main__":
     main()

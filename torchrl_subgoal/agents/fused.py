@@ -48,7 +48,7 @@ from torchrl_subgoal.agents.actor_critic import FourierActorCritic
 from torchrl_subgoal.agents.loop import EpisodeRecords
 from torchrl_subgoal.agents.sarsa import SoftmaxSarsa
 from torchrl_subgoal.envs.four_rooms import FourRoomsEnv
-from torchrl_subgoal.envs.pinball import PinBallEnv, step_balls
+from torchrl_subgoal.envs.pinball import PinBallEnv, step_ball
 from torchrl_subgoal.potentials import NaivePotential, TabularPotential
 from torchrl_subgoal.subgoals import StateAggregation, SubgoalTables
 from torchrl_subgoal.transform import SubgoalPotentialTransform
@@ -245,38 +245,38 @@ def _pinball_ac_run(
 ):
     """PinBall + shaping + actor-critic, per learner the TorchRL loop's kernels in its order (see module doc).
 
-    Learners are independent (own streams, own tables): one that has all its
-    episodes is dropped from the loop. At most ``max_steps_run`` steps;
-    returns ``(steps taken, episodes filed)``.
+    Learners are independent (own streams, own tables), so each runs its
+    steps of the block in one go (its tables stay in the core's cache) and
+    one that has all its episodes stops. At most ``max_steps_run`` steps per
+    learner; returns ``(steps of the longest-running learner, episodes filed)``:
+    the steps the TorchRL loop's batch would take for the same block.
     """
     n_actions = 5
-    executed = np.empty(1, np.int64)
-    reached = np.empty(1, np.bool_)
     obs = np.empty(4, np.float32)
     obs_next = np.empty(4, np.float64)
     obs_root = np.empty(4, np.float64)
+    candidates = np.empty(edges.shape[0], np.int64)
+    owners = np.empty(edges.shape[0], np.int64)
     scratch, phi_next = _kernels._feature_scratch(order, half, 4, theta.shape[2])
     max_episodes = steps_out.shape[1]
     active, n_active = _kernels._active_learners(episode, max_episodes)
     filed_total = 0
-    for step in range(max_steps_run):
-        if n_active == 0:
-            return step, filed_total
-        kept = 0
-        for i in range(n_active):
-            b = active[i]
-            executed[0] = _kernels._random_action(action[b], env_streams, b, random_prob, n_actions)
-            step_balls(position[b:b + 1], velocity[b:b + 1], executed, reached, edges, boxes, first_edge, ball_radius,
-                       target_x, target_y, target_radius, velocity_limit)
+    taken = 0
+    for i in range(n_active):
+        b = active[i]
+        steps = max_steps_run
+        for step in range(max_steps_run):
+            executed = _kernels._random_action(action[b], env_streams, b, random_prob, n_actions)
+            px, py, vx, vy, terminated = step_ball(
+                position[b, 0], position[b, 1], velocity[b, 0], velocity[b, 1], executed, edges, boxes, first_edge,
+                ball_radius, target_x, target_y, target_radius, velocity_limit, candidates, owners)
             env_steps[b] += 1
-            terminated = reached[0]
             done = terminated or env_steps[b] >= max_steps
             r = goal_reward if terminated else 0.0
             if step_penalty != 0.0 or thrust_penalty != 0.0:
-                r += thrust_penalty if executed[0] != n_actions - 1 else step_penalty
+                r += thrust_penalty if executed != n_actions - 1 else step_penalty
             reward = np.float32(r)
-            obs[0], obs[1] = position[b, 0], position[b, 1]
-            obs[2], obs[3] = velocity[b, 0], velocity[b, 1]
+            obs[0], obs[1], obs[2], obs[3] = px, py, vx, vy
             zb = z[b, 0]
             znb = zb
             if shaping == _kernels.SUBGOAL_SHAPING:
@@ -291,13 +291,14 @@ def _pinball_ac_run(
             for d in range(4):
                 obs_next[d] = obs[d]
             if done:  # the env and the transform reset this ball
-                position[b, 0], position[b, 1] = start_x, start_y
-                velocity[b, 0], velocity[b, 1] = 0.0, 0.0
+                px, py, vx, vy = start_x, start_y, 0.0, 0.0
                 env_steps[b] = 0
-            obs_root[0] = np.float32(position[b, 0])
-            obs_root[1] = np.float32(position[b, 1])
-            obs_root[2] = np.float32(velocity[b, 0])
-            obs_root[3] = np.float32(velocity[b, 1])
+            position[b, 0], position[b, 1] = px, py
+            velocity[b, 0], velocity[b, 1] = vx, vy
+            obs_root[0] = np.float32(px)
+            obs_root[1] = np.float32(py)
+            obs_root[2] = np.float32(vx)
+            obs_root[3] = np.float32(vy)
             if shaping == _kernels.LOOKUP_SHAPING and done:  # region aggregation: z of the reset state
                 z[b, 0] = _kernels._first_region_one(z[b, 0], obs_root, region_lo, region_hi, region_centre,
                                                      region_weight, region_radius2)
@@ -309,11 +310,14 @@ def _pinball_ac_run(
                 action[b] = _kernels._ac_learner(b, w, theta, phi, probs, action[b], shaped, obs_next, terminated,
                                                  done, obs_root, low, inv_range, order, half, agent_streams,
                                                  actor_lr, critic_lr, gamma, normalize, scratch, phi_next)
-            filed, kept = _kernels._record_and_keep(b, done, terminated, reward, t_rec, ret, episode, steps_out,
-                                                    returns_out, success_out, active, kept)
-            filed_total += filed
-        n_active = kept
-    return max_steps_run, filed_total
+            if _kernels._record_learner(b, done, terminated, reward, t_rec, ret, episode, steps_out, returns_out,
+                                        success_out):
+                filed_total += 1
+            if episode[b] >= max_episodes:
+                steps = step + 1
+                break
+        taken = max(taken, steps)
+    return taken, filed_total
 
 
 def run_pinball_fused(

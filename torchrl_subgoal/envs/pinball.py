@@ -273,6 +273,123 @@ class _Geometry:
         self.edge_owner = torch.as_tensor(self.owner, device=device)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def step_ball(
+    px: float,
+    py: float,
+    vx: float,
+    vy: float,
+    a: int,
+    edges: np.ndarray,
+    boxes: np.ndarray,
+    first_edge: np.ndarray,
+    ball_radius: float,
+    target_x: float,
+    target_y: float,
+    target_radius: float,
+    velocity_limit: float,
+    candidates: np.ndarray,
+    owners: np.ndarray,
+) -> tuple[float, float, float, float, bool]:
+    """One environment step of one ball: ``(x, y, vx, vy, reached the target)`` (compiled by numba).
+
+    Before its substeps, the ball collects the edges it can reach during this
+    step: its speed is fixed by the thrust (reflections and reversals keep it),
+    so in at most ``SUBSTEPS + 1`` moves its centre travels at most
+    ``SUBSTEPS + 1`` moves of ``speed * move``; an edge farther than
+    ``ball_radius`` plus that distance (``reach``) cannot be hit. Polygons are
+    first rejected by their bounding box grown by that distance. The substeps
+    then test only the collected edges (``candidates``, with their polygons in
+    ``owners``: scratch of one entry per edge), which gives the same hits as
+    testing every edge. :func:`step_balls` steps a batch; the fused engine
+    calls this once per learner.
+    """
+    move = ball_radius / SUBSTEPS
+    r2 = ball_radius * ball_radius
+    t2 = target_radius * target_radius
+    if a == 0:
+        vx += THRUST
+    elif a == 1:
+        vy += THRUST
+    elif a == 2:
+        vx -= THRUST
+    elif a == 3:
+        vy -= THRUST
+    vx = min(max(vx, -velocity_limit), velocity_limit)
+    vy = min(max(vy, -velocity_limit), velocity_limit)
+
+    reach = ball_radius + (SUBSTEPS + 1) * move * math.sqrt(vx * vx + vy * vy) + 1e-9
+    count = 0
+    for p in range(boxes.shape[0]):
+        if (
+            px + reach < boxes[p, 0]
+            or py + reach < boxes[p, 1]
+            or px - reach > boxes[p, 2]
+            or py - reach > boxes[p, 3]
+        ):
+            continue
+        for e in range(first_edge[p], first_edge[p + 1]):
+            ax, ay = edges[e, 0], edges[e, 1]
+            dx, dy = edges[e, 2], edges[e, 3]
+            t = min(max(((px - ax) * dx + (py - ay) * dy) * edges[e, 4], 0.0), 1.0)
+            ox = px - (ax + t * dx)
+            oy = py - (ay + t * dy)
+            if ox * ox + oy * oy <= reach * reach:
+                candidates[count] = e
+                owners[count] = p
+                count += 1
+
+    done = False
+    for substep in range(SUBSTEPS):
+        px += vx * move
+        py += vy * move
+        hits = 0
+        polygons_hit = 0
+        last_owner = -1
+        hit_nx = 0.0
+        hit_ny = 0.0
+        for c in range(count):
+            e = candidates[c]
+            ax, ay = edges[e, 0], edges[e, 1]
+            dx, dy = edges[e, 2], edges[e, 3]
+            t = min(max(((px - ax) * dx + (py - ay) * dy) * edges[e, 4], 0.0), 1.0)
+            ox = px - (ax + t * dx)
+            oy = py - (ay + t * dy)
+            if ox * ox + oy * oy <= r2 and vx * ox + vy * oy < 0.0:
+                hits += 1
+                hit_nx, hit_ny = edges[e, 5], edges[e, 6]
+                if owners[c] != last_owner:  # candidates are grouped by polygon
+                    polygons_hit += 1
+                    last_owner = owners[c]
+        if hits == 1:
+            dot = vx * hit_nx + vy * hit_ny
+            vx -= 2.0 * dot * hit_nx
+            vy -= 2.0 * dot * hit_ny
+        elif hits > 1:
+            vx, vy = -vx, -vy
+        if polygons_hit == 1 and substep == SUBSTEPS - 1:
+            px += vx * move
+            py += vy * move
+        if (px - target_x) ** 2 + (py - target_y) ** 2 <= t2:
+            done = True
+            break
+    if not done:
+        vx *= DRAG
+        vy *= DRAG
+        out = False
+        if px > 1.0:
+            px, out = 0.95, True
+        elif px < 0.0:
+            px, out = 0.05, True
+        if py > 1.0:
+            py, out = 0.95, True
+        elif py < 0.0:
+            py, out = 0.05, True
+        if out:
+            vx, vy = 0.0, 0.0
+    return px, py, vx, vy, done
+
+
 def _step_balls(
     position: np.ndarray,
     velocity: np.ndarray,
@@ -287,105 +404,14 @@ def _step_balls(
     target_radius: float,
     velocity_limit: float,
 ) -> None:
-    """One environment step for every ball, in place (compiled by numba).
-
-    A loop per ball. Before its substeps, a ball collects the edges it can
-    reach during this step: its speed is fixed by the thrust (reflections and
-    reversals keep it), so in at most ``SUBSTEPS + 1`` moves its centre
-    travels at most ``SUBSTEPS + 1`` moves of ``speed * move``; an edge
-    farther than ``ball_radius`` plus that distance (``reach``) cannot be hit. Polygons are first rejected by their bounding box grown by
-    that distance. The substeps then test only the collected edges, which
-    gives the same hits as testing every edge.
-    """
-    move = ball_radius / SUBSTEPS
-    r2 = ball_radius * ball_radius
-    t2 = target_radius * target_radius
+    """One environment step for every ball, in place (compiled by numba): :func:`step_ball` per ball."""
     candidates = np.empty(edges.shape[0], dtype=np.int64)
     owners = np.empty(edges.shape[0], dtype=np.int64)
     for i in range(position.shape[0]):
-        px, py = position[i, 0], position[i, 1]
-        vx, vy = velocity[i, 0], velocity[i, 1]
-        a = action[i]
-        if a == 0:
-            vx += THRUST
-        elif a == 1:
-            vy += THRUST
-        elif a == 2:
-            vx -= THRUST
-        elif a == 3:
-            vy -= THRUST
-        vx = min(max(vx, -velocity_limit), velocity_limit)
-        vy = min(max(vy, -velocity_limit), velocity_limit)
-
-        reach = ball_radius + (SUBSTEPS + 1) * move * math.sqrt(vx * vx + vy * vy) + 1e-9
-        count = 0
-        for p in range(boxes.shape[0]):
-            if (
-                px + reach < boxes[p, 0]
-                or py + reach < boxes[p, 1]
-                or px - reach > boxes[p, 2]
-                or py - reach > boxes[p, 3]
-            ):
-                continue
-            for e in range(first_edge[p], first_edge[p + 1]):
-                ax, ay = edges[e, 0], edges[e, 1]
-                dx, dy = edges[e, 2], edges[e, 3]
-                t = min(max(((px - ax) * dx + (py - ay) * dy) * edges[e, 4], 0.0), 1.0)
-                ox = px - (ax + t * dx)
-                oy = py - (ay + t * dy)
-                if ox * ox + oy * oy <= reach * reach:
-                    candidates[count] = e
-                    owners[count] = p
-                    count += 1
-
-        done = False
-        for substep in range(SUBSTEPS):
-            px += vx * move
-            py += vy * move
-            hits = 0
-            polygons_hit = 0
-            last_owner = -1
-            hit_nx = 0.0
-            hit_ny = 0.0
-            for c in range(count):
-                e = candidates[c]
-                ax, ay = edges[e, 0], edges[e, 1]
-                dx, dy = edges[e, 2], edges[e, 3]
-                t = min(max(((px - ax) * dx + (py - ay) * dy) * edges[e, 4], 0.0), 1.0)
-                ox = px - (ax + t * dx)
-                oy = py - (ay + t * dy)
-                if ox * ox + oy * oy <= r2 and vx * ox + vy * oy < 0.0:
-                    hits += 1
-                    hit_nx, hit_ny = edges[e, 5], edges[e, 6]
-                    if owners[c] != last_owner:  # candidates are grouped by polygon
-                        polygons_hit += 1
-                        last_owner = owners[c]
-            if hits == 1:
-                dot = vx * hit_nx + vy * hit_ny
-                vx -= 2.0 * dot * hit_nx
-                vy -= 2.0 * dot * hit_ny
-            elif hits > 1:
-                vx, vy = -vx, -vy
-            if polygons_hit == 1 and substep == SUBSTEPS - 1:
-                px += vx * move
-                py += vy * move
-            if (px - target_x) ** 2 + (py - target_y) ** 2 <= t2:
-                done = True
-                break
-        if not done:
-            vx *= DRAG
-            vy *= DRAG
-            out = False
-            if px > 1.0:
-                px, out = 0.95, True
-            elif px < 0.0:
-                px, out = 0.05, True
-            if py > 1.0:
-                py, out = 0.95, True
-            elif py < 0.0:
-                py, out = 0.05, True
-            if out:
-                vx, vy = 0.0, 0.0
+        px, py, vx, vy, done = step_ball(
+            position[i, 0], position[i, 1], velocity[i, 0], velocity[i, 1], action[i], edges, boxes, first_edge,
+            ball_radius, target_x, target_y, target_radius, velocity_limit, candidates, owners,
+        )
         position[i, 0], position[i, 1] = px, py
         velocity[i, 0], velocity[i, 1] = vx, vy
         reached[i] = done
