@@ -257,7 +257,7 @@ def _pinball_ac_run(
     obs_root = np.empty(4, np.float64)
     candidates = np.empty(edges.shape[0], np.int64)
     owners = np.empty(edges.shape[0], np.int64)
-    scratch, phi_next = _kernels._feature_scratch(order, half, 4, theta.shape[2])
+    scratch, phi_next = _kernels._feature_scratch(order, half, 4, theta.shape[2], theta.shape[1])
     max_episodes = steps_out.shape[1]
     active, n_active = _kernels._active_learners(episode, max_episodes)
     filed_total = 0
