@@ -54,11 +54,11 @@ def fingerprint(engine: str) -> dict[str, np.ndarray]:
         run = recipe.run_episodes
         count = [0]
 
-        def capture(env: Any, agent: Any, episodes: int, _run: Any = run, _domain: str = domain,
+        def capture(env: Any, agent: Any, episodes: int, _run: Any = run, _domain: str = domain, _count: list[int] = count,
                     **kwargs: Any) -> Any:
             records = _run(env, agent, episodes, **kwargs)
-            key = f"{_domain}/{count[0]}"
-            count[0] += 1
+            key = f"{_domain}/{_count[0]}"
+            _count[0] += 1
             found[f"{key}/steps"] = records.steps.numpy().copy()
             found[f"{key}/returns"] = records.returns.numpy().copy()
             found[f"{key}/success"] = records.success.numpy().copy()

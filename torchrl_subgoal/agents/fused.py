@@ -45,7 +45,7 @@ from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal import _kernels
 from torchrl_subgoal.agents.actor_critic import FourierActorCritic
-from torchrl_subgoal.agents.loop import EpisodeRecords
+from torchrl_subgoal.agents.records import EpisodeRecords
 from torchrl_subgoal.agents.sarsa import SoftmaxSarsa
 from torchrl_subgoal.envs.four_rooms import FourRoomsEnv
 from torchrl_subgoal.envs.pinball import PinBallEnv, step_ball

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Literal, Protocol
 
 import numpy as np
@@ -13,6 +12,7 @@ from tensordict.utils import NestedKey
 from torchrl.envs import EnvBase
 
 from torchrl_subgoal import _kernels
+from torchrl_subgoal.agents.records import EpisodeRecords
 
 __all__ = ["EpisodeRecords", "OnlineAgent", "run_episodes"]
 
@@ -40,26 +40,6 @@ class OnlineAgent(Protocol):
         on, the reset observation where it ended.
         """
         ...
-
-
-@dataclass
-class EpisodeRecords:
-    """Per-learner, per-episode results: ``[num_learners, num_episodes]`` tensors.
-
-    Examples:
-        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
-        >>> from torchrl_subgoal.envs import FourRoomsEnv
-        >>> env = FourRoomsEnv(num_envs=4)
-        >>> agent = SoftmaxSarsa(4, env.num_states, 4, SARSA_PRESETS["released"], seed=0)
-        >>> records = run_episodes(env, agent, episodes=2)
-        >>> records.steps.shape, records.returns.shape, records.success.dtype
-        (torch.Size([4, 2]), torch.Size([4, 2]), torch.bool)
-    """
-
-    steps: torch.Tensor
-    returns: torch.Tensor
-    success: torch.Tensor
-    env_steps: int = 0
 
 
 def run_episodes(
