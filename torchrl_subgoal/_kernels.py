@@ -540,123 +540,6 @@ def _dot(x, y):
 
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
-def _dot2(x0, y0, x1, y1):
-    """``(_dot(x0, y0), _dot(x1, y1))``, each summed in :func:`_dot`'s order, the two interleaved.
-
-    A dot product is one chain of dependent additions (its four partial sums
-    are one vector register): interleaving independent products keeps the
-    core's adders busy without changing any product's result.
-    """
-    n = x0.shape[0]
-    a0 = a1 = a2 = a3 = b0 = b1 = b2 = b3 = 0.0
-    f = 0
-    while f + 4 <= n:
-        a0 += x0[f] * y0[f]
-        a1 += x0[f + 1] * y0[f + 1]
-        a2 += x0[f + 2] * y0[f + 2]
-        a3 += x0[f + 3] * y0[f + 3]
-        b0 += x1[f] * y1[f]
-        b1 += x1[f + 1] * y1[f + 1]
-        b2 += x1[f + 2] * y1[f + 2]
-        b3 += x1[f + 3] * y1[f + 3]
-        f += 4
-    while f < n:
-        a0 += x0[f] * y0[f]
-        b0 += x1[f] * y1[f]
-        f += 1
-    return (a0 + a1) + (a2 + a3), (b0 + b1) + (b2 + b3)
-
-
-@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
-def _dot4(x0, y0, x1, y1, x2, y2, x3, y3):
-    """Four dot products as :func:`_dot2` does two."""
-    n = x0.shape[0]
-    a0 = a1 = a2 = a3 = b0 = b1 = b2 = b3 = c0 = c1 = c2 = c3 = d0 = d1 = d2 = d3 = 0.0
-    f = 0
-    while f + 4 <= n:
-        a0 += x0[f] * y0[f]
-        a1 += x0[f + 1] * y0[f + 1]
-        a2 += x0[f + 2] * y0[f + 2]
-        a3 += x0[f + 3] * y0[f + 3]
-        b0 += x1[f] * y1[f]
-        b1 += x1[f + 1] * y1[f + 1]
-        b2 += x1[f + 2] * y1[f + 2]
-        b3 += x1[f + 3] * y1[f + 3]
-        c0 += x2[f] * y2[f]
-        c1 += x2[f + 1] * y2[f + 1]
-        c2 += x2[f + 2] * y2[f + 2]
-        c3 += x2[f + 3] * y2[f + 3]
-        d0 += x3[f] * y3[f]
-        d1 += x3[f + 1] * y3[f + 1]
-        d2 += x3[f + 2] * y3[f + 2]
-        d3 += x3[f + 3] * y3[f + 3]
-        f += 4
-    while f < n:
-        a0 += x0[f] * y0[f]
-        b0 += x1[f] * y1[f]
-        c0 += x2[f] * y2[f]
-        d0 += x3[f] * y3[f]
-        f += 1
-    return (a0 + a1) + (a2 + a3), (b0 + b1) + (b2 + b3), (c0 + c1) + (c2 + c3), (d0 + d1) + (d2 + d3)
-
-
-@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
-def _logits(theta_b, phi, out):
-    """``out[a] = θ_a · φ`` for every action (:func:`_dot` each, four at a time)."""
-    n_actions = theta_b.shape[0]
-    a = 0
-    while a + 4 <= n_actions:
-        out[a], out[a + 1], out[a + 2], out[a + 3] = _dot4(theta_b[a], phi, theta_b[a + 1], phi, theta_b[a + 2], phi,
-                                                           theta_b[a + 3], phi)
-        a += 4
-    while a + 2 <= n_actions:
-        out[a], out[a + 1] = _dot2(theta_b[a], phi, theta_b[a + 1], phi)
-        a += 2
-    if a < n_actions:
-        out[a] = _dot(theta_b[a], phi)
-
-
-@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
-def _logits_pair(theta_b, phi, psi, out_phi, out_psi):
-    """:func:`_logits` of two feature vectors in one pass over ``θ``."""
-    n_actions = theta_b.shape[0]
-    a = 0
-    while a + 2 <= n_actions:
-        out_phi[a], out_psi[a], out_phi[a + 1], out_psi[a + 1] = _dot4(
-            theta_b[a], phi, theta_b[a], psi, theta_b[a + 1], phi, theta_b[a + 1], psi)
-        a += 2
-    if a < n_actions:
-        out_phi[a], out_psi[a] = _dot2(theta_b[a], phi, theta_b[a], psi)
-
-
-@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
-def _softmax(probs):
-    """``probs`` (logits on entry) ← their softmax."""
-    n_actions = probs.shape[0]
-    top = -np.inf
-    for a in range(n_actions):
-        top = max(top, probs[a])
-    total = 0.0
-    for a in range(n_actions):
-        probs[a] = np.exp(probs[a] - top)
-        total += probs[a]
-    for a in range(n_actions):
-        probs[a] /= total
-
-
-@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
-def _sample(probs, u):
-    """The action drawn from the distribution ``probs`` with the uniform ``u`` (inverse CDF)."""
-    n_actions = probs.shape[0]
-    acc = 0.0
-    for a in range(n_actions - 1):
-        acc += probs[a]
-        if acc > u:
-            return a
-    return n_actions - 1
-
-
-@numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
 def _basis_exponentials(trig, k, first_dim, end_dim, out):
     """``out[i] = exp(iπ c_i · s̃)`` over dimensions ``[first_dim, end_dim)``, with ``c_i``
     the base-``k`` digits of ``i`` (last dimension least significant), as (re, im) pairs.
@@ -689,7 +572,7 @@ def fourier_features(obs, low, inv_range, order, half, scratch, out):
     within a few units in the last place).
     ``scratch`` is :func:`_feature_scratch`'s.
     """
-    first, second, trig = scratch[0], scratch[1], scratch[2]
+    first, second, trig = scratch
     k = order + 1
     for d in range(obs.shape[0]):  # exp(iπ c s̃_d) = exp(iπ s̃_d)^c: two trigonometric calls per dimension
         x = min(max((obs[d] - low[d]) * inv_range[d], 0.0), 1.0)
@@ -709,22 +592,38 @@ def fourier_features(obs, low, inv_range, order, half, scratch, out):
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
 def _policy(theta_b, phi, probs):
     """``probs`` ← softmax(θ φ)."""
-    _logits(theta_b, phi, probs)
-    _softmax(probs)
+    n_actions = theta_b.shape[0]
+    top = -np.inf
+    for a in range(n_actions):
+        s = _dot(theta_b[a], phi)
+        probs[a] = s
+        top = max(top, s)
+    total = 0.0
+    for a in range(n_actions):
+        probs[a] = np.exp(probs[a] - top)
+        total += probs[a]
+    for a in range(n_actions):
+        probs[a] /= total
 
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
 def _policy_sample(theta_b, phi, u, logits):
     """Draw from softmax(θ φ) with the uniform ``u``; ``logits`` is filled with π."""
     _policy(theta_b, phi, logits)
-    return _sample(logits, u)
+    n_actions = theta_b.shape[0]
+    acc = 0.0
+    for a in range(n_actions - 1):
+        acc += logits[a]
+        if acc > u:
+            return a
+    return n_actions - 1
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
 def ac_act(theta, phi, probs, obs, low, inv_range, order, half, streams, action_out):
     """Features of ``obs`` into ``phi``, the policy into ``probs`` and a first action per learner
     (drawn from its stream; an empty ``streams`` draws nothing and leaves ``action_out`` alone)."""
-    scratch, _ = _feature_scratch(order, half, obs.shape[1], 0, theta.shape[1])
+    scratch, _ = _feature_scratch(order, half, obs.shape[1], 0)
     for b in range(obs.shape[0]):
         fourier_features(obs[b], low, inv_range, order, half, scratch, phi[b])
         if streams.shape[0] > 0:
@@ -734,11 +633,11 @@ def ac_act(theta, phi, probs, obs, low, inv_range, order, half, streams, action_
 
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
-def _feature_scratch(order, half, dim, n_features, n_actions=1):
+def _feature_scratch(order, half, dim, n_features):
     """Scratch arrays of :func:`fourier_features` (the two halves' exponentials and the per-dimension
-    ones) and of the learners (``n_actions`` logits), and a feature vector."""
+    ones) and a feature vector."""
     scratch = (np.empty(((order + 1) ** half, 2)), np.empty(((order + 1) ** (dim - half), 2)),
-               np.empty((dim, order + 1, 2)), np.empty(n_actions))
+               np.empty((dim, order + 1, 2)))
     return scratch, np.empty(n_features)
 
 
@@ -757,7 +656,7 @@ def _ac_learner(b, w, theta, phi, probs, a_taken, reward, obs_next, terminated, 
     """:func:`ac_step` for learner ``b``; returns its next action."""
     n_features = theta.shape[2]
     fourier_features(obs_next, low, inv_range, order, half, scratch, phi_next)
-    value = _dot(w[b], phi[b])  # not _dot2: interleaved here, fast-math changes the sums in the last bit
+    value = _dot(w[b], phi[b])
     value_next = _dot(w[b], phi_next)
     norm2 = _dot(phi[b], phi[b])
     delta = reward - value
@@ -790,7 +689,7 @@ def ac_step(
     state where the episode ended), from which the next action is drawn with
     one uniform of the learner's stream.
     """
-    scratch, phi_next = _feature_scratch(order, half, obs_next.shape[1], theta.shape[2], theta.shape[1])
+    scratch, phi_next = _feature_scratch(order, half, obs_next.shape[1], theta.shape[2])
     for b in range(w.shape[0]):
         action_out[b] = _ac_learner(b, w, theta, phi, probs, action[b], reward[b], obs_next[b], terminated[b],
                                     done[b], obs_root[b], low, inv_range, order, half, streams, actor_lr, critic_lr,
@@ -803,17 +702,12 @@ def _qac_learner(b, w, theta, phi, probs, a_taken, reward, obs_next, terminated,
     """:func:`qac_step` for learner ``b``; returns its next action."""
     n_features = theta.shape[2]
     fourier_features(obs_next, low, inv_range, order, half, scratch, phi_next)
-    logits = scratch[3]
-    _logits_pair(theta[b], phi_next, phi[b], probs[b], logits)  # θ does not change before both are used
-    _softmax(probs[b])
-    a_next = _sample(probs[b], uniform(streams, b))
-    q, q_next = _dot2(w[b, a_taken * n_features:(a_taken + 1) * n_features], phi[b],
-                      w[b, a_next * n_features:(a_next + 1) * n_features], phi_next)
+    a_next = _policy_sample(theta[b], phi_next, uniform(streams, b), probs[b])
+    q = _dot(w[b, a_taken * n_features:(a_taken + 1) * n_features], phi[b])
+    q_next = _dot(w[b, a_next * n_features:(a_next + 1) * n_features], phi_next)
     norm2 = _dot(phi[b], phi[b])
     scale = 1.0 / np.sqrt(norm2) if normalize else 1.0
-    for a in range(probs.shape[1]):
-        probs[b, a] = logits[a]
-    _softmax(probs[b])
+    _policy(theta[b], phi[b], probs[b])
     _policy_gradient_step(theta[b], phi[b], probs[b], a_taken, actor_lr, scale, q)
     delta = reward - q
     if not terminated:
@@ -846,7 +740,7 @@ def qac_step(
     ``phi`` holds each learner's ``φ(s)`` and becomes that of the next state;
     ``probs`` is scratch.
     """
-    scratch, phi_next = _feature_scratch(order, half, obs_next.shape[1], theta.shape[2], theta.shape[1])
+    scratch, phi_next = _feature_scratch(order, half, obs_next.shape[1], theta.shape[2])
     for b in range(w.shape[0]):
         action_out[b] = _qac_learner(b, w, theta, phi, probs, action[b], reward[b], obs_next[b], terminated[b],
                                      done[b], obs_root[b], low, inv_range, order, half, streams, actor_lr, critic_lr,

@@ -202,15 +202,16 @@ def run_four_rooms_fused(
     initial_z = int(state["lookup"][base.start_state]) if state["kind"] == _kernels.LOOKUP_SHAPING else 0
     _check_own_tables(state)
     cfg = agent.config
+    grid, q = base.kernel_state(), agent.q.numpy()
 
     def run_block(records: tuple[np.ndarray, ...]) -> tuple[int, int]:
         return _kernels.sarsa_grid_run(
-            base._state.numpy(), base._t.numpy(), base._transitions_np, base._cells_np,
+            *grid,
             base.start_state, base.goal_state, base.max_steps, base.goal_reward, base.step_reward,
             state["kind"], observe_cell, *state["regions"], state["lookup"], initial_z,
             state["z"], state["achieved"], state["r_h"], state["k"], state["table"],
             state["eta"], state["gamma"], state["value_gamma"], state["value_lr"], state["zero_terminal"],
-            state["start_mode"], state["z_start"], agent._q, agent.abstract_states, action, cfg.lr, cfg.gamma,
+            state["start_mode"], state["z_start"], q, agent.abstract_states, action, cfg.lr, cfg.gamma,
             1.0 / cfg.temperature, agent.streams, block, *records,
         )
 
@@ -257,7 +258,7 @@ def _pinball_ac_run(
     obs_root = np.empty(4, np.float64)
     candidates = np.empty(edges.shape[0], np.int64)
     owners = np.empty(edges.shape[0], np.int64)
-    scratch, phi_next = _kernels._feature_scratch(order, half, 4, theta.shape[2], theta.shape[1])
+    scratch, phi_next = _kernels._feature_scratch(order, half, 4, theta.shape[2])
     max_episodes = steps_out.shape[1]
     active, n_active = _kernels._active_learners(episode, max_episodes)
     filed_total = 0
@@ -359,10 +360,11 @@ def run_pinball_fused(
     g = base.physics.geometry
     tx, ty, tr = g.target
     cfg = agent.config
+    balls = base.kernel_state()
 
     def run_block(records: tuple[np.ndarray, ...]) -> tuple[int, int]:
         return _pinball_ac_run(
-            base._position.numpy(), base._velocity.numpy(), base._steps.numpy(), base.start[0], base.start[1],
+            *balls, base.start[0], base.start[1],
             g.edges, g.boxes, g.first_edge, g.ball_radius, tx, ty, tr, base.physics.velocity_limit,
             base.max_steps, base.random_action_prob, base.goal_reward, base.step_penalty, base.thrust_penalty,
             base.streams, kind, *state["regions"], region["lo"], region["hi"], region["centre"], region["weight"],

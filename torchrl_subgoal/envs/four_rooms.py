@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
+import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
@@ -107,6 +108,15 @@ def check_subgoal(predicate: Predicate) -> str | None:
             return f"state {predicate.state} is not one of the {len(_CELLS)} free states"
         return None
     return f"four-rooms subgoals are cells or states, not {predicate.kind}"
+
+
+class GridKernelState(NamedTuple):
+    """A :class:`FourRoomsEnv`'s state and tables as numpy views, for compiled loops (updated in place)."""
+
+    state: np.ndarray  #: ``[N]`` state number of every learner
+    t: np.ndarray  #: ``[N]`` steps into the episode
+    transitions: np.ndarray  #: ``[S, 4]`` next state of every state and action
+    cells: np.ndarray  #: ``[S, 2]`` (row, column) of every state
 
 
 class FourRoomsEnv(EnvBase):
@@ -252,6 +262,17 @@ class FourRoomsEnv(EnvBase):
 
     def _set_seed(self, seed: int | None) -> None:
         """The dynamics are deterministic: nothing to seed."""
+
+    def kernel_state(self) -> GridKernelState:
+        """The env's state and tables as numpy views (CPU only), for a compiled loop to step in place.
+
+        Examples:
+            >>> FourRoomsEnv(num_envs=3).kernel_state().state.shape
+            (3,)
+        """
+        if self.device.type != "cpu":
+            raise TypeError(f"kernel_state needs a CPU env, not {self.device}")
+        return GridKernelState(self._state.numpy(), self._t.numpy(), self._transitions_np, self._cells_np)
 
     def shortest_path_length(self) -> int:
         """Steps of the shortest start-to-goal path (breadth-first search; 20)."""

@@ -44,7 +44,7 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple
 
 import numba
 import numpy as np
@@ -388,6 +388,14 @@ def step_ball(
         if out:
             vx, vy = 0.0, 0.0
     return px, py, vx, vy, done
+
+
+class BallKernelState(NamedTuple):
+    """A :class:`PinBallEnv`'s balls as numpy views, for compiled loops (updated in place)."""
+
+    position: np.ndarray  #: ``[N, 2]`` ball centres
+    velocity: np.ndarray  #: ``[N, 2]`` velocities
+    steps: np.ndarray  #: ``[N]`` steps into the episode
 
 
 def _step_balls(
@@ -793,6 +801,17 @@ class PinBallEnv(EnvBase):
         self.streams = _kernels.new_streams(keys, _kernels.ENV_STREAM)
 
     # -- map helpers -------------------------------------------------------
+
+    def kernel_state(self) -> BallKernelState:
+        """The balls' state as numpy views (CPU only), for a compiled loop to step in place.
+
+        Examples:
+            >>> PinBallEnv(2, seed=0).kernel_state().position.shape
+            (2, 2)
+        """
+        if self.device.type != "cpu":
+            raise TypeError(f"kernel_state needs a CPU env, not {self.device}")
+        return BallKernelState(self._position.numpy(), self._velocity.numpy(), self._steps.numpy())
 
     def sample_free_positions(
         self, n: int, generator: torch.Generator | None = None
