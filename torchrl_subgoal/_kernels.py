@@ -426,6 +426,15 @@ def _transform_learner(b, shaping, zb, znb, achieved, r_h, k, reward, done, term
     return np.float32(shaped), rh_new, k_new
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _record_and_stop(b, done, terminated, reward, t, ret, episode, steps_out, returns_out, success_out):
+    """File learner ``b``'s step (:func:`_record_learner`): ``(episodes filed, whether it has them all)``,
+    for the fused loops, which run each learner until it has them all."""
+    filed = 1 if _record_learner(b, done, terminated, reward, t, ret, episode, steps_out, returns_out,
+                                 success_out) else 0
+    return filed, episode[b] >= steps_out.shape[1]
+
+
 @numba.njit(cache=True, nogil=True)
 def sarsa_grid_run(
     # the grid env (its state arrays are updated in place)
@@ -486,9 +495,10 @@ def sarsa_grid_run(
             row_root = state[b] * abstract_states + (z[b, 0] if abstract_states > 1 else 0)
             action[b] = _sarsa_learner(q[b], row, action[b], shaped, row_next, terminated, done, row_root, streams,
                                        b, lr, gamma, inv_temperature, scratch)
-            if _record_learner(b, done, terminated, reward, t_rec, ret, episode, steps_out, returns_out, success_out):
-                filed_total += 1
-            if episode[b] >= max_episodes:
+            filed, finished = _record_and_stop(b, done, terminated, reward, t_rec, ret, episode, steps_out,
+                                               returns_out, success_out)
+            filed_total += filed
+            if finished:
                 steps = step + 1
                 break
         taken = max(taken, steps)

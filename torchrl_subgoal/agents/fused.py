@@ -311,10 +311,10 @@ def _pinball_ac_run(
                 action[b] = _kernels._ac_learner(b, w, theta, phi, probs, action[b], shaped, obs_next, terminated,
                                                  done, obs_root, low, inv_range, order, half, agent_streams,
                                                  actor_lr, critic_lr, gamma, normalize, scratch, phi_next)
-            if _kernels._record_learner(b, done, terminated, reward, t_rec, ret, episode, steps_out, returns_out,
-                                        success_out):
-                filed_total += 1
-            if episode[b] >= max_episodes:
+            filed, finished = _kernels._record_and_stop(b, done, terminated, reward, t_rec, ret, episode, steps_out,
+                                                        returns_out, success_out)
+            filed_total += filed
+            if finished:
                 steps = step + 1
                 break
         taken = max(taken, steps)

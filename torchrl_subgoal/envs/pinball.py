@@ -275,21 +275,9 @@ class _Geometry:
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def step_ball(
-    px: float,
-    py: float,
-    vx: float,
-    vy: float,
-    a: int,
-    edges: np.ndarray,
-    boxes: np.ndarray,
-    first_edge: np.ndarray,
-    ball_radius: float,
-    target_x: float,
-    target_y: float,
-    target_radius: float,
-    velocity_limit: float,
-    candidates: np.ndarray,
-    owners: np.ndarray,
+    px: float, py: float, vx: float, vy: float, a: int, edges: np.ndarray, boxes: np.ndarray, first_edge: np.ndarray,
+    ball_radius: float, target_x: float, target_y: float, target_radius: float, velocity_limit: float,
+    candidates: np.ndarray, owners: np.ndarray,
 ) -> tuple[float, float, float, float, bool]:
     """One environment step of one ball: ``(x, y, vx, vy, reached the target)`` (compiled by numba).
 
