@@ -71,7 +71,7 @@ def fingerprint(engine: str) -> dict[str, np.ndarray]:
                 found[f"{key}/potential"] = table.detach().numpy().copy()
             return records
 
-        recipe.run_episodes = capture
+        recipe.run_episodes = capture  # type: ignore[attr-defined]
         with tempfile.TemporaryDirectory() as results:
             code = recipe.main([*args, "--workers", "0", "--engine", engine, "--results", results])
         if code:
