@@ -879,24 +879,29 @@ class SubgoalPotentialTransform(Transform):
             raise KeyError(f"{type(self).__name__}.transitions: the data has no {missing}; pass data collected "
                            "through the transform (or shaped by it)")
         in_keys = self.potential.in_keys
-        root_keys = {keys.index, keys.ret, keys.steps, *in_keys}
-        next_keys = {keys.index, *in_keys, self.done_key, self.terminated_key, self.env_reward_key, self.reward_key}
-        flat = data.select(*root_keys, *[("next", k) for k in next_keys], strict=False).reshape(-1)
-        nxt = flat.get("next")
-        z, z_next = flat.get(keys.index), nxt.get(keys.index)
-        done = nxt.get(self.done_key)
-        terminated = nxt.get(self.terminated_key, done)
+        n, dims, nxt = data.batch_size.numel(), data.batch_dims, data.get("next")
+
+        def flat(td: TensorDictBase, key: NestedKey) -> torch.Tensor | None:
+            value = td.get(key, None)  # entry by entry: cheaper than reshaping and indexing the TensorDict
+            return None if value is None else value.reshape(n, *value.shape[dims:])
+
+        z, z_next, done = flat(data, keys.index), flat(nxt, keys.index), flat(nxt, self.done_key)
+        assert z is not None and z_next is not None and done is not None
+        terminated = flat(nxt, self.terminated_key)
         emit = ((z_next != z) | done).reshape(-1)
-        rows = flat[emit]
-        nxt = rows.get("next")
-        reward = nxt.get(self.env_reward_key, None)
-        reward = nxt.get(self.reward_key) if reward is None else reward
-        k = rows.get(keys.steps)
-        r_h = rows.get(keys.ret) + reward.to(torch.float32) * self.value_gamma**k
+        reward = flat(nxt, self.env_reward_key)
+        reward = flat(nxt, self.reward_key) if reward is None else reward
+        assert reward is not None
+        k, ret = flat(data, keys.steps), flat(data, keys.ret)
+        assert k is not None and ret is not None
+        k = k[emit]
+        r_h = ret[emit] + reward[emit].to(torch.float32) * self.value_gamma**k
+        inputs = {key: v[emit] for key in in_keys if (v := flat(data, key)) is not None}
+        next_inputs = {key: v[emit] for key in in_keys if (v := flat(nxt, key)) is not None}
+        done = done[emit]
         return _transition(
-            rows.batch_size, {key: rows.get(key) for key in in_keys if key in rows},
-            {key: nxt.get(key) for key in in_keys if key in nxt}, r_h, k + 1,
-            torch.ones_like(z[emit]).bool(), done[emit], terminated[emit],
+            torch.Size([done.shape[0]]), inputs, next_inputs, r_h, k + 1, torch.ones_like(z[emit]).bool(), done,
+            done if terminated is None else terminated[emit],
         )
 
     # ------------------------------------------------------------------ stored data
