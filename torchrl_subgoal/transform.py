@@ -137,6 +137,13 @@ class SubgoalPotentialTransform(Transform):
     with the same loss. Freeze a trained potential with
     ``transform.potential.requires_grad_(False)``.
 
+    On the eager path (a neural potential, conditions, a device) the step does
+    not evaluate ``Φ(z)`` again when ``z``'s entries and the potential's
+    parameters and buffers equal those of the previous step's ``Φ(z')``
+    (compared by value, so ``.data`` writes and shared-memory updates from other
+    processes are seen), nor ``Φ(z_0)`` within an episode: the potential must be
+    a deterministic function of its inputs and those tensors (no dropout).
+
     **Stored data.** Calling the transform on a TensorDict (``transform(data)``,
     e.g. a replay-buffer sample ``[*B, T]``) recomputes the abstract state and
     the shaping along the time dimension from the stored observations, for
