@@ -761,19 +761,19 @@ class SubgoalPotentialTransform(Transform):
     ) -> torch.Tensor:
         """``Φ`` of abstract-state entries, ``[*B, 1]``.
 
-        With ``slot``, the value is remembered under it with the entries and the potential's
-        parameters, and given back without evaluating the potential while neither changed.
+        With ``slot``, the value is remembered under it with the entries, and given back without
+        evaluating the potential while they are unchanged (``_phi_cache.check`` first, once per step).
         """
         inputs = {k: entries[k] for k in self.potential.in_keys}
         if slot is not None:
-            cached = self._phi_cache.get(slot, inputs, self.potential)
+            cached = self._phi_cache.get(slot, inputs)
             if cached is not None:
                 return cached
         td = TensorDict(inputs, batch_size=batch_shape)
         value = check_value(self.potential(td).get(self.value_key), batch_shape,
                             f"the potential {type(self.potential).__name__}")
         if slot is not None:
-            self._phi_cache.put(slot, inputs, self.potential, value)
+            self._phi_cache.put(slot, inputs, value)
         return value
 
     def _start_entries(self, current: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -828,10 +828,11 @@ class SubgoalPotentialTransform(Transform):
             # Φ(z) of this step is last step's Φ(z') (unless an env was reset), and Φ(z_0) holds for
             # the episode: neither is evaluated again while the inputs and the potential are unchanged
             slot = "z"
+            self._phi_cache.check(self.potential)
             phi = self._value(current, batch_shape, slot)
             phi_next = self._value(nxt_state, batch_shape, None)
             if slot is not None:
-                self._phi_cache.put(slot, {k: nxt_state[k] for k in in_keys}, self.potential, phi_next)
+                self._phi_cache.put(slot, {k: nxt_state[k] for k in in_keys}, phi_next)
             if self.start_potential != "value" and not isinstance(self.potential, NaivePotential):
                 shift = self._value(self._start_entries(current), batch_shape, "start")
                 shift = shift if self.start_potential == "zero" else shift.clamp(min=0.0)
@@ -1017,8 +1018,8 @@ class _ValueCache:
         self._versions: tuple[tuple[int, int], ...] = ()
         self._snapshot: list[torch.Tensor] = []
 
-    def _unchanged(self, potential: TensorDictModuleBase) -> bool:
-        """Whether the potential is as when the slots were filled (if not, start afresh)."""
+    def check(self, potential: TensorDictModuleBase) -> None:
+        """Call once per step before :meth:`get`: forget every slot if the potential changed since."""
         tensors = [*potential.parameters(), *potential.buffers()]
         versions = tuple((id(t), t._version) for t in tensors)
         same = potential is self._module and versions == self._versions  # a moved counter: changed for sure
@@ -1028,11 +1029,10 @@ class _ValueCache:
             self._slots.clear()
             self._module, self._versions = potential, versions
             self._snapshot = [t.detach().clone() for t in tensors]
-        return same
 
-    def get(self, slot: str, inputs: dict[str, torch.Tensor], potential: TensorDictModuleBase) -> torch.Tensor | None:
+    def get(self, slot: str, inputs: dict[str, torch.Tensor]) -> torch.Tensor | None:
         entry = self._slots.get(slot)
-        if entry is None or not self._unchanged(potential):
+        if entry is None:
             return None
         kept, value = entry
         if kept.keys() != inputs.keys():
@@ -1043,9 +1043,7 @@ class _ValueCache:
                 return None
         return value
 
-    def put(self, slot: str, inputs: dict[str, torch.Tensor], potential: TensorDictModuleBase,
-            value: torch.Tensor) -> None:
-        self._unchanged(potential)
+    def put(self, slot: str, inputs: dict[str, torch.Tensor], value: torch.Tensor) -> None:
         self._slots[slot] = ({k: t.detach().clone() for k, t in inputs.items()}, value.detach())
 
 
