@@ -14,11 +14,15 @@ centrally, as the recipe does, and online). Every set-up collects with the
 same policy (briefly trained, then kept with learning rate 0): a policy that
 learns at a different speed would end episodes, and so reset envs, at a
 different rate, which changes a step's cost more than the transform does.
-Set-ups are interleaved and repeated; the best repeat of each is compared
-(the machine is shared).
+The set-ups run in turn, in a rotating order, ``--repeats`` times; each round
+gives every set-up's time over the plain iteration's of the same round, and
+the cost reported is the median of those ratios (with their range), by the
+process's CPU time (what other processes on a busy machine disturb least)
+and by wall time. The load average is printed with them.
 
     python benchmarks/a2c_collection.py            # the figures in docs/torchrl.md
     python benchmarks/a2c_collection.py --quick
+    python benchmarks/a2c_collection.py --part 2 --repeats 15
 """
 
 from __future__ import annotations
@@ -26,6 +30,8 @@ from __future__ import annotations
 import argparse
 import copy
 import functools
+import os
+import statistics
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -56,6 +62,34 @@ def best_rate(make_steps: dict[str, Callable[[], int]], repeats: int) -> dict[st
             frames = run()
             best[name] = max(best[name], frames / (time.perf_counter() - start))
     return best
+
+
+def paired_costs(
+    setups: dict[str, Callable[[], int]], repeats: int, base: str
+) -> dict[str, dict[str, tuple[float, float, float]]]:
+    """Run the set-ups in turn ``repeats`` times (the order rotates every round); each round, every
+    set-up's seconds per frame over ``base``'s of the same round, minus 1. Returns, per set-up and
+    clock (``"cpu"``: this process's CPU time; ``"wall"``), the (median, lowest, highest) cost."""
+    names = list(setups)
+    ratios: dict[str, dict[str, list[float]]] = {n: {"cpu": [], "wall": []} for n in names}
+    for r in range(repeats):
+        per_frame: dict[str, tuple[float, float]] = {}
+        for name in names[r % len(names):] + names[:r % len(names)]:
+            cpu, wall = time.process_time(), time.perf_counter()
+            frames = setups[name]()
+            per_frame[name] = ((time.process_time() - cpu) / frames, (time.perf_counter() - wall) / frames)
+        for name in names:
+            for i, clock in enumerate(("cpu", "wall")):
+                ratios[name][clock].append(per_frame[name][i] / per_frame[base][i] - 1.0)
+    return {n: {c: (statistics.median(v), min(v), max(v)) for c, v in clocks.items()} for n, clocks in ratios.items()}
+
+
+def load_average() -> str:
+    """The 1-, 5- and 15-minute load averages (``"n/a"`` where the OS has none)."""
+    try:
+        return "/".join(f"{x:.1f}" for x in os.getloadavg())
+    except OSError:
+        return "n/a"
 
 
 def bare_env_steps(env: EnvBase, steps: int) -> Callable[[], int]:
@@ -140,15 +174,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("--quick", action="store_true", help="fewer repeats")
     parser.add_argument("--part", choices=["1", "2", "both"], default="both", help="which part to run")
+    parser.add_argument("--repeats", type=int, default=0, help="rounds (default 7, --quick 3; part 2: 11 / 5)")
     args = parser.parse_args()
+    if args.repeats < 0:
+        parser.error(f"--repeats must be >= 0, got {args.repeats}")
     torch.set_num_threads(1)
     repeats, batches = (3, 10) if args.quick else (7, 30)
     config = a2c_domain("four_rooms").a2c
 
     if args.part != "2":
-        collector_throughput(repeats, batches)
+        collector_throughput(args.repeats or repeats, batches)
     if args.part != "1":
-        transform_cost(config, repeats, batches)
+        transform_cost(config, args.repeats or (5 if args.quick else 11), batches)
 
 
 def collector_throughput(repeats: int, batches: int) -> None:
@@ -190,11 +227,16 @@ def transform_cost(config: A2CConfig, repeats: int, batches: int) -> None:
         "HRS, potential trained per batch": a2c_iterations(hrs, config, batches, False, networks, lr=0.0)[0],
         "HRS, potential trained online": a2c_iterations(hrs_online, config, batches, True, networks, lr=0.0)[0],
     }
-    rates = best_rate(setups, repeats)
-    plain = rates["plain A2C"]
-    for name, rate in rates.items():
-        cost = plain / rate - 1.0
-        print(f"  {name:34s} {rate:9.0f} frames/s   transform cost {100 * cost:+5.1f}% of the plain iteration")
+    print(f"        {repeats} rounds; load average before {load_average()}")
+    costs = paired_costs(setups, repeats, "plain A2C")
+    print(f"        load average after {load_average()}; cost = time over the plain iteration's in the same "
+          "round - 1, median [lowest, highest]")
+    for name, clocks in costs.items():
+        if name == "plain A2C":
+            continue
+        cpu, wall = clocks["cpu"], clocks["wall"]
+        print(f"  {name:34s} CPU {100 * cpu[0]:+5.1f}% [{100 * cpu[1]:+5.1f}, {100 * cpu[2]:+5.1f}]   "
+              f"wall {100 * wall[0]:+5.1f}% [{100 * wall[1]:+5.1f}, {100 * wall[2]:+5.1f}]")
 
 
 if __name__ == "__main__":

@@ -69,6 +69,7 @@ class Config:
     env_workers: int = setting(0, "ParallelEnv workers per learner (0: the batched env in the collector)")
     collector_workers: int = setting(0, "0: Collector; k: MultiSyncCollector of k processes")
     lr: float = setting(0.0, "A2C learning rate (0: the domain's default)")
+    reward_scale: float = setting(0.0, "env reward x this, before shaping and learning (0: the domain's default)")
     value_lr: float = setting(0.05, "learning rate of the potential's optimiser (Adam)")
     online_potential: bool = setting(False, "train the potential in the transform every step instead")
     normalize_advantage: bool = setting(False, "standardise GAE advantages per batch")
@@ -89,6 +90,7 @@ class Config:
             check(getattr(self, name) >= 0, name, f"must be >= 0, got {getattr(self, name)}")
         check(self.value_lr > 0, "value_lr", f"must be positive, got {self.value_lr}")
         check(self.lr >= 0, "lr", f"must be >= 0, got {self.lr}")
+        check(self.reward_scale >= 0, "reward_scale", f"must be >= 0, got {self.reward_scale}")
 
     @property
     def method_names(self) -> list[str]:
@@ -140,6 +142,7 @@ def main(argv: list[str] | None = None) -> int:
                 env_workers=cfg.env_workers, collector_workers=cfg.collector_workers, value_lr=cfg.value_lr,
                 online_potential=cfg.online_potential, normalize_advantage=cfg.normalize_advantage,
                 total_frames=cfg.total_frames or domain.a2c.total_frames, lr=cfg.lr or domain.a2c.lr,
+                reward_scale=cfg.reward_scale or domain.a2c.reward_scale,
             )
         except ValueError as exc:
             raise ConfigError(str(exc)) from None

@@ -651,3 +651,55 @@ def test_neural_potential_with_the_wrong_output_shape() -> None:
     env = TransformedEnv(FourRoomsEnv(2), t)
     with pytest.raises(ValueError, match=r"returned values of shape \(2, 3\).*output size is 1"):
         env.rollout(3)
+
+
+class _CountingNet(torch.nn.Module):
+    """A linear value network that counts its evaluations."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.net = torch.nn.Linear(2, 1)
+        self.calls = 0
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        self.calls += 1
+        return self.net(x)
+
+
+@pytest.mark.parametrize("change", ["none", "optimizer", "data", "shared"])
+def test_potential_value_is_reused_only_while_inputs_and_parameters_are_unchanged(change: str) -> None:
+    """Φ(z) of a step is the previous step's Φ(z') and Φ(z_0) that of the episode, without evaluating
+    the potential again; any change of the parameters (an optimiser step, an in-place ``.data`` write
+    that moves no version counter, shared memory written by another process) is seen."""
+    torch.manual_seed(0)
+    net = _CountingNet()
+    if change == "shared":
+        net.share_memory()
+    t = SubgoalPotentialTransform(HALLWAYS, NeuralPotential(net), gamma=0.9, observation_key="cell",
+                                  start_potential="zero")
+    env = TransformedEnv(FourRoomsEnv(3, max_steps=1000), t)
+    optimizer = torch.optim.SGD(net.parameters(), lr=0.1)
+    td = env.reset()
+    was_reset = True
+    for _ in range(15):
+        td["action"] = env.action_spec.rand()
+        before = td.clone()
+        net.calls = 0
+        out, td = env.step_and_maybe_reset(td)
+        nxt = out["next"]
+        with torch.no_grad():
+            shift = net.net(before["subgoal_start"])
+            phi = net.net(before["subgoal_anchor"]) - shift
+            phi_next = (net.net(nxt["subgoal_anchor"]) - shift).masked_fill(nxt["terminated"], 0.0)
+        assert torch.allclose(nxt["reward"], nxt["env_reward"] + 0.9 * phi_next - phi, atol=1e-6)
+        if change == "none" and not was_reset:
+            assert net.calls == 1  # Φ(z') only
+        elif change != "none":
+            assert net.calls == 3  # Φ(z), Φ(z'), Φ(z_0): the parameters changed since the last step
+        was_reset = bool(nxt["done"].any())
+        if change == "optimizer":
+            optimizer.zero_grad()
+            net.net(td["subgoal_anchor"]).sum().backward()
+            optimizer.step()
+        elif change in ("data", "shared"):
+            net.net.bias.data.add_(0.1)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -44,42 +45,42 @@ class SubgoalKeys:
 
     prefix: str = "subgoal"
 
-    @property
+    @functools.cached_property
     def index(self) -> str:
         """``z``, the node of the subgoal series reached."""
         return f"{self.prefix}_index"
 
-    @property
+    @functools.cached_property
     def ret(self) -> str:
         """``r_h``, the discounted reward since ``z`` was entered."""
         return f"{self.prefix}_return"
 
-    @property
+    @functools.cached_property
     def steps(self) -> str:
         """``k``, the steps since ``z`` was entered."""
         return f"{self.prefix}_steps"
 
-    @property
+    @functools.cached_property
     def achieved(self) -> str:
         """Whether ``z`` was entered on this step."""
         return f"{self.prefix}_achieved"
 
-    @property
+    @functools.cached_property
     def anchor(self) -> str:
         """The observation at which ``z`` was entered."""
         return f"{self.prefix}_anchor"
 
-    @property
+    @functools.cached_property
     def learner(self) -> str:
         """Which env of the batch the row belongs to (its learner)."""
         return f"{self.prefix}_learner"
 
-    @property
+    @functools.cached_property
     def start(self) -> str:
         """The potential's input at reset (``z_0`` of an aggregation, ``o_0`` of a neural potential)."""
         return f"{self.prefix}_start"
 
-    @property
+    @functools.cached_property
     def optional(self) -> tuple[str, ...]:
         """The entries kept only when the potential reads them."""
         return (self.achieved, self.anchor, self.learner)
@@ -135,6 +136,13 @@ class SubgoalPotentialTransform(Transform):
     shape with it). Otherwise train it yourself from ``data["next", "smdp"]``
     with the same loss. Freeze a trained potential with
     ``transform.potential.requires_grad_(False)``.
+
+    On the eager path (a neural potential, conditions, a device) the step does
+    not evaluate ``Φ(z)`` again when ``z``'s entries and the potential's
+    parameters and buffers equal those of the previous step's ``Φ(z')``
+    (compared by value, so ``.data`` writes and shared-memory updates from other
+    processes are seen), nor ``Φ(z_0)`` within an episode: the potential must be
+    a deterministic function of its inputs and those tensors (no dropout).
 
     **Stored data.** Calling the transform on a TensorDict (``transform(data)``,
     e.g. a replay-buffer sample ``[*B, T]``) recomputes the abstract state and
@@ -308,6 +316,10 @@ class SubgoalPotentialTransform(Transform):
         ):
             extra = (*extra, keys.start)
         self._state_keys: tuple[str, ...] = (keys.index, keys.ret, keys.steps, *extra)
+        # which optional entries are kept, looked up once (every env step reads them)
+        self._keeps_achieved, self._keeps_anchor, self._keeps_learner, self._keeps_start = (
+            k in self._state_keys for k in (keys.achieved, keys.anchor, keys.learner, keys.start))
+        self._phi_cache = _ValueCache()
         self._parameters_list = list(potential.parameters())
         self.value_loss: SubgoalValueLoss | None = None
         self.value_optimizer: torch.optim.Optimizer | None = None
@@ -618,7 +630,7 @@ class SubgoalPotentialTransform(Transform):
                 raise KeyError(f"{type(self).__name__}: {key!r} is missing from the step's input: reset the env "
                                "through the transform (env.reset()) before stepping")
             current[key] = value
-        out = self._advance(setup, current, next_tensordict, learn=self.learning)
+        out = self._advance(setup, current, next_tensordict, obs, learn=self.learning)
         next_tensordict.update(out)
         return next_tensordict
 
@@ -647,7 +659,7 @@ class SubgoalPotentialTransform(Transform):
         self._fused_potential(setup, online=True)
         nxt = TensorDict({self.observation_key: obs, self.reward_key: reward, self.done_key: done,
                           self.terminated_key: terminated}, batch_size=batch_shape)
-        return self._advance(setup, dict(current), nxt, learn=self.learning)
+        return self._advance(setup, dict(current), nxt, obs, learn=self.learning)
 
     def _rewards(self, nxt: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
         """(the reward to shape, the env reward that ``r_h`` accumulates)."""
@@ -656,11 +668,12 @@ class SubgoalPotentialTransform(Transform):
         return reward, (reward if env_reward is None else env_reward)
 
     def _advance(
-        self, setup: _Setup, current: dict[str, torch.Tensor], nxt: TensorDictBase, *, learn: bool
+        self, setup: _Setup, current: dict[str, torch.Tensor], nxt: TensorDictBase, obs: torch.Tensor | None,
+        *, learn: bool,
     ) -> dict[str, Any]:
-        """One step of aggregation and shaping from ``current`` with the step's ``nxt`` entries;
-        with ``learn``, the online update of the potential first. Returns the next entries."""
-        obs = nxt.get(self.observation_key, None) if self._uses_observation else None
+        """One step of aggregation and shaping from ``current`` with the step's ``nxt`` entries (``obs``:
+        its ``observation_key`` entry, when read); with ``learn``, the online update of the potential
+        first. Returns the next entries."""
         if self._uses_observation and obs is None:
             raise KeyError(f"{type(self).__name__}: the step has no {self.observation_key!r} entry")
         reward, env_reward = self._rewards(nxt)
@@ -668,7 +681,7 @@ class SubgoalPotentialTransform(Transform):
         done = nxt.get(self.done_key)
         terminated = nxt.get(self.terminated_key, done)
         z = current[self.keys.index]
-        if self.keys.learner in self.state_keys:
+        if self._keeps_learner:
             current.setdefault(self.keys.learner, setup.learner)
         if setup.table is not None and (obs is None or obs.device.type == "cpu") and z.device.type == "cpu":
             return self._advance_fused(setup, current, obs, reward, env_reward, done, terminated, learn)
@@ -729,11 +742,12 @@ class SubgoalPotentialTransform(Transform):
         }
         if reward is env_reward:
             out[self.env_reward_key] = reward
-        if keys.achieved in self.state_keys:
+        if self._keeps_achieved:
             out[keys.achieved] = z_next[0] != z
-        for kept in (keys.learner, keys.start):
-            if kept in self.state_keys:
-                out[kept] = current[kept]
+        if self._keeps_learner:
+            out[keys.learner] = current[keys.learner]
+        if self._keeps_start:
+            out[keys.start] = current[keys.start]
         if key is not None:
             in_keys = self.potential.in_keys
             inputs = {name: current[name] for name in in_keys}
@@ -742,11 +756,25 @@ class SubgoalPotentialTransform(Transform):
                                    terminated)
         return out
 
-    def _value(self, entries: dict[str, torch.Tensor], batch_shape: torch.Size) -> torch.Tensor:
-        """``Φ`` of abstract-state entries, ``[*B, 1]``."""
-        td = TensorDict({k: entries[k] for k in self.potential.in_keys}, batch_size=batch_shape)
-        value = self.potential(td).get(self.value_key)
-        return check_value(value, batch_shape, f"the potential {type(self.potential).__name__}")
+    def _value(
+        self, entries: dict[str, torch.Tensor], batch_shape: torch.Size, slot: str | None = None
+    ) -> torch.Tensor:
+        """``Φ`` of abstract-state entries, ``[*B, 1]``.
+
+        With ``slot``, the value is remembered under it with the entries, and given back without
+        evaluating the potential while they are unchanged (``_phi_cache.check`` first, once per step).
+        """
+        inputs = {k: entries[k] for k in self.potential.in_keys}
+        if slot is not None:
+            cached = self._phi_cache.get(slot, inputs)
+            if cached is not None:
+                return cached
+        td = TensorDict(inputs, batch_size=batch_shape)
+        value = check_value(self.potential(td).get(self.value_key), batch_shape,
+                            f"the potential {type(self.potential).__name__}")
+        if slot is not None:
+            self._phi_cache.put(slot, inputs, value)
+        return value
 
     def _start_entries(self, current: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
         """The potential's inputs at the start of the episode: ``z_0`` (0 for a subgoal series) or ``o_0``."""
@@ -797,10 +825,16 @@ class SubgoalPotentialTransform(Transform):
             assert transition is not None
             self.update_potential(transition)
         with torch.no_grad():
-            phi = self._value(current, batch_shape)
-            phi_next = self._value(nxt_state, batch_shape)
+            # Φ(z) of this step is last step's Φ(z') (unless an env was reset), and Φ(z_0) holds for
+            # the episode: neither is evaluated again while the inputs and the potential are unchanged
+            slot = "z"
+            self._phi_cache.check(self.potential)
+            phi = self._value(current, batch_shape, slot)
+            phi_next = self._value(nxt_state, batch_shape, None)
+            if slot is not None:
+                self._phi_cache.put(slot, {k: nxt_state[k] for k in in_keys}, phi_next)
             if self.start_potential != "value" and not isinstance(self.potential, NaivePotential):
-                shift = self._value(self._start_entries(current), batch_shape)
+                shift = self._value(self._start_entries(current), batch_shape, "start")
                 shift = shift if self.start_potential == "zero" else shift.clamp(min=0.0)
                 phi, phi_next = phi - shift, phi_next - shift
         if self.zero_terminal_potential:
@@ -853,24 +887,29 @@ class SubgoalPotentialTransform(Transform):
             raise KeyError(f"{type(self).__name__}.transitions: the data has no {missing}; pass data collected "
                            "through the transform (or shaped by it)")
         in_keys = self.potential.in_keys
-        root_keys = {keys.index, keys.ret, keys.steps, *in_keys}
-        next_keys = {keys.index, *in_keys, self.done_key, self.terminated_key, self.env_reward_key, self.reward_key}
-        flat = data.select(*root_keys, *[("next", k) for k in next_keys], strict=False).reshape(-1)
-        nxt = flat.get("next")
-        z, z_next = flat.get(keys.index), nxt.get(keys.index)
-        done = nxt.get(self.done_key)
-        terminated = nxt.get(self.terminated_key, done)
+        n, dims, nxt = data.batch_size.numel(), data.batch_dims, data.get("next")
+
+        def flat(td: TensorDictBase, key: NestedKey) -> torch.Tensor | None:
+            value = td.get(key, None)  # entry by entry: cheaper than reshaping and indexing the TensorDict
+            return None if value is None else value.reshape(n, *value.shape[dims:])
+
+        z, z_next, done = flat(data, keys.index), flat(nxt, keys.index), flat(nxt, self.done_key)
+        assert z is not None and z_next is not None and done is not None
+        terminated = flat(nxt, self.terminated_key)
         emit = ((z_next != z) | done).reshape(-1)
-        rows = flat[emit]
-        nxt = rows.get("next")
-        reward = nxt.get(self.env_reward_key, None)
-        reward = nxt.get(self.reward_key) if reward is None else reward
-        k = rows.get(keys.steps)
-        r_h = rows.get(keys.ret) + reward.to(torch.float32) * self.value_gamma**k
+        reward = flat(nxt, self.env_reward_key)
+        reward = flat(nxt, self.reward_key) if reward is None else reward
+        assert reward is not None
+        k, ret = flat(data, keys.steps), flat(data, keys.ret)
+        assert k is not None and ret is not None
+        k = k[emit]
+        r_h = ret[emit] + reward[emit].to(torch.float32) * self.value_gamma**k
+        inputs = {key: v[emit] for key in in_keys if (v := flat(data, key)) is not None}
+        next_inputs = {key: v[emit] for key in in_keys if (v := flat(nxt, key)) is not None}
+        done = done[emit]
         return _transition(
-            rows.batch_size, {key: rows.get(key) for key in in_keys if key in rows},
-            {key: nxt.get(key) for key in in_keys if key in nxt}, r_h, k + 1,
-            torch.ones_like(z[emit]).bool(), done[emit], terminated[emit],
+            torch.Size([done.shape[0]]), inputs, next_inputs, r_h, k + 1, torch.ones_like(z[emit]).bool(), done,
+            done if terminated is None else terminated[emit],
         )
 
     # ------------------------------------------------------------------ stored data
@@ -946,7 +985,8 @@ class SubgoalPotentialTransform(Transform):
                 reward = nxt.get(self.reward_key)
             view = nxt.exclude(self.env_reward_key)  # shallow: the step's entries with the env reward to shape
             view.set(self.reward_key, reward)
-            out = self._advance(setup, current, view, learn=False)
+            obs = view.get(self.observation_key, None) if self._uses_observation else None
+            out = self._advance(setup, current, view, obs, learn=False)
             outs.append(out)
             if t + 1 < len(steps):
                 done = view.get(self.done_key)
@@ -960,6 +1000,51 @@ class SubgoalPotentialTransform(Transform):
             )
             tensordict.set(("next", key), stacked)
         return tensordict
+
+
+class _ValueCache:
+    """``Φ`` of the last inputs seen under each slot, given back while the inputs (compared by value)
+    and the potential's parameters and buffers are unchanged.
+
+    The parameters are compared by value with a copy taken when they last changed: an in-place
+    update that moves no version counter (through ``.data``, TorchRL's weight updates, or another
+    process writing shared memory) is seen too. Assumes ``Φ`` is a deterministic function of its
+    inputs and those tensors (no dropout).
+    """
+
+    def __init__(self) -> None:
+        self._slots: dict[str, tuple[dict[str, torch.Tensor], torch.Tensor]] = {}
+        self._module: TensorDictModuleBase | None = None
+        self._versions: tuple[tuple[int, int], ...] = ()
+        self._snapshot: list[torch.Tensor] = []
+
+    def check(self, potential: TensorDictModuleBase) -> None:
+        """Call once per step before :meth:`get`: forget every slot if the potential changed since."""
+        tensors = [*potential.parameters(), *potential.buffers()]
+        versions = tuple((id(t), t._version) for t in tensors)
+        same = potential is self._module and versions == self._versions  # a moved counter: changed for sure
+        if same:
+            same = all(torch.equal(t, s) for t, s in zip(tensors, self._snapshot, strict=True))
+        if not same:
+            self._slots.clear()
+            self._module, self._versions = potential, versions
+            self._snapshot = [t.detach().clone() for t in tensors]
+
+    def get(self, slot: str, inputs: dict[str, torch.Tensor]) -> torch.Tensor | None:
+        entry = self._slots.get(slot)
+        if entry is None:
+            return None
+        kept, value = entry
+        if kept.keys() != inputs.keys():
+            return None
+        for key, tensor in inputs.items():
+            ref = kept[key]
+            if ref.shape != tensor.shape or ref.dtype != tensor.dtype or not torch.equal(ref, tensor):
+                return None
+        return value
+
+    def put(self, slot: str, inputs: dict[str, torch.Tensor], value: torch.Tensor) -> None:
+        self._slots[slot] = ({k: t.detach().clone() for k, t in inputs.items()}, value.detach())
 
 
 _NO_TABLE = np.zeros((0, 1), dtype=np.float32)

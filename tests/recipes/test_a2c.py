@@ -40,7 +40,8 @@ def test_a2c_recipe_pinball_runs(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("flag", "value"), [("--num-envs", "0"), ("--value-lr", "0"),
-                                             ("--methods", "DQN"), ("--frames-per-batch", "100")])
+                                             ("--methods", "DQN"), ("--frames-per-batch", "100"),
+                                             ("--reward-scale", "-1")])
 def test_a2c_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str], flag: str,
                                         value: str) -> None:
     a2c = recipe("a2c")
