@@ -42,7 +42,7 @@ import torch
 import yaml
 from tensordict import TensorDictBase
 
-from torchrl_subgoal import _kernels
+from torchrl_subgoal import _kernels, domains
 
 __all__ = [
     "Box",
@@ -941,28 +941,20 @@ class SubgoalSeries:
 DomainCheck = Callable[[Predicate], "str | None"]
 
 
-def _domain_check(domain: str) -> DomainCheck:
-    """The map check of a known domain (imported lazily to keep envs optional)."""
-    if domain == "four_rooms":
-        from torchrl_subgoal.envs.four_rooms import check_subgoal
-
-        return check_subgoal
-    if domain == "pinball":
-        from torchrl_subgoal.envs.pinball import check_subgoal as check_pinball
-
-        return check_pinball
-    if domain == "pick_and_place":
-        from torchrl_subgoal.envs.fetch import check_subgoal as check_fetch
-
-        return check_fetch
-    raise SubgoalFileError(f"unknown domain {domain!r}; known: four_rooms, pinball, pick_and_place")
+def _domain_check(domain: str) -> DomainCheck | None:
+    """The map check of the domain registered as ``domain`` (:mod:`torchrl_subgoal.domains`)."""
+    try:
+        return domains.get(domain).check_subgoal
+    except domains.UnknownDomainError as exc:
+        raise SubgoalFileError(str(exc)) from None
 
 
 def load_patterns(path: str | Path, *, domain: str | None = None) -> dict[str, SubgoalSeries]:
     """Load every named pattern of a subgoal file.
 
     The file holds ``patterns: {name: {subgoals: [...], order: [...]}}`` and
-    optionally ``domain: four_rooms`` (or ``pinball``, ``pick_and_place``), which
+    optionally ``domain: four_rooms`` (or ``pinball``, ``pick_and_place``, or any
+    domain registered with :func:`torchrl_subgoal.domains.register`), which
     checks every subgoal against that domain's map (a cell in a wall or off the
     grid, a circle off the table, a box entry outside the observation).
 

@@ -12,8 +12,9 @@ from typing import Any
 import pytest
 
 from tests.experiments import toy_domain
+from torchrl_subgoal import domains
+from torchrl_subgoal.domains import Domain, register
 from torchrl_subgoal.experiments import Sweep, load_results, stats
-from torchrl_subgoal.experiments.plots import register_map_hook
 from torchrl_subgoal.experiments.report import ReportSpec, main, write_report
 
 REPO = Path(__file__).resolve().parents[2]
@@ -91,7 +92,10 @@ def test_domains_without_a_map_or_paper_get_notes(tmp_path: Path) -> None:
     assert "moving average of 3 episodes" in markdown
 
 
-def test_map_hooks_are_looked_up_by_domain_and_failures_only_cost_the_map(tmp_path: Path) -> None:
+def test_map_hooks_are_looked_up_by_domain_and_failures_only_cost_the_map(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(domains, "_REGISTRY", dict(domains._REGISTRY))  # the test's domains go with it
     drawn: list[dict[str, Any]] = []
 
     def hook(ax: Any, patterns: Any, options: Any) -> None:
@@ -101,8 +105,8 @@ def test_map_hooks_are_looked_up_by_domain_and_failures_only_cost_the_map(tmp_pa
     def broken(ax: Any, patterns: Any, options: Any) -> None:
         raise ImportError("no module named envs.broken")
 
-    register_map_hook("hooked", hook)
-    register_map_hook("broken", broken)
+    register(Domain("hooked", draw_map=hook))
+    register(Domain("broken", draw_map=broken))
     path = make_results(tmp_path / "hooked", "hooked")
     write_report(path, n_boot=50)
     assert drawn == [{"p1": 2}, {"p2": 2}] and (path / "patterns.png").exists()

@@ -12,6 +12,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from torchrl_subgoal import domains
+
 CITATION = (
     'Okudo, T. & Yamada, S. (2021). "Reward Shaping with Dynamic Trajectory Aggregation". '
     "International Joint Conference on Neural Networks (IJCNN)."
@@ -63,63 +65,24 @@ class PaperResults:
     source: str = CITATION
 
 
-def _table(methods: tuple[str, ...], rows: Mapping[float, tuple[tuple[float, float], ...]]) -> dict[float, dict[str, PaperStat]]:
+def paper_table(
+    methods: tuple[str, ...], rows: Mapping[float, tuple[tuple[float, float], ...]]
+) -> dict[float, dict[str, PaperStat]]:
+    """A time-to-threshold table as printed: threshold -> one ``(mean, sd)`` per method, in ``methods``' order.
+
+    Examples:
+        >>> paper_table(("HRS", "SARSA"), {50: ((33.0, 10.2), (51.8, 16.2))})[50]["SARSA"]
+        PaperStat(mean=51.8, sd=16.2)
+    """
     return {
         threshold: {m: PaperStat(mean, sd) for m, (mean, sd) in zip(methods, cells, strict=True)}
         for threshold, cells in rows.items()
     }
 
 
-PAPER_RESULTS: dict[str, PaperResults] = {
-    "four_rooms": PaperResults(
-        domain="four_rooms",
-        metric="steps",
-        window=1,
-        time_to_threshold=_table(
-            ("HRS", "RRS", "SARSA", "NRS"),
-            {
-                500: ((2.68, 1.86), (2.91, 2.10), (3.93, 3.07), (5.78, 6.39)),
-                300: ((5.06, 3.05), (5.60, 3.61), (6.68, 4.29), (10.4, 9.17)),
-                100: ((17.3, 7.92), (18.6, 7.89), (26.4, 11.0), (38.3, 47.1)),
-                50: ((33.0, 10.2), (36.3, 11.0), (51.8, 16.2), (59.6, 45.8)),
-            },
-        ),
-        asymptotic_window=(990, 1000),
-        notes=(
-            "100 learnings per subgoal pattern, 1,000 episodes each.",
-            "Asymptotic performance (steps, episodes 990-1000): no significant difference between methods.",
-        ),
-    ),
-    "pinball": PaperResults(
-        domain="pinball",
-        metric="steps",
-        window=10,
-        time_to_threshold=_table(
-            ("HRS", "RRS", "AC", "NRS"),
-            {
-                3000: ((21.2, 39.8), (34.6, 48.4), (51.7, 67.1), (40.0, 50.7)),
-                2000: ((26.8, 40.4), (48.7, 54.2), (70.2, 77.8), (59.0, 59.0)),
-                1000: ((56.7, 58.5), (89.1, 67.9), (101.0, 71.4), (93.0, 70.1)),
-                500: ((115.3, 66.4), (147.3, 64.7), (163.0, 54.8), (157.0, 61.6)),
-            },
-        ),
-        learnings=100,
-    ),
-    "fetch": PaperResults(
-        domain="fetch",
-        metric="success",
-        window=1,
-        time_to_threshold={},
-        asymptotic={"HRS": 0.67, "DDPG": 0.63, "NRS": 0.49, "RRS": 0.43},
-        asymptotic_window=(190, 200),
-        learnings=5,
-        notes=("Success rate 0.6 reached 30 epochs earlier with HRS than with DDPG.",),
-    ),
-}
-
-
 def paper_results(domain: str) -> PaperResults | None:
-    """The paper's results for ``domain``, or None if the paper has none for it.
+    """The paper's results for ``domain`` (its registered :class:`~torchrl_subgoal.domains.Domain`'s
+    ``paper``), or None if the paper has none for it.
 
     Examples:
         >>> paper_results("four_rooms").time_to_threshold[500]["HRS"]
@@ -127,4 +90,5 @@ def paper_results(domain: str) -> PaperResults | None:
         >>> paper_results("toy") is None
         True
     """
-    return PAPER_RESULTS.get(domain)
+    registered = domains.find(domain)
+    return registered.paper if registered is not None else None

@@ -3,30 +3,27 @@
 Figures are drawn with matplotlib's object API (no pyplot), so making a report
 neither needs a display nor changes the caller's matplotlib backend.
 
-Maps come from per-domain hooks looked up by domain name in a small registry.
-The built-in hooks import their environment module only when called, so a domain
-whose module is missing or broken costs the report its map panel (with a note
-saying why), never the whole report. Register a hook for a new domain with
-:func:`register_map_hook`.
+Maps are drawn by the ``draw_map`` of the domain registered under the sweep's
+domain name (:mod:`torchrl_subgoal.domains`). A built-in domain's module is
+imported only when its map is drawn, so a domain whose module is missing or
+broken costs the report its map panel (with a note saying why), never the whole
+report.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
+from torchrl_subgoal import domains
 from torchrl_subgoal.experiments.stats import mean_and_sem, moving_average
-
-#: ``hook(ax, patterns, options)``: draw the map and ``patterns`` (name -> SubgoalSeries) on ``ax``.
-MapHook = Callable[[Axes, Mapping[str, Any], Mapping[str, Any]], None]
 
 
 @dataclass(frozen=True)
@@ -40,56 +37,6 @@ class FigureFile:
 
     path: Path | None
     note: str = ""
-
-
-def _four_rooms_map(ax: Axes, patterns: Mapping[str, Any], options: Mapping[str, Any]) -> None:
-    from torchrl_subgoal.envs import four_rooms
-    from torchrl_subgoal.subgoals import Cell, State
-
-    cells: dict[str, list[tuple[int, int]]] = {}
-    for name, series in patterns.items():
-        cells[name] = []
-        for predicate in series.predicates:
-            if isinstance(predicate, Cell):
-                cells[name].append((predicate.row, predicate.col))
-            elif isinstance(predicate, State):
-                cells[name].append(four_rooms.free_cells()[predicate.state])
-            else:
-                raise ValueError(f"pattern {name}: a {type(predicate).__name__} is not a grid cell")
-    four_rooms.draw_map(ax, cells, **options)
-
-
-def _pinball_map(ax: Axes, patterns: Mapping[str, Any], options: Mapping[str, Any]) -> None:
-    from torchrl_subgoal.envs import pinball
-    from torchrl_subgoal.subgoals import Circle
-
-    circles: dict[str, list[tuple[float, float, float]]] = {}
-    for name, series in patterns.items():
-        circles[name] = []
-        for predicate in series.predicates:
-            if not isinstance(predicate, Circle):
-                raise ValueError(f"pattern {name}: a {type(predicate).__name__} is not a circle")
-            x, y = predicate.centre[:2]
-            circles[name].append((float(x), float(y), float(predicate.radius)))
-    pinball.draw_map(ax, circles=circles, **options)
-
-
-_MAP_HOOKS: dict[str, MapHook] = {"four_rooms": _four_rooms_map, "pinball": _pinball_map}
-
-
-def register_map_hook(domain: str, hook: MapHook) -> None:
-    """Use ``hook`` to draw subgoal patterns for ``domain`` (replacing any earlier one).
-
-    Args:
-        domain: the name sweeps of this domain record.
-        hook: ``hook(ax, patterns, options)`` with ``patterns`` a mapping from pattern name
-            to :class:`~torchrl_subgoal.subgoals.SubgoalSeries`, and ``options`` the
-            ``report.map`` section of the sweep's config.
-
-    Examples:
-        >>> register_map_hook("line", lambda ax, patterns, options: ax.plot([0, 1], [0, 1]))
-    """
-    _MAP_HOOKS[domain] = hook
 
 
 def plot_learning_curves(
@@ -154,7 +101,7 @@ def plot_pattern_maps(
     """One panel per subgoal pattern, drawn on the domain's map.
 
     Args:
-        domain: selects the map hook.
+        domain: the registered domain whose ``draw_map`` draws the map.
         patterns: pattern name -> its subgoals, as in a sweep's ``config["patterns"]``: a
             list of subgoal dicts (``{"cell": [4, 9]}``, ``{"circle": {"centre": [x, y],
             "radius": 0.04}}``) or a subgoal-file pattern body.
@@ -172,7 +119,11 @@ def plot_pattern_maps(
         >>> figure.path.name, figure.path.exists()
         ('maps.png', True)
     """
-    hook = _MAP_HOOKS.get(domain)
+    try:
+        registered = domains.find(domain)
+    except Exception as exc:  # a broken domain module costs the map, not the report
+        return FigureFile(None, f"map for domain {domain!r} skipped: {type(exc).__name__}: {exc}")
+    hook = registered.draw_map if registered is not None else None
     if hook is None:
         return FigureFile(None, f"no map is registered for domain {domain!r}")
     if not patterns:

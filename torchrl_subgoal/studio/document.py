@@ -239,7 +239,7 @@ def read_drawing(data: Any, domains: Mapping[str, Domain], *, source: str = "dra
     if domain.map_check is not None:
         for name, series in patterns.items():
             for j, predicate in enumerate(series.predicates):
-                problem = domain.map_check(predicate, map_name)
+                problem = domain.map_check(predicate, map_name, domain.maps[map_name])
                 if problem:
                     label = f"subgoals.{series.names[j]}" if series.names else f"subgoals[{j}]"
                     raise RequestError(f"{source}: pattern {name!r}: {label}.{predicate.kind}: {problem}")

@@ -143,7 +143,8 @@ def create_app(
         map_name = request.args.get("map") or next(iter(domain.maps), "")
         if domain.maps and map_name not in domain.maps:
             raise RequestError(f"map: expected one of {list(domain.maps)}, got {map_name!r}")
-        return jsonify(domain.geometry(map_name))
+        assert domain.geometry is not None  # the studio serves only domains with a map
+        return jsonify(domain.geometry(domain.maps.get(map_name, "")))
 
     @app.post("/api/validate")
     def validate() -> Response:

@@ -15,10 +15,12 @@ import torch
 from tensordict.utils import NestedKey
 from torchrl.envs import EnvBase
 
+from torchrl_subgoal.envs.four_rooms_domain import four_rooms_env
+from torchrl_subgoal.envs.pinball_domain import pinball_env
 from torchrl_subgoal.subgoals import Box, Cell, Circle, Predicate, StateAggregation
 from torchrl_subgoal.training.a2c import A2CConfig
 
-__all__ = ["A2CDomain", "a2c_domain"]
+__all__ = ["A2CDomain", "a2c_domain", "four_rooms_env", "pinball_env"]
 
 
 @dataclass(frozen=True)
@@ -55,31 +57,6 @@ class A2CDomain:
     a2c: A2CConfig
     aggregation: Callable[[], StateAggregation | None] = field(default=lambda: None)
     candidates: Callable[[int], list[Predicate]] = field(default=lambda seed: [])
-
-
-def four_rooms_env(num_envs: int) -> EnvBase:
-    """``FourRoomsEnv(num_envs)`` with the paper's 1,000-step cap.
-
-    Examples:
-        >>> env = four_rooms_env(3)
-        >>> env.batch_size, env.max_steps
-        (torch.Size([3]), 1000)
-    """
-    from torchrl_subgoal.envs import FourRoomsEnv
-
-    return FourRoomsEnv(num_envs)
-
-
-def pinball_env(num_envs: int) -> EnvBase:
-    """``PinBallEnv(num_envs)`` on the simple map, the paper's 10,000-step cap, seeded from torch.
-
-    Examples:
-        >>> pinball_env(2).reset()["observation"].shape
-        torch.Size([2, 4])
-    """
-    from torchrl_subgoal.envs import PinBallEnv
-
-    return PinBallEnv(num_envs, "simple", seed=int(torch.randint(2**31 - 1, ())))
 
 
 def _four_rooms_candidates(seed: int) -> list[Predicate]:

@@ -1,0 +1,87 @@
+"""The four-rooms domain's registration: env, subgoal check, map, paper table, studio grid.
+
+Everything the package knows about four-rooms beyond the env itself, in one
+place; :mod:`torchrl_subgoal.domains` imports this module the first time
+``"four_rooms"`` is looked up.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from torchrl.envs import EnvBase
+
+from torchrl_subgoal import domains
+from torchrl_subgoal.envs import four_rooms
+from torchrl_subgoal.experiments.paper import PaperResults, paper_table
+from torchrl_subgoal.subgoals import Cell, Predicate, State
+
+__all__ = ["DOMAIN", "four_rooms_env"]
+
+
+def four_rooms_env(num_envs: int) -> EnvBase:
+    """``FourRoomsEnv(num_envs)`` with the paper's 1,000-step cap.
+
+    Examples:
+        >>> env = four_rooms_env(3)
+        >>> env.batch_size, env.max_steps
+        (torch.Size([3]), 1000)
+    """
+    return four_rooms.FourRoomsEnv(num_envs)
+
+
+def _draw_map(ax: Any, patterns: Mapping[str, Any], options: Mapping[str, Any]) -> None:
+    cells: dict[str, list[tuple[int, int]]] = {}
+    for name, series in patterns.items():
+        cells[name] = []
+        for predicate in series.predicates:
+            if isinstance(predicate, Cell):
+                cells[name].append((predicate.row, predicate.col))
+            elif isinstance(predicate, State):
+                cells[name].append(four_rooms.free_cells()[predicate.state])
+            else:
+                raise ValueError(f"pattern {name}: a {type(predicate).__name__} is not a grid cell")
+    four_rooms.draw_map(ax, cells, **options)
+
+
+def _geometry(config: str) -> dict[str, Any]:
+    return {
+        "kind": "grid", "rows": four_rooms.LAYOUT.splitlines(), "wall": "w", "start": list(four_rooms.START),
+        "goal": list(four_rooms.GOAL), "hallways": [list(h) for h in four_rooms.HALLWAYS],
+    }
+
+
+def _cell_of_state(predicate: Predicate) -> dict[str, Any]:
+    if isinstance(predicate, State):
+        return Cell(*four_rooms.free_cells()[predicate.state]).to_dict()
+    return predicate.to_dict()
+
+
+PAPER = PaperResults(
+    domain="four_rooms",
+    metric="steps",
+    window=1,
+    time_to_threshold=paper_table(
+        ("HRS", "RRS", "SARSA", "NRS"),
+        {
+            500: ((2.68, 1.86), (2.91, 2.10), (3.93, 3.07), (5.78, 6.39)),
+            300: ((5.06, 3.05), (5.60, 3.61), (6.68, 4.29), (10.4, 9.17)),
+            100: ((17.3, 7.92), (18.6, 7.89), (26.4, 11.0), (38.3, 47.1)),
+            50: ((33.0, 10.2), (36.3, 11.0), (51.8, 16.2), (59.6, 45.8)),
+        },
+    ),
+    asymptotic_window=(990, 1000),
+    notes=(
+        "100 learnings per subgoal pattern, 1,000 episodes each.",
+        "Asymptotic performance (steps, episodes 990-1000): no significant difference between methods.",
+    ),
+)
+
+DOMAIN = domains.register(domains.Domain(
+    "four_rooms", "Four rooms", make_env=four_rooms_env, check_subgoal=four_rooms.check_subgoal,
+    draw_map=_draw_map, paper=PAPER, geometry=_geometry,
+    limits={"episodes": domains.Limit(300, 1, 2000), "learners": domains.Limit(20, 1, 200),
+            "max_steps": domains.Limit(1000, 50, 1000)},
+    recipe="recipes/four_rooms.py", to_page=_cell_of_state,
+))

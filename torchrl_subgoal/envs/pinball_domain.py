@@ -1,0 +1,94 @@
+"""The PinBall domain's registration: env, subgoal check, map, paper table, studio table.
+
+Everything the package knows about PinBall beyond the env itself, in one
+place; :mod:`torchrl_subgoal.domains` imports this module the first time
+``"pinball"`` is looked up.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping
+from typing import Any
+
+import torch
+from torchrl.envs import EnvBase
+
+from torchrl_subgoal import domains
+from torchrl_subgoal.envs import pinball
+from torchrl_subgoal.experiments.paper import PaperResults, paper_table
+from torchrl_subgoal.subgoals import Circle, Predicate
+
+__all__ = ["DOMAIN", "pinball_env"]
+
+
+def pinball_env(num_envs: int) -> EnvBase:
+    """``PinBallEnv(num_envs)`` on the simple map, the paper's 10,000-step cap, seeded from torch.
+
+    Examples:
+        >>> pinball_env(2).reset()["observation"].shape
+        torch.Size([2, 4])
+    """
+    return pinball.PinBallEnv(num_envs, "simple", seed=int(torch.randint(2**31 - 1, ())))
+
+
+def _draw_map(ax: Any, patterns: Mapping[str, Any], options: Mapping[str, Any]) -> None:
+    circles: dict[str, list[tuple[float, float, float]]] = {}
+    for name, series in patterns.items():
+        circles[name] = []
+        for predicate in series.predicates:
+            if not isinstance(predicate, Circle):
+                raise ValueError(f"pattern {name}: a {type(predicate).__name__} is not a circle")
+            x, y = predicate.centre[:2]
+            circles[name].append((float(x), float(y), float(predicate.radius)))
+    pinball.draw_map(ax, circles=circles, **options)
+
+
+@functools.lru_cache(maxsize=32)
+def _load_map(config: str) -> pinball.PinBallConfig:
+    return pinball.PinBallConfig.load(config)
+
+
+def _geometry(config: str) -> dict[str, Any]:
+    cfg = _load_map(config)
+    return {
+        "kind": "table", "ball_radius": cfg.ball_radius, "target": list(cfg.target), "start": list(cfg.start),
+        "polygons": [[list(v) for v in poly] for poly in cfg.polygons],
+        "default_radius": cfg.target[2],  # the target's radius, as the paper's participants' circles
+    }
+
+
+def _map_check(predicate: Predicate, map_name: str, config: str) -> str | None:
+    if not isinstance(predicate, Circle):
+        return None
+    x, y = predicate.centre[:2]
+    for i, polygon in enumerate(_load_map(config).polygons):
+        if pinball.point_in_polygon((x, y), polygon):
+            return (f"centre ({x:g}, {y:g}) lies inside obstacle {i + 1} of the {map_name!r} map; "
+                    "move it to where the ball can go")
+    return None
+
+
+PAPER = PaperResults(
+    domain="pinball",
+    metric="steps",
+    window=10,
+    time_to_threshold=paper_table(
+        ("HRS", "RRS", "AC", "NRS"),
+        {
+            3000: ((21.2, 39.8), (34.6, 48.4), (51.7, 67.1), (40.0, 50.7)),
+            2000: ((26.8, 40.4), (48.7, 54.2), (70.2, 77.8), (59.0, 59.0)),
+            1000: ((56.7, 58.5), (89.1, 67.9), (101.0, 71.4), (93.0, 70.1)),
+            500: ((115.3, 66.4), (147.3, 64.7), (163.0, 54.8), (157.0, 61.6)),
+        },
+    ),
+    learnings=100,
+)
+
+DOMAIN = domains.register(domains.Domain(
+    "pinball", "PinBall", make_env=pinball_env, check_subgoal=pinball.check_subgoal, draw_map=_draw_map,
+    paper=PAPER, geometry=_geometry, maps={"simple": "simple", "hard": "hard"}, map_check=_map_check,
+    limits={"episodes": domains.Limit(30, 1, 100), "learners": domains.Limit(5, 1, 10),
+            "max_steps": domains.Limit(10_000, 100, 10_000)},
+    recipe="recipes/pinball.py",
+))
