@@ -14,6 +14,7 @@ DOCS = Path(__file__).resolve().parents[2] / "docs"
 TUTORIALS = sorted((DOCS / "tutorials").glob("*.py"))
 #: what each script must print at any budget (its output file holds the same text)
 EXPECTED = {
+    "adding_a_domain": [r"^HRS: mean steps per episode \d", r"^SARSA: mean steps per episode \d"],
     "shape_your_env": [r"^unshaped ", r"^shaped ", r"learned potential, mean of the shaped learners: Φ\(0\)="],
     "quickstart": [r"^unshaped: \d+ episodes", r"^shaped: \d+ episodes"],
     "train_the_potential": [r"^first batch: 256 steps, \d+ SMDP transitions", r"^V at start \(z=0\)",

@@ -37,6 +37,7 @@ def fetch_env(num_envs: int) -> EnvBase:
     """
     from torchrl_subgoal.training import batched
 
+    fetch.require_fetch()  # the one-line error naming the install command, before any env is made
     return batched(functools.partial(fetch.make_fetch_env, 0))(num_envs)
 
 
