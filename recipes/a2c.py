@@ -24,7 +24,6 @@ TorchRL CSV logs (TensorBoard too if installed) go to ``RESULTS/logs``.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -36,17 +35,17 @@ import torch
 
 from torchrl_subgoal import load_patterns
 from torchrl_subgoal.experiments import Chunk, EpisodeTable
-from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
+from torchrl_subgoal.experiments.cli import ConfigError, check, setting
 from torchrl_subgoal.experiments.recipe import (
-    RECIPE_ERRORS,
+    Plan,
+    RecipeConfig,
     check_patterns,
     chunk_patterns,
-    fail,
     method_specs,
     pattern_config,
     pattern_sets,
     pattern_sources,
-    sweep_and_report,
+    recipe_main,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_parts
 from torchrl_subgoal.training import A2CConfig, Shaping, a2c_domain, experiment_logger, train_a2c
@@ -55,7 +54,7 @@ METHODS = paper_methods(baseline="A2C")
 
 
 @dataclass
-class Config:
+class Config(RecipeConfig):
     """A2C with subgoal shaping on TorchRL collectors."""
 
     domain: str = setting("four_rooms", "four_rooms or pinball", choices=["four_rooms", "pinball"])
@@ -81,20 +80,15 @@ class Config:
     results: str = setting("", "results directory (default results/a2c_<domain>; re-run to resume)")
     backend: Literal["local", "ray"] = setting("local", "where learners run")
     workers: int = setting(2, "learners run at once (processes; 0: in this process)")
-    overwrite: bool = setting(False, "discard results of a different experiment in --results")
+
+    AT_LEAST_ONE = ("learnings", "random_patterns", "num_envs", "frames_per_batch")
+    AT_LEAST_ZERO = ("total_frames", "env_workers", "collector_workers", "workers")
 
     def __post_init__(self) -> None:
-        for name in ("learnings", "random_patterns", "num_envs", "frames_per_batch"):
-            check(getattr(self, name) >= 1, name, f"must be >= 1, got {getattr(self, name)}")
-        for name in ("total_frames", "env_workers", "collector_workers", "workers"):
-            check(getattr(self, name) >= 0, name, f"must be >= 0, got {getattr(self, name)}")
+        super().__post_init__()
         check(self.value_lr > 0, "value_lr", f"must be positive, got {self.value_lr}")
         check(self.lr >= 0, "lr", f"must be >= 0, got {self.lr}")
         check(self.reward_scale >= 0, "reward_scale", f"must be >= 0, got {self.reward_scale}")
-
-    @property
-    def method_names(self) -> list[str]:
-        return [m.strip() for m in self.methods.split(",") if m.strip()]
 
 
 def a2c_config(config: Mapping[str, Any]) -> A2CConfig:
@@ -128,42 +122,42 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     return EpisodeTable(steps, returns, success)
 
 
-def main(argv: list[str] | None = None) -> int:
+def plan(cfg: Config) -> Plan:
+    """The sweep of ``cfg``: one chunk per learner, the stored configuration, the report's thresholds."""
+    domain = a2c_domain(cfg.domain)
+    human = load_patterns(cfg.subgoals or domain.participants, domain=cfg.domain)
+    patterns = pattern_sets(human, domain.candidates(cfg.seed), cfg.random_patterns, cfg.seed)
+    check_patterns(patterns, domain.make_env(1), str(domain.subgoal_key))
+    specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
     try:
-        cfg = parse_config(Config, argv, description=__doc__.splitlines()[0] if __doc__ else None)
-        domain = a2c_domain(cfg.domain)
-        human = load_patterns(cfg.subgoals or domain.participants, domain=cfg.domain)
-        patterns = pattern_sets(human, domain.candidates(cfg.seed), cfg.random_patterns, cfg.seed)
-        check_patterns(patterns, domain.make_env(1), str(domain.subgoal_key))
-        specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
-        try:
-            a2c = dataclasses.replace(
-                domain.a2c, num_envs=cfg.num_envs, frames_per_batch=cfg.frames_per_batch,
-                env_workers=cfg.env_workers, collector_workers=cfg.collector_workers, value_lr=cfg.value_lr,
-                online_potential=cfg.online_potential, normalize_advantage=cfg.normalize_advantage,
-                total_frames=cfg.total_frames or domain.a2c.total_frames, lr=cfg.lr or domain.a2c.lr,
-                reward_scale=cfg.reward_scale or domain.a2c.reward_scale,
-            )
-        except ValueError as exc:
-            raise ConfigError(str(exc)) from None
-        results = cfg.results or f"results/a2c_{cfg.domain}"
-        config = {
-            "domain": cfg.domain,
-            "a2c": dataclasses.asdict(a2c),
-            "zero_terminal_potential": cfg.zero_terminal_potential,
-            "start_potential": cfg.start_potential,
-            "subgoal_file": cfg.subgoals or domain.participants,
-            "patterns": pattern_config(patterns),
-            "pattern_sources": pattern_sources(patterns),
-            "log_dir": str(Path(results) / "logs"),
-            "report": {"metric": "steps", "thresholds": list(domain.thresholds), "unit": "update",
-                       "asymptotic_window": [max(0, a2c.iterations - 10), a2c.iterations]},
-        }
-        run = functools.partial(sweep_and_report, f"a2c_{cfg.domain}", results, specs, run_chunk, config)
-        return run(seed=cfg.seed, chunk_size=1, episodes=a2c.iterations, overwrite=cfg.overwrite,
-                   backend=cfg.backend, workers=cfg.workers)
-    except RECIPE_ERRORS as exc:
-        return fail(exc)
+        a2c = dataclasses.replace(
+            domain.a2c, num_envs=cfg.num_envs, frames_per_batch=cfg.frames_per_batch,
+            env_workers=cfg.env_workers, collector_workers=cfg.collector_workers, value_lr=cfg.value_lr,
+            online_potential=cfg.online_potential, normalize_advantage=cfg.normalize_advantage,
+            total_frames=cfg.total_frames or domain.a2c.total_frames, lr=cfg.lr or domain.a2c.lr,
+            reward_scale=cfg.reward_scale or domain.a2c.reward_scale,
+        )
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    results = cfg.results or f"results/a2c_{cfg.domain}"
+    config = {
+        "domain": cfg.domain,
+        "a2c": dataclasses.asdict(a2c),
+        "zero_terminal_potential": cfg.zero_terminal_potential,
+        "start_potential": cfg.start_potential,
+        "subgoal_file": cfg.subgoals or domain.participants,
+        "patterns": pattern_config(patterns),
+        "pattern_sources": pattern_sources(patterns),
+        "log_dir": str(Path(results) / "logs"),
+        "report": {"metric": "steps", "thresholds": list(domain.thresholds), "unit": "update",
+                   "asymptotic_window": [max(0, a2c.iterations - 10), a2c.iterations]},
+    }
+    return Plan(f"a2c_{cfg.domain}", specs, run_chunk, config, episodes=a2c.iterations, chunk_size=1,
+                results=results)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return recipe_main(Config, plan, argv, description=__doc__.splitlines()[0] if __doc__ else None, threads=None)
 
 
 if __name__ == "__main__":

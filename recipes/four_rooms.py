@@ -31,9 +31,8 @@ import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib.resources import files
-from typing import Any, Literal
+from typing import Any
 
-import torch
 from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import load_patterns
@@ -41,18 +40,17 @@ from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import GOAL, START, free_cells, room_aggregation
 from torchrl_subgoal.experiments import Chunk, EpisodeTable, learner_seeds
-from torchrl_subgoal.experiments.cli import check, parse_config, setting
+from torchrl_subgoal.experiments.cli import setting
 from torchrl_subgoal.experiments.recipe import (
-    RECIPE_ERRORS,
     PatternSets,
+    Plan,
+    ReproductionConfig,
     check_patterns,
     chunk_patterns,
-    fail,
     method_specs,
-    pattern_config,
     pattern_sets,
-    pattern_sources,
-    sweep_and_report,
+    recipe_main,
+    sweep_entries,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 from torchrl_subgoal.subgoals import Cell
@@ -63,7 +61,7 @@ OBSERVATION_KEY = "cell"  # what the subgoal predicates read: (row, col)
 
 
 @dataclass
-class Config:
+class Config(ReproductionConfig):
     """Four-rooms reproduction: SARSA with HRS, RRS, NRS and SARSA-RS."""
 
     preset: str = setting("released", "SARSA hyper-parameters: the paper's text or the released configuration",
@@ -72,39 +70,13 @@ class Config:
     learnings: int = setting(10, "learnings per subgoal pattern (paper: 100)")
     methods: str = setting(",".join(METHODS), "comma-separated methods to run")
     subgoals: str = setting(PARTICIPANTS, "subgoal file of the human patterns (HRS, NRS)")
-    random_patterns: int = setting(10, "random subgoal patterns for RRS (paper: 10)")
     eta: float = setting(1.0, "NRS potential η (paper: 1)")
     agent_state: str = setting("s", "what SARSA's table is over for subgoal methods: s (the paper) or s,z "
                                "(z = subgoal index; makes Φ(z) a potential over the agent's state)",
                                choices=["s", "s,z"])
-    zero_terminal_potential: bool = setting(False, "Φ = 0 at the goal (exact policy invariance); the authors "
-                                            "shape the goal step with γΦ(z_T)")
-    start_potential: str = setting("value", "level of Φ: value (Φ = V, the authors), zero (Φ(z_0) = 0) or "
-                                   "nonpositive (Φ(z_0) = min(V(z_0), 0), the library default)",
-                                   choices=["value", "zero", "nonpositive"])
     reward: str = setting("goal", "goal: +1 at the goal, 0 otherwise (the paper); step-cost: -1 per step, "
                           "0 at the goal", choices=["goal", "step-cost"])
-    engine: str = setting("fused", "fused: one compiled loop; torchrl: step_and_maybe_reset (identical results)",
-                          choices=["fused", "torchrl"])
-    seed: int = setting(0, "sweep seed (random patterns, chunk seeds)")
     results: str = setting("results/four_rooms", "results directory (re-run to resume)")
-    backend: Literal["local", "ray"] = setting("local", "where chunks run")
-    workers: int = setting(2, "local worker processes (0: in this process)")
-    chunk_size: int = setting(100, "learners per batch (results do not depend on it; small chunks keep both "
-                              "workers busy to the end and resume finer)")
-    overwrite: bool = setting(False, "discard results of a different experiment in --results")
-
-    def __post_init__(self) -> None:
-        check(self.episodes >= 1, "episodes", f"must be >= 1, got {self.episodes}")
-        check(self.learnings >= 1, "learnings", f"must be >= 1, got {self.learnings}")
-        check(self.random_patterns >= 1, "random_patterns", f"must be >= 1, got {self.random_patterns}")
-        check(self.eta >= 0, "eta", f"must be >= 0, got {self.eta}")
-        check(self.chunk_size >= 1, "chunk_size", f"must be >= 1, got {self.chunk_size}")
-        check(self.workers >= 0, "workers", f"must be >= 0, got {self.workers}")
-
-    @property
-    def method_names(self) -> list[str]:
-        return [m.strip() for m in self.methods.split(",") if m.strip()]
 
 
 def build_patterns(cfg: Config) -> PatternSets:
@@ -138,30 +110,25 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     return EpisodeTable(records.steps, records.returns, records.success)
 
 
+def plan(cfg: Config) -> Plan:
+    """The sweep of ``cfg``: every method's learners, the stored configuration, the report's thresholds."""
+    patterns = build_patterns(cfg)
+    check_patterns(patterns, FourRoomsEnv(num_envs=1), OBSERVATION_KEY)
+    specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
+    settings = dataclasses.asdict(cfg)
+    config = {
+        **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential",
+                                    "start_potential", "reward", "engine", "agent_state")},
+        "sarsa": dataclasses.asdict(SARSA_PRESETS[cfg.preset]),
+        **sweep_entries(cfg, cfg.subgoals, patterns),
+        "report": {"metric": "steps", "thresholds": [500, 300, 100, 50],
+                   "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes]},
+    }
+    return Plan("four_rooms", specs, run_chunk, config, episodes=cfg.episodes, chunk_size=cfg.chunk_size)
+
+
 def main(argv: list[str] | None = None) -> int:
-    torch.set_num_threads(1)  # batched small ops run fastest on one thread
-    try:
-        cfg = parse_config(Config, argv, description=__doc__.splitlines()[0] if __doc__ else None)
-        patterns = build_patterns(cfg)
-        check_patterns(patterns, FourRoomsEnv(num_envs=1), OBSERVATION_KEY)
-        specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
-        settings = dataclasses.asdict(cfg)
-        config = {
-            **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential",
-                                        "start_potential", "reward", "engine", "agent_state")},
-            "sarsa": dataclasses.asdict(SARSA_PRESETS[cfg.preset]),
-            "seed": cfg.seed,  # learners' seeds derive from it (learner_seeds)
-            "subgoal_file": cfg.subgoals,
-            "patterns": pattern_config(patterns),
-            "pattern_sources": pattern_sources(patterns),
-            "report": {"metric": "steps", "thresholds": [500, 300, 100, 50],
-                       "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes]},
-        }
-        return sweep_and_report("four_rooms", cfg.results, specs, run_chunk, config, seed=cfg.seed,
-                                chunk_size=cfg.chunk_size, episodes=cfg.episodes, overwrite=cfg.overwrite,
-                                backend=cfg.backend, workers=cfg.workers)
-    except RECIPE_ERRORS as exc:
-        return fail(exc)
+    return recipe_main(Config, plan, argv, description=__doc__.splitlines()[0] if __doc__ else None)
 
 
 if __name__ == "__main__":

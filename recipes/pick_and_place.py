@@ -65,14 +65,15 @@ from torchrl_subgoal.experiments.checkpoint import (
     restore_rng_states,
     rng_states,
 )
-from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
+from torchrl_subgoal.experiments.cli import ConfigError, check, setting
 from torchrl_subgoal.experiments.recipe import (
     RECIPE_ERRORS,
+    Plan,
+    RecipeConfig,
     chunk_patterns,
-    fail,
     pattern_config,
     pattern_sources,
-    sweep_and_report,
+    recipe_main,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_parts
 from torchrl_subgoal.training import EnvFactory, Shaping, shaped_env, smdp_transitions
@@ -93,7 +94,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 
 @dataclass
-class Config:
+class Config(RecipeConfig):
     """Pick and place reproduction: DDPG with HRS, RRS, NRS and SARSA-RS."""
 
     preset: str = setting("paper", "schedule and network sizes", choices=sorted(PRESETS))
@@ -118,13 +119,11 @@ class Config:
     results: str = setting("results/pick_and_place", "results directory (re-run to resume)")
     backend: Literal["local", "ray"] = setting("local", "where learnings run")
     workers: int = setting(1, "learnings run at once (0: in this process)")
-    overwrite: bool = setting(False, "discard results of a different experiment in --results")
+
+    AT_LEAST_ZERO = ("epochs", "envs", "workers", "collector_workers", "env_processes")
 
     def __post_init__(self) -> None:
-        check(self.epochs >= 0, "epochs", f"must be >= 0, got {self.epochs}")
-        check(self.learnings >= 1, "learnings", f"must be >= 1, got {self.learnings}")
-        for name in ("envs", "workers", "collector_workers", "env_processes"):
-            check(getattr(self, name) >= 0, name, f"must be >= 0, got {getattr(self, name)}")
+        super().__post_init__()
         check(self.value_lr > 0 and self.aggregation_lr > 0, "value_lr", "learning rates must be > 0")
         cycle_steps = PRESETS[self.preset]["cycle_steps"]
         self.envs = self.envs or cycle_steps // fetch.MAX_EPISODE_STEPS
@@ -139,10 +138,6 @@ class Config:
         except json.JSONDecodeError as exc:
             raise ConfigError(f"--shaping: not valid JSON: {exc}") from None
         check(isinstance(options, dict), "shaping", f"must be a JSON object, got {self.shaping!r}")
-
-    @property
-    def method_names(self) -> list[str]:
-        return [m.strip() for m in self.methods.split(",") if m.strip()]
 
 
 @dataclass
@@ -301,16 +296,11 @@ def build_specs(cfg: Config, patterns: dict[str, dict[str, Any]]) -> list[Method
         raise ConfigError(f"--methods: {exc}") from None
 
 
-def main(argv: list[str] | None = None) -> int:
-    torch.set_num_threads(1)
-    try:
-        cfg = parse_config(Config, argv, description=__doc__.splitlines()[0] if __doc__ else None)
-        fetch.require_fetch()
-        patterns = build_patterns(cfg)
-        specs = build_specs(cfg, patterns)
-    except (ConfigError, ValueError, ImportError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+def plan(cfg: Config) -> Plan:
+    """The sweep of ``cfg``: one chunk per learning, the stored configuration, the report's threshold."""
+    fetch.require_fetch()
+    patterns = build_patterns(cfg)
+    specs = build_specs(cfg, patterns)
     preset = PRESETS[cfg.preset]
     epochs = cfg.epochs or preset["epochs"]
     ddpg = dataclasses.asdict(DDPGConfig(**preset["ddpg"], clip_return=cfg.clip_return or None,
@@ -327,12 +317,12 @@ def main(argv: list[str] | None = None) -> int:
         "report": {"metric": "success", "lower_is_better": False, "thresholds": [0.6], "window": 1,
                    "asymptotic_window": [max(0, epochs - 10), epochs], "log_scale": False, "unit": "epoch"},
     }
-    try:
-        return sweep_and_report("fetch", cfg.results, specs, run_chunk, config, seed=cfg.seed, chunk_size=1,
-                                episodes=epochs, overwrite=cfg.overwrite, backend=cfg.backend,
-                                workers=cfg.workers)
-    except RECIPE_ERRORS as exc:  # results dir not usable, a failed chunk: one line, no traceback
-        return fail(exc)
+    return Plan("fetch", specs, run_chunk, config, episodes=epochs, chunk_size=1)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return recipe_main(Config, plan, argv, description=__doc__.splitlines()[0] if __doc__ else None,
+                       errors=(*RECIPE_ERRORS, ValueError, ImportError))  # ImportError: the fetch extra missing
 
 
 if __name__ == "__main__":

@@ -30,7 +30,7 @@ import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib.resources import files
-from typing import Any, Literal
+from typing import Any
 
 import torch
 from torchrl.envs import TransformedEnv
@@ -39,18 +39,17 @@ from torchrl_subgoal import Box, Circle, StateAggregation, load_patterns
 from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic, run_episodes
 from torchrl_subgoal.envs import PinBallEnv
 from torchrl_subgoal.experiments import Chunk, EpisodeTable, learner_seeds
-from torchrl_subgoal.experiments.cli import check, parse_config, setting
+from torchrl_subgoal.experiments.cli import setting
 from torchrl_subgoal.experiments.recipe import (
-    RECIPE_ERRORS,
     PatternSets,
+    Plan,
+    ReproductionConfig,
     check_patterns,
     chunk_patterns,
-    fail,
     method_specs,
-    pattern_config,
     pattern_sets,
-    pattern_sources,
-    sweep_and_report,
+    recipe_main,
+    sweep_entries,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 
@@ -61,7 +60,7 @@ SUBGOAL_RADIUS = 0.04  # the target's radius, as in the paper
 
 
 @dataclass
-class Config:
+class Config(ReproductionConfig):
     """PinBall reproduction: actor-critic with HRS, RRS, NRS and SARSA-RS."""
 
     preset: str = setting("released", "agent and rates: released (the authors' Q-based actor-critic), paper "
@@ -71,36 +70,18 @@ class Config:
     learnings: int = setting(10, "learnings per subgoal pattern (paper: 10)")
     methods: str = setting(",".join(METHODS), "comma-separated methods to run")
     subgoals: str = setting(PARTICIPANTS, "subgoal file of the human patterns (HRS, NRS)")
-    random_patterns: int = setting(10, "random subgoal patterns for RRS (paper: 10)")
     eta: float = setting(10_000.0, "NRS potential η (paper: 10,000)")
-    zero_terminal_potential: bool = setting(False, "Φ = 0 at the goal (exact policy invariance); the authors "
-                                            "shape the goal step with γΦ(z_T)")
-    start_potential: str = setting("value", "level of Φ: value (Φ = V, the authors), zero (Φ(z_0) = 0) or "
-                                   "nonpositive (Φ(z_0) = min(V(z_0), 0), the library default)",
-                                   choices=["value", "zero", "nonpositive"])
     step_penalty: float = setting(0.0, "reward of a step without thrust (classic PinBall: -1; the paper: 0)")
     thrust_penalty: float = setting(0.0, "reward of a thrust (classic PinBall: -5; the paper: 0)")
     map: str = setting("simple", "PinBall configuration: simple, hard or a file")
     max_steps: int = setting(10_000, "episode cap (paper: 10,000)")
     engine: str = setting("fused", "fused: one compiled loop; torchrl: step_and_maybe_reset (same episodes)",
                           choices=["fused", "torchrl"])
-    seed: int = setting(0, "sweep seed (random patterns, chunk seeds)")
     results: str = setting("results/pinball", "results directory (re-run to resume)")
-    backend: Literal["local", "ray"] = setting("local", "where chunks run")
-    workers: int = setting(2, "local worker processes (0: in this process)")
     chunk_size: int = setting(10, "learners per batch (results do not depend on it; small chunks keep both "
                               "workers busy to the end and resume finer)")
-    overwrite: bool = setting(False, "discard results of a different experiment in --results")
 
-    def __post_init__(self) -> None:
-        for name in ("episodes", "learnings", "random_patterns", "max_steps", "chunk_size"):
-            check(getattr(self, name) >= 1, name, f"must be >= 1, got {getattr(self, name)}")
-        check(self.eta >= 0, "eta", f"must be >= 0, got {self.eta}")
-        check(self.workers >= 0, "workers", f"must be >= 0, got {self.workers}")
-
-    @property
-    def method_names(self) -> list[str]:
-        return [m.strip() for m in self.methods.split(",") if m.strip()]
+    AT_LEAST_ONE = ("episodes", "learnings", "random_patterns", "max_steps", "chunk_size")
 
 
 def thirds_of_the_table() -> StateAggregation:
@@ -139,31 +120,25 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     return EpisodeTable(records.steps, records.returns, records.success)
 
 
+def plan(cfg: Config) -> Plan:
+    """The sweep of ``cfg``: every method's learners, the stored configuration, the report's thresholds."""
+    patterns = build_patterns(cfg)
+    check_patterns(patterns, PinBallEnv(1, cfg.map), OBSERVATION_KEY)
+    specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
+    settings = dataclasses.asdict(cfg)
+    config = {
+        **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential", "start_potential",
+                                    "step_penalty", "thrust_penalty", "map", "max_steps", "engine")},
+        "actor_critic": dataclasses.asdict(AC_PRESETS[cfg.preset]),
+        **sweep_entries(cfg, cfg.subgoals, patterns),
+        "report": {"metric": "steps", "thresholds": [3000, 2000, 1000, 500], "window": min(10, cfg.episodes),
+                   "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes], "map": {"config": cfg.map}},
+    }
+    return Plan("pinball", specs, run_chunk, config, episodes=cfg.episodes, chunk_size=cfg.chunk_size)
+
+
 def main(argv: list[str] | None = None) -> int:
-    torch.set_num_threads(1)
-    try:
-        cfg = parse_config(Config, argv, description=__doc__.splitlines()[0] if __doc__ else None)
-        patterns = build_patterns(cfg)
-        check_patterns(patterns, PinBallEnv(1, cfg.map), OBSERVATION_KEY)
-        specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
-        settings = dataclasses.asdict(cfg)
-        config = {
-            **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential",
-                                        "start_potential", "step_penalty", "thrust_penalty", "map", "max_steps",
-                                        "engine")},
-            "actor_critic": dataclasses.asdict(AC_PRESETS[cfg.preset]),
-            "seed": cfg.seed,  # learners' seeds derive from it (learner_seeds)
-            "subgoal_file": cfg.subgoals,
-            "patterns": pattern_config(patterns),
-            "pattern_sources": pattern_sources(patterns),
-            "report": {"metric": "steps", "thresholds": [3000, 2000, 1000, 500], "window": min(10, cfg.episodes),
-                       "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes], "map": {"config": cfg.map}},
-        }
-        return sweep_and_report("pinball", cfg.results, specs, run_chunk, config, seed=cfg.seed,
-                                chunk_size=cfg.chunk_size, episodes=cfg.episodes, overwrite=cfg.overwrite,
-                                backend=cfg.backend, workers=cfg.workers)
-    except RECIPE_ERRORS as exc:
-        return fail(exc)
+    return recipe_main(Config, plan, argv, description=__doc__.splitlines()[0] if __doc__ else None)
 
 
 if __name__ == "__main__":

@@ -1,20 +1,26 @@
-"""What the paper-reproduction recipes share: patterns, learners per method, chunk decoding, run + report.
+"""What the recipes share: one settings base, one ``main``, patterns, learners per method, chunk decoding,
+run + report.
 
-A recipe (``recipes/four_rooms.py``, ``recipes/pinball.py``) supplies its
-domain's pieces — the human patterns, candidate subgoals for RRS, an env and an
-agent per chunk — and these helpers do the rest the same way for every domain.
+A recipe (``recipes/four_rooms.py``, ``recipes/pinball.py``, ``recipes/a2c.py``,
+``recipes/pick_and_place.py``) is a :class:`RecipeConfig` subclass (a paper
+reproduction: a :class:`ReproductionConfig`), a ``plan`` that turns its settings
+into a :class:`Plan` (the domain's pieces: the human patterns, candidate subgoals
+for RRS, a ``run_chunk`` making an env and an agent per chunk) and
+``main = recipe_main(Config, plan)``; these helpers do the rest the same way for
+every domain.
 """
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Mapping, Sequence
-from typing import Any, Literal
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal, TypeVar
 
 import torch
 from torchrl.envs import EnvBase, TransformedEnv
 
-from torchrl_subgoal.experiments.cli import ConfigError
+from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
 from torchrl_subgoal.experiments.store import Chunk, ResultsError, UnknownMethodError
 from torchrl_subgoal.experiments.sweep import (
     ChunkFailedError,
@@ -30,6 +36,9 @@ from torchrl_subgoal.transform import SubgoalPotentialTransform
 
 __all__ = [
     "RECIPE_ERRORS",
+    "Plan",
+    "RecipeConfig",
+    "ReproductionConfig",
     "check_patterns",
     "chunk_patterns",
     "fail",
@@ -37,10 +46,13 @@ __all__ = [
     "pattern_config",
     "pattern_sets",
     "pattern_sources",
+    "recipe_main",
     "sweep_and_report",
+    "sweep_entries",
 ]
 
 PatternSets = dict[str, dict[str, SubgoalSeries]]
+C = TypeVar("C", bound="RecipeConfig")
 
 #: What a recipe reports as one line on stderr instead of a traceback (see :func:`fail`).
 RECIPE_ERRORS = (ConfigError, SubgoalFileError, ResultsError, ChunkFailedError)
@@ -228,3 +240,160 @@ def sweep_and_report(
     print(report.markdown)
     print(f"results, report.md, summary.json and plots in {results}", file=sys.stderr)
     return 0
+
+
+@dataclass
+class RecipeConfig:
+    """Settings every recipe has: which methods, how many learnings, the seed, where results go and how
+    chunks run. A recipe's ``Config`` subclasses it; redefining a field changes its default or help text.
+
+    ``__post_init__`` checks that the fields named in ``AT_LEAST_ONE`` are >= 1 and those in
+    ``AT_LEAST_ZERO`` >= 0 (a subclass names its own), raising :class:`ConfigError` for the flag.
+
+    Examples:
+        >>> from dataclasses import dataclass
+        >>> @dataclass
+        ... class Config(RecipeConfig):
+        ...     episodes: int = setting(100, "episodes per learning")
+        ...     AT_LEAST_ONE = ("learnings", "episodes")
+        >>> cfg = parse_config(Config, ["--methods", "HRS, SARSA", "--episodes", "5"])
+        >>> cfg.method_names, cfg.episodes, cfg.workers
+        (['HRS', 'SARSA'], 5, 2)
+        >>> Config(episodes=0)
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --episodes: must be >= 1, got 0
+    """
+
+    methods: str = setting("", "comma-separated methods to run")
+    learnings: int = setting(10, "learnings per subgoal pattern")
+    seed: int = setting(0, "sweep seed (random patterns, chunk seeds)")
+    results: str = setting("results", "results directory (re-run to resume)")
+    backend: Literal["local", "ray"] = setting("local", "where chunks run")
+    workers: int = setting(2, "local worker processes (0: in this process)")
+    overwrite: bool = setting(False, "discard results of a different experiment in --results")
+
+    AT_LEAST_ONE: ClassVar[tuple[str, ...]] = ("learnings",)
+    AT_LEAST_ZERO: ClassVar[tuple[str, ...]] = ("workers",)
+
+    def __post_init__(self) -> None:
+        for low, names in ((1, self.AT_LEAST_ONE), (0, self.AT_LEAST_ZERO)):
+            for name in names:
+                check(getattr(self, name) >= low, name, f"must be >= {low}, got {getattr(self, name)}")
+
+    @property
+    def method_names(self) -> list[str]:
+        """``--methods`` as a list of names."""
+        return [m.strip() for m in self.methods.split(",") if m.strip()]
+
+
+@dataclass
+class ReproductionConfig(RecipeConfig):
+    """The settings of a paper reproduction on the fused engine (four-rooms, PinBall): episodes, the human
+    and random patterns, NRS's η, the shaping convention, the engine and the chunk size.
+
+    Examples:
+        >>> ReproductionConfig(eta=-1.0)
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --eta: must be >= 0, got -1.0
+    """
+
+    episodes: int = setting(1000, "episodes per learning")
+    subgoals: str = setting("", "subgoal file of the human patterns (HRS, NRS)")
+    random_patterns: int = setting(10, "random subgoal patterns for RRS (paper: 10)")
+    eta: float = setting(1.0, "NRS potential η")
+    zero_terminal_potential: bool = setting(False, "Φ = 0 at the goal (exact policy invariance); the authors "
+                                            "shape the goal step with γΦ(z_T)")
+    start_potential: str = setting("value", "level of Φ: value (Φ = V, the authors), zero (Φ(z_0) = 0) or "
+                                   "nonpositive (Φ(z_0) = min(V(z_0), 0), the library default)",
+                                   choices=["value", "zero", "nonpositive"])
+    engine: str = setting("fused", "fused: one compiled loop; torchrl: step_and_maybe_reset (identical results)",
+                          choices=["fused", "torchrl"])
+    chunk_size: int = setting(100, "learners per batch (results do not depend on it; small chunks keep both "
+                              "workers busy to the end and resume finer)")
+
+    AT_LEAST_ONE = ("episodes", "learnings", "random_patterns", "chunk_size")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check(self.eta >= 0, "eta", f"must be >= 0, got {self.eta}")
+
+
+def sweep_entries(cfg: RecipeConfig, subgoal_file: str, patterns: PatternSets) -> dict[str, Any]:
+    """The entries of a sweep's configuration every reproduction records: the seed its learners' seeds
+    derive from (:func:`~torchrl_subgoal.experiments.learner_seeds`), the subgoal file and the patterns.
+
+    Examples:
+        >>> from torchrl_subgoal.subgoals import Cell
+        >>> sets = pattern_sets({"alice": SubgoalSeries([Cell(4, 9)], name="alice")}, [Cell(1, 1)], 1, seed=0)
+        >>> sorted(sweep_entries(RecipeConfig(), "alice.yaml", sets))
+        ['pattern_sources', 'patterns', 'seed', 'subgoal_file']
+    """
+    return {"seed": cfg.seed, "subgoal_file": subgoal_file, "patterns": pattern_config(patterns),
+            "pattern_sources": pattern_sources(patterns)}
+
+
+@dataclass
+class Plan:
+    """What a recipe's settings make: the sweep :func:`recipe_main` runs and reports.
+
+    Args:
+        domain: the name the results record (the report's map and paper columns, :mod:`torchrl_subgoal.domains`).
+        specs: the learners of each method.
+        run_chunk: runs one chunk of learners.
+        config: the sweep's configuration (stored; what ``run_chunk`` reads).
+        episodes: the report's columns per learner (episodes, updates or epochs).
+        chunk_size: learners per chunk.
+        results: the results directory (default: the recipe's ``--results``).
+
+    Examples:
+        >>> Plan("four_rooms", [], print, {}, episodes=10, chunk_size=100).results is None
+        True
+    """
+
+    domain: str
+    specs: Sequence[MethodSpec]
+    run_chunk: RunChunk
+    config: Mapping[str, Any]
+    episodes: int
+    chunk_size: int
+    results: str | None = None
+
+
+def recipe_main(
+    config_cls: type[C],
+    plan: Callable[[C], Plan],
+    argv: Sequence[str] | None = None,
+    *,
+    description: str | None = None,
+    threads: int | None = 1,
+    errors: tuple[type[BaseException], ...] = RECIPE_ERRORS,
+) -> int:
+    """A recipe's ``main``: parse the flags into ``config_cls``, make the :class:`Plan`, run (or resume)
+    the sweep, write the report and print it; the exit code (see :func:`fail`, :func:`sweep_and_report`).
+
+    Args:
+        config_cls: the recipe's settings (a :class:`RecipeConfig`).
+        plan: the recipe's settings -> its sweep.
+        argv: the command line (default: ``sys.argv[1:]``).
+        description: the ``--help`` description (default: the settings' docstring's first line).
+        threads: ``torch.set_num_threads`` first (batched small ops run fastest on one thread); ``None``: leave it.
+        errors: what is reported as one line on stderr instead of a traceback.
+
+    Examples:
+        >>> def plan(cfg: RecipeConfig) -> Plan:
+        ...     raise ConfigError("--methods: give at least one method")
+        >>> recipe_main(RecipeConfig, plan, [])  # prints "error: --methods: ..." on stderr
+        2
+    """
+    if threads is not None:
+        torch.set_num_threads(threads)
+    try:
+        cfg = parse_config(config_cls, argv, description=description)
+        sweep = plan(cfg)
+        return sweep_and_report(sweep.domain, sweep.results or cfg.results, sweep.specs, sweep.run_chunk,
+                                sweep.config, seed=cfg.seed, chunk_size=sweep.chunk_size, episodes=sweep.episodes,
+                                overwrite=cfg.overwrite, backend=cfg.backend, workers=cfg.workers)
+    except errors as exc:
+        return fail(exc)
