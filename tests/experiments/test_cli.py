@@ -36,11 +36,15 @@ def test_defaults_and_conversions() -> None:
     (["--name", "c"], "--name: invalid choice: 'c'"),
     (["--backend", "slurm"], "--backend: invalid choice: 'slurm'"),
     (["--episodes", "many"], "--episodes: invalid int value: 'many'"),
+    (["--rate", "fast"], "--rate: invalid float value: 'fast'"),
+    (["--episodes"], "--episodes: expected one argument"),
+    (["--bogus", "1"], "unrecognized arguments: --bogus 1"),
 ])
 def test_bad_values_name_the_flag(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit) as exit_:
         parse_config(Settings, argv)
-    assert message in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and message in err and err.startswith("error: ") and err.count("\n") == 1
 
 
 def test_post_init_checks_name_the_flag() -> None:
