@@ -130,10 +130,10 @@ def _tyro_field(f: dataclasses.Field, kind: Any) -> tuple[str, Any, Any]:
     choices = f.metadata.get("choices")
     marks: list[Any] = [tyro.conf.arg(help=f.metadata.get("help", ""), metavar=None if kind is bool else metavar)]
     if choices is not None:
-        kind = Literal.__getitem__(tuple(choices))  # type: ignore[attr-defined]
+        kind = Literal.__getitem__(tuple(choices))
     elif kind in (int, float):
         marks.insert(0, _number(kind, metavar))
-    return f.name, Annotated[(kind, *marks)], dataclasses.field(default=f.default)  # type: ignore[misc]
+    return f.name, Annotated[(kind, *marks)], dataclasses.field(default=f.default)
 
 
 def parse_config(cls: type[T], argv: Sequence[str] | None = None, description: str | None = None) -> T:
@@ -166,8 +166,8 @@ def parse_config(cls: type[T], argv: Sequence[str] | None = None, description: s
     prog = os.path.basename(sys.argv[0])
     try:
         with tyro_errors.on_parse_error(_one_line):
-            parsed = tyro.cli(flags, args=list(argv) if argv is not None else None, prog=prog,
-                              description=description or (cls.__doc__ or "").strip().splitlines()[0])
+            parsed: Any = tyro.cli(flags, args=list(argv) if argv is not None else None, prog=prog,
+                                   description=description or (cls.__doc__ or "").strip().splitlines()[0])
     except _UsageError as exc:
         print(f"error: {exc} (see {prog} --help)", file=sys.stderr)
         raise SystemExit(2) from None

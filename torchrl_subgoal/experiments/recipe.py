@@ -313,7 +313,7 @@ class ReproductionConfig(RecipeConfig):
     chunk_size: int = setting(100, "learners per batch (results do not depend on it; small chunks keep both "
                               "workers busy to the end and resume finer)")
 
-    AT_LEAST_ONE = ("episodes", "learnings", "random_patterns", "chunk_size")
+    AT_LEAST_ONE: ClassVar[tuple[str, ...]] = ("episodes", "learnings", "random_patterns", "chunk_size")
 
     def __post_init__(self) -> None:
         super().__post_init__()

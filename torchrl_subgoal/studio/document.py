@@ -276,7 +276,8 @@ def infer_domain(patterns: Mapping[str, SubgoalSeries], domains: Mapping[str, Do
     """
     predicates = [p for series in patterns.values() for p in series.predicates]
     for domain in domains.values():
-        if all(domain.check_subgoal(p) is None for p in predicates):
+        check = domain.check_subgoal
+        if check is None or all(check(p) is None for p in predicates):
             return domain
     kinds = sorted({p.kind for p in predicates})
     raise RequestError(f"{source}: its subgoals ({', '.join(kinds)}) fit none of the studio's domains "
