@@ -10,7 +10,6 @@ install command, when the ``fetch`` extra is missing.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Mapping
 from typing import Any
 
@@ -35,10 +34,8 @@ def fetch_env(num_envs: int) -> EnvBase:
         >>> fetch_env(2).batch_size  # doctest: +SKIP
         torch.Size([2])
     """
-    from torchrl_subgoal.training import batched
-
     fetch.require_fetch()  # the one-line error naming the install command, before any env is made
-    return batched(functools.partial(fetch.make_fetch_env, 0))(num_envs)
+    return fetch.make_fetch_envs(0, num_envs)
 
 
 def _geometry(config: str) -> dict[str, Any]:
