@@ -258,7 +258,18 @@ def make_fetch_envs(goal_seed: int, num_envs: int, *, device: str | torch.device
 
 
 class FetchEnvs(EnvBase):
-    """``num_envs`` single-goal FetchPickAndPlace envs as one batched TorchRL env (:func:`make_fetch_envs`)."""
+    """``num_envs`` single-goal FetchPickAndPlace envs as one batched TorchRL env (:func:`make_fetch_envs`).
+
+    Args:
+        goal_seed: the seed that fixes the goal and the object's start of every env.
+        num_envs: envs stepped together (the batch size).
+        device: device of the returned tensors.
+
+    Examples:
+        >>> env = FetchEnvs(goal_seed=3, num_envs=2)  # doctest: +SKIP
+        >>> env.rollout(3)["next", "observation"].shape  # doctest: +SKIP
+        torch.Size([2, 3, 25])
+    """
 
     def __init__(self, goal_seed: int, num_envs: int, device: str | torch.device = "cpu") -> None:
         super().__init__(device=device, batch_size=torch.Size([num_envs]))

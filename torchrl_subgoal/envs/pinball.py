@@ -291,6 +291,15 @@ def step_ball(
     ``owners``: scratch of one entry per edge), which gives the same hits as
     testing every edge. :func:`step_balls` steps a batch; the fused engine
     calls this once per learner.
+
+    Examples:
+        >>> import numpy as np
+        >>> g = PinBallEnv(1, seed=0).physics.geometry
+        >>> scratch = np.empty(g.edges.shape[0], dtype=np.int64)
+        >>> x, y, vx, vy, reached = step_ball(0.2, 0.9, 0.0, 0.0, 0, g.edges, g.boxes, g.first_edge,
+        ...     g.ball_radius, *g.target, 1.0, scratch, scratch.copy())
+        >>> vx > 0.0, vy == 0.0, bool(reached)  # thrust to the right, away from the target
+        (True, True, False)
     """
     move = ball_radius / SUBSTEPS
     r2 = ball_radius * ball_radius
@@ -379,7 +388,13 @@ def step_ball(
 
 
 class BallKernelState(NamedTuple):
-    """A :class:`PinBallEnv`'s balls as numpy views, for compiled loops (updated in place)."""
+    """A :class:`PinBallEnv`'s balls as numpy views, for compiled loops (updated in place).
+
+    Examples:
+        >>> state = PinBallEnv(3, seed=0).kernel_state()
+        >>> state.position.shape, state.velocity.shape, state.steps.shape
+        ((3, 2), (3, 2), (3,))
+    """
 
     position: np.ndarray  #: ``[N, 2]`` ball centres
     velocity: np.ndarray  #: ``[N, 2]`` velocities
