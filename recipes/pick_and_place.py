@@ -79,6 +79,8 @@ from torchrl_subgoal.methods import paper_methods, shaping_parts
 from torchrl_subgoal.training import EnvFactory, Shaping, shaped_env, smdp_transitions
 
 METHODS = paper_methods(baseline="DDPG")
+#: --clip-positive: which learners clip their critic's targets above at 0.
+CLIP_POSITIVE = ("unshaped", "all", "none")
 #: epochs, cycles per epoch, env steps per cycle, gradient steps per cycle, test episodes, DDPG settings.
 #: "paper" is the authors' released run (docs/pick_and_place.md): 6 MPI workers, each collecting one
 #: 50-step episode per cycle, then 40 synchronous gradient steps whose gradients sum the 6 workers'
@@ -112,8 +114,10 @@ class Config(RecipeConfig):
     shaping: str = setting("{}", "JSON of extra SubgoalPotentialTransform options, e.g. "
                            '\'{"zero_terminal_potential": false}\'')
     clip_return: float = setting(50.0, "critic targets clipped to [-clip_return, 0]; 0: no clipping")
-    clip_positive: bool = setting(True, "clip critic targets above at 0 (the authors'); a shaped target "
-                                  "Q - Φ exceeds 0 wherever Q > Φ (docs/pick_and_place.md)")
+    clip_positive: str = setting("unshaped", "whose critic targets are clipped above at 0: unshaped (DDPG only), "
+                                 "all (the authors'), none; a shaped target Q - Φ exceeds 0 wherever Q > Φ, and "
+                                 "with Φ(z_0) = -50 every shaped target clips to 0 (docs/pick_and_place.md)",
+                                 choices=CLIP_POSITIVE)
     device: str = setting("cpu", "device of the networks and replay buffer (e.g. cuda)")
     seed: int = setting(0, "sweep seed (goals, random patterns, chunk seeds)")
     results: str = setting("results/pick_and_place", "results directory (re-run to resume)")
@@ -176,6 +180,26 @@ def make_shaping(method_name: str, series: SubgoalSeries | None, config: Mapping
     return shaping, trainer
 
 
+def agent_config(config: Mapping[str, Any], shaped: bool) -> DDPGConfig:
+    """The DDPG settings of a learner; ``shaped``: its reward carries ``F = γΦ(z') − Φ(z)``.
+
+    A shaped critic learns ``Q − Φ``, which exceeds 0 wherever ``Q > Φ``; once the
+    potential of the start state has learned the failure return (``Φ(z_0) = −50``),
+    the clip at 0 cuts every shaped target to 0, successes included. So by default
+    (``--clip-positive unshaped``) only unshaped learners clip above at 0; a stored
+    configuration from before that setting (no ``"shaped_clip_positive"``) clips all.
+
+    Examples:
+        >>> config = {"ddpg": dataclasses.asdict(DDPGConfig()), "shaped_clip_positive": False}
+        >>> agent_config(config, shaped=False).clip_positive, agent_config(config, shaped=True).clip_positive
+        (True, False)
+    """
+    settings = {**config["ddpg"], "hidden": tuple(config["ddpg"]["hidden"])}
+    if shaped:
+        settings["clip_positive"] = config.get("shaped_clip_positive", settings["clip_positive"])
+    return DDPGConfig(**settings)
+
+
 def make_collector(goal_seed: int, shaping: Shaping | None, value_lr: float | None, agent: DDPGAgent,
                    config: Mapping[str, Any], device: torch.device) -> Collector | MultiSyncCollector:
     """A MultiSyncCollector of ``collector_workers`` processes sharing V, or a Collector in this process."""
@@ -210,9 +234,9 @@ def learn(chunk: Chunk, learning: int, series: SubgoalSeries | None, config: Map
     torch.manual_seed(chunk.seed)
     np.random.seed(chunk.seed % 2**32)
     goal_seed = int(np.random.SeedSequence([config["seed"], learning]).generate_state(1)[0])
-    ddpg = DDPGConfig(**{**config["ddpg"], "hidden": tuple(config["ddpg"]["hidden"])})
+    shaping, trainer = make_shaping(chunk.method, series, config, config["ddpg"]["gamma"])
+    ddpg = agent_config(config, shaped=shaping is not None)
     device = torch.device(config["device"])
-    shaping, trainer = make_shaping(chunk.method, series, config, ddpg.gamma)
     online_lr = config["aggregation_lr"] if METHODS[chunk.method].shaping == "aggregation" else None
     test_env = fetch.make_fetch_env(goal_seed, device=device)
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, test_env.action_spec_unbatched, ddpg, device)
@@ -304,12 +328,13 @@ def plan(cfg: Config) -> Plan:
     preset = PRESETS[cfg.preset]
     epochs = cfg.epochs or preset["epochs"]
     ddpg = dataclasses.asdict(DDPGConfig(**preset["ddpg"], clip_return=cfg.clip_return or None,
-                                         clip_positive=cfg.clip_positive))
+                                         clip_positive=cfg.clip_positive != "none"))
     config = {
         **{k: preset[k] for k in ("cycles", "cycle_steps", "updates", "test_episodes")},
         **{k: getattr(cfg, k) for k in ("envs", "collector_workers", "env_processes", "value_lr", "aggregation_lr",
                                         "eta", "device", "seed")},
-        "epochs": epochs, "ddpg": ddpg, "shaping": json.loads(cfg.shaping),
+        "epochs": epochs, "ddpg": ddpg, "shaped_clip_positive": cfg.clip_positive == "all",
+        "shaping": json.loads(cfg.shaping),
         "checkpoints": str((Path(cfg.results) / "checkpoints").resolve()),
         "subgoal_file": cfg.subgoals, "patterns": pattern_config(patterns),
         "pattern_sources": pattern_sources(patterns),

@@ -9,8 +9,10 @@ from pathlib import Path
 
 import pytest
 import torch
+from tensordict import TensorDict
 from torch import nn
 from torchrl.collectors import Collector, MultiSyncCollector
+from torchrl.data import Bounded
 from torchrl.envs import ParallelEnv, TransformedEnv
 
 from tests.recipes.test_recipes import recipe
@@ -18,6 +20,7 @@ from torchrl_subgoal import NeuralPotential, SubgoalPotentialTransform, SubgoalV
 from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.experiments import load_frame
+from torchrl_subgoal.experiments.cli import parse_config
 from torchrl_subgoal.training import EnvFactory, batched, shaped_env
 
 GAMMA = 0.98
@@ -185,3 +188,46 @@ def test_a_pattern_rrs_cannot_randomise_is_one_line_naming_the_file(tmp_path: Pa
     last = capsys.readouterr().err.strip().splitlines()[-1]  # (gymnasium-robotics may warn on import before it)
     assert last.startswith(f"error: {path}: pattern 'moving': RRS has no range")
     assert "'gripper_velocity'" in last and not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(("mode", "unshaped", "shaped"), [("unshaped", True, False), ("all", True, True),
+                                                          ("none", False, False)])
+def test_clip_positive_chooses_whose_targets_are_clipped_above(tmp_path: Path, mode: str, unshaped: bool,
+                                                                shaped: bool) -> None:
+    pick_and_place = recipe("pick_and_place")
+    cfg = parse_config(pick_and_place.Config, ["--clip-positive", mode, "--results", str(tmp_path)])
+    config = pick_and_place.plan(cfg).config
+    assert pick_and_place.agent_config(config, shaped=False).clip_positive is unshaped
+    assert pick_and_place.agent_config(config, shaped=True).clip_positive is shaped
+    # a configuration stored before the setting existed clips every learner as it did
+    old = {k: v for k, v in config.items() if k != "shaped_clip_positive"}
+    assert pick_and_place.agent_config(old, shaped=True).clip_positive is unshaped
+
+
+def shaped_targets(agent: DDPGAgent) -> list[float]:
+    """TD targets of a failed and a successful step in z_0 once Φ(z_0) = −1/(1 − γ): shaped rewards
+    −1 + (γ − 1)Φ = 0 and 0 + (γ − 1)Φ = 1, with a critic that learned Q ≡ 0 (the run's learned state)."""
+    phi = -1 / (1 - agent.config.gamma)
+    rewards = torch.tensor([[-1.0], [0.0]]) + (agent.config.gamma - 1) * phi
+    for net in (agent.loss.target_value_network_params, agent.loss.value_network_params):
+        net.apply(lambda p: p.data.zero_())  # Q ≡ 0
+    obs = torch.zeros(2, fetch.OBSERVATION_SIZE)
+    batch = TensorDict({"observation": obs, "action": torch.zeros(2, 4), "next": {
+        "observation": obs, "reward": rewards, "done": torch.zeros(2, 1, dtype=torch.bool),
+        "terminated": torch.zeros(2, 1, dtype=torch.bool)}}, [2])
+    batch.set("observation_normalized", agent.norm(obs))
+    batch.set(("next", "observation_normalized"), agent.norm(obs))
+    return agent.loss.loss_value(batch)[1]["target_value"].tolist()
+
+
+def test_shaped_learner_tells_success_from_failure_only_with_the_top_open(tmp_path: Path) -> None:
+    # measured in the HRS learnings (docs/pick_and_place.md): V(z_0) = −50 after 5 epochs
+    pick_and_place = recipe("pick_and_place")
+    config = pick_and_place.plan(parse_config(pick_and_place.Config, ["--results", str(tmp_path)])).config
+    spec = Bounded(-1.0, 1.0, shape=(4,))
+    small = {**config, "ddpg": {**config["ddpg"], "hidden": [8]}}
+    clipped = DDPGAgent(fetch.OBSERVATION_SIZE, spec, pick_and_place.agent_config({**small, "shaped_clip_positive": True},
+                                                                                  shaped=True))
+    assert shaped_targets(clipped) == [0.0, 0.0]  # the authors' clip: success and failure look the same
+    default = DDPGAgent(fetch.OBSERVATION_SIZE, spec, pick_and_place.agent_config(small, shaped=True))
+    assert shaped_targets(default) == pytest.approx([0.0, 1.0])
