@@ -189,8 +189,9 @@ def main(argv: list[str] | None = None) -> int:
         obs, _ = env.reset()
         goal = env.unwrapped.goal.copy()
         env.close()
-        print(f"learning {learning} (goal seed {seed}): gripper {obs[0:3].round(3).tolist()}, object "
-              f"{obs[3:6].round(3).tolist()}, goal {goal.round(3).tolist()} ({goal[2] - obs[5]:.3f} m above the "
+        gripper, obj = (np.round(obs[part].astype(np.float64), 3).tolist() for part in (slice(0, 3), slice(3, 6)))
+        print(f"learning {learning} (goal seed {seed}): gripper {gripper}, object {obj}, goal "
+              f"{np.round(goal, 3).tolist()} ({goal[2] - obs[5]:.3f} m above the "
               f"object's start, {np.linalg.norm(goal - obs[3:6]):.3f} m from it; gripper-object "
               f"{np.linalg.norm(obs[6:9]):.3f} m)", flush=True)
         run("scripted", scripted, seed, 3)
