@@ -18,7 +18,9 @@ success at the last step (the recipe's test), and the closest the gripper came t
   deterministic) and with the exploration.
 
 With ``--replay`` the same counts are read from the stored transitions of those checkpoints
-(every step the learning collected), together with how often the object moved.
+(every step the learning collected), together with how often the object moved and the mean
+stored reward of each epoch (the shaped reward for a shaped method: while no subgoal is
+reached it is ``−1 − (1 − γ) Φ(z_0)``).
 
 Usage::
 
@@ -154,9 +156,10 @@ def replay_counts(learning_dir: Path, goal: np.ndarray) -> None:
     """Subgoal, success and object-moved counts over every stored transition of one learning."""
     parts = sorted((learning_dir / "transitions").glob("*.pt"))
     counts = np.zeros(4, dtype=np.int64)
-    total, closest = 0, []
+    total, closest, rewards = 0, [], []
     for part in parts:
         data = torch.load(part, weights_only=False)
+        rewards.append(float(data["next", "reward"].mean()))
         obs = data["next", "observation"].numpy()
         start = data["observation"][0, 3:6].numpy()
         counts += [subgoal_1(obs).sum(), subgoal_2(obs).sum(),
@@ -166,7 +169,8 @@ def replay_counts(learning_dir: Path, goal: np.ndarray) -> None:
         closest.append(float(np.linalg.norm(obs[:, 6:9], axis=-1).min()))
     print(f"  stored transitions ({len(parts)} epochs, {total} steps): subgoal 1 on {counts[0]} steps, "
           f"subgoal 2 on {counts[1]}, success on {counts[2]}, object moved > 1 cm on {counts[3]}; "
-          f"closest gripper-object per epoch {np.round(closest, 3).tolist()} m", flush=True)
+          f"closest gripper-object per epoch {np.round(closest, 3).tolist()} m; mean stored (shaped) reward per "
+          f"epoch {np.round(rewards, 4).tolist()}", flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -221,7 +221,7 @@ def shaped_targets(agent: DDPGAgent) -> list[float]:
 
 
 def test_shaped_learner_tells_success_from_failure_only_with_the_top_open(tmp_path: Path) -> None:
-    # measured in the HRS learnings (docs/pick_and_place.md): V(z_0) = −50 after 5 epochs
+    # measured in the HRS learnings (docs/pick_and_place.md): V(z_0) = −50 after 3 epochs
     pick_and_place = recipe("pick_and_place")
     config = pick_and_place.plan(parse_config(pick_and_place.Config, ["--results", str(tmp_path)])).config
     spec = Bounded(-1.0, 1.0, shape=(4,))
