@@ -111,6 +111,18 @@ def test_bootstrap_keeps_stratum_sizes() -> None:
     assert low < 2.5 < high  # unstratified, the mix varies
 
 
+def test_bootstrap_pools_strata_of_one_run() -> None:
+    # one learner per pattern: resampled within its own stratum the CI would have zero width
+    scores, strata = np.arange(5.0), np.arange(5)
+    low, high = stats.stratified_bootstrap_ci(scores, strata, statistic=np.mean, seed=3)
+    assert low < 2.0 < high
+    assert (low, high) == stats.stratified_bootstrap_ci(scores, None, statistic=np.mean, seed=3)
+    # a stratum of several runs is still resampled within itself, beside the pooled singletons
+    scores, strata = np.array([0.0, 0.0, 0.0, 10.0, 20.0]), np.array(["a", "a", "a", "b", "c"])
+    low, high = stats.stratified_bootstrap_ci(scores, strata, statistic=np.mean, seed=3)
+    assert low >= 4.0 and high <= 8.0 and low < high  # three 0s always; b/c mixed
+
+
 def test_probability_of_improvement() -> None:
     assert stats.probability_of_improvement([5, 6, 7], [1, 2, 3]) == 1.0
     assert stats.probability_of_improvement([1, 2, 3], [5, 6, 7]) == 0.0

@@ -269,7 +269,10 @@ def stratified_bootstrap_ci(
 
     Each bootstrap sample draws, within every stratum independently and with
     replacement, as many scores as the stratum holds, so the strata keep their
-    sizes (as Agarwal et al. 2021 resample runs within each task).
+    sizes (as Agarwal et al. 2021 resample runs within each task). A stratum of
+    one run cannot vary when resampled within itself, so strata of one run are
+    pooled into one stratum (one learner per subgoal pattern would otherwise
+    give an interval of zero width).
 
     Args:
         scores: one score per run, shape ``[n]``.
@@ -291,9 +294,11 @@ def stratified_bootstrap_ci(
     if labels.size != x.size:
         raise ValueError(f"{labels.size} strata labels for {x.size} scores")
     rng = np.random.default_rng(seed)
+    _, codes, counts = np.unique(labels, return_inverse=True, return_counts=True)
+    codes = np.where(counts[codes] == 1, -1, codes)  # strata of one run: pooled into stratum -1
     parts = []
-    for label in np.unique(labels):
-        members = np.flatnonzero(labels == label)
+    for label in np.unique(codes):
+        members = np.flatnonzero(codes == label)
         parts.append(members[rng.integers(0, members.size, size=(n_boot, members.size))])
     samples = x[np.concatenate(parts, axis=1)]
     values = np.asarray(statistic(samples, axis=-1), dtype=np.float64)
