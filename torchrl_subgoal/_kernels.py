@@ -779,8 +779,29 @@ def advance_and_shape(
     table, shared, eta, gamma, value_gamma, value_lr, zero_terminal, start_mode, z_start,
     z_out, rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out,
 ):
-    """:func:`advance_regions` then :func:`shape_step`: one transform step in one call."""
+    """:func:`advance_regions` then :func:`shape_step`: one transform step in one call.
+
+    Returns ``False``, having written and updated nothing, when a ``reward`` is NaN or
+    infinite or an ``obs`` entry is NaN (the caller then names the culprit); ``True`` otherwise.
+    """
+    if not finite_inputs(reward, obs):
+        return False
     advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_out)
     shape_step(z, z_out, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma,
                value_gamma, value_lr, zero_terminal, start_mode, z_start, rh_out, k_out, reward_out, rh_acc_out,
                k_acc_out, emit_out)
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def finite_inputs(reward, obs):
+    """Whether every ``reward[b, 0]`` is finite and no ``obs[b, j]`` is NaN (``±inf`` compares as a number)."""
+    for b in range(reward.shape[0]):
+        if not np.isfinite(reward[b, 0]):
+            return False
+    for b in range(obs.shape[0]):
+        for j in range(obs.shape[1]):
+            v = obs[b, j]
+            if v != v:
+                return False
+    return True

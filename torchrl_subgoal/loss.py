@@ -156,12 +156,12 @@ class SubgoalValueLoss(LossModule):
 
     def _check(self, tensordict: TensorDictBase) -> None:
         keys = self.tensor_keys
-        have = set(tensordict.keys(True, True))
         optional = getattr(self.potential, "optional_in_keys", ())
         inputs = [k for k in self.potential.in_keys if k not in optional]
         needed = [*inputs, keys.steps_to_next_obs, *[("next", k) for k in (*inputs, keys.reward, keys.terminated)]]
-        missing = [k for k in needed if k not in have]
+        missing = [k for k in needed if not isinstance(tensordict.get(k, None), torch.Tensor)]
         if missing:
+            have = set(tensordict.keys(True, True))
             raise ValueError(
                 f"SubgoalValueLoss reads SMDP transitions (transform.transitions(data), or data['next', 'smdp'] "
                 f"written with write_transitions=True); missing {missing}, the TensorDict has "

@@ -5,7 +5,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
@@ -97,6 +97,16 @@ class _Setup:
     table: np.ndarray | None  # None: not fusable (neural potential, conditions, not CPU)
     shared: bool = False
     eta: float = 0.0
+    regions: tuple[np.ndarray, ...] = ()  # a SubgoalTables' arrays as the kernel reads them (looked up once)
+    z_start: np.ndarray = field(default_factory=lambda: np.zeros((1, 1), np.int64))
+
+    def __post_init__(self) -> None:
+        abstraction = self.abstraction
+        if isinstance(abstraction, SubgoalTables):
+            t = abstraction._np
+            self.regions = tuple(t[k] for k in ("pattern", "lo", "hi", "centre", "weight", "radius2", "succ"))
+        # a subgoal series starts every episode in z = 0: the kernels' z_0 column, allocated once
+        self.z_start = np.zeros((max(1, self.batch_shape.numel()), 1), np.int64)
 
 
 class SubgoalPotentialTransform(Transform):
@@ -330,6 +340,8 @@ class SubgoalPotentialTransform(Transform):
         self._has_value_lr = value_lr is not None
         self._online: _Setup | None = None
         self._layout: tuple[int, bool] | None = None
+        # the last fused step's z', r_h', k' outputs and their numpy views (tensor, array, ...)
+        self._last_outputs: tuple[Any, ...] = (None,) * 6
         self._table_ptr = 0
 
     # ------------------------------------------------------------------ set-up
@@ -631,7 +643,8 @@ class SubgoalPotentialTransform(Transform):
                                "through the transform (env.reset()) before stepping")
             current[key] = value
         out = self._advance(setup, current, next_tensordict, obs, learn=self.learning)
-        next_tensordict.update(out)
+        for key, value in out.items():  # entry by entry: cheaper than update() for a handful of entries
+            next_tensordict.set(key, value)
         return next_tensordict
 
     def shape(
@@ -677,14 +690,16 @@ class SubgoalPotentialTransform(Transform):
         if self._uses_observation and obs is None:
             raise KeyError(f"{type(self).__name__}: the step has no {self.observation_key!r} entry")
         reward, env_reward = self._rewards(nxt)
-        _check_finite(reward, obs, self.reward_key, self.observation_key)
         done = nxt.get(self.done_key)
         terminated = nxt.get(self.terminated_key, done)
         z = current[self.keys.index]
         if self._keeps_learner:
             current.setdefault(self.keys.learner, setup.learner)
         if setup.table is not None and (obs is None or obs.device.type == "cpu") and z.device.type == "cpu":
+            if not (setup.regions and reward is env_reward):  # else the kernel checks (and calls this if wrong)
+                _check_finite(reward, obs, self.reward_key, self.observation_key)
             return self._advance_fused(setup, current, obs, reward, env_reward, done, terminated, learn)
+        _check_finite(reward, obs, self.reward_key, self.observation_key)
         z_next = setup.abstraction.advance(z, obs, nxt)
         return self._shape_eager(setup, current, z_next, nxt, reward, env_reward, done, terminated, learn)
 
@@ -699,7 +714,7 @@ class SubgoalPotentialTransform(Transform):
         terminated: torch.Tensor,
         learn: bool,
     ) -> dict[str, Any]:
-        assert setup.table is not None
+        assert setup.table is not None and obs is not None
         keys = self.keys
         n = setup.batch_shape.numel()
         if not setup.shared and setup.table.shape[0] not in (0, n):
@@ -714,32 +729,37 @@ class SubgoalPotentialTransform(Transform):
         else:
             extra = _NO_TRANSITION
         lr = self._value_lr if learn else 0.0
-        cols = [_col(t, n, name) for t, name in ((z, keys.index), (current.get(keys.achieved, z), keys.achieved),
-                                                  (r_h, keys.ret), (k, keys.steps), (env_reward, "env reward"),
-                                                  (done, "done"), (terminated, "terminated"))]
-        if reward is not env_reward:  # a second transform: shape the (already shaped) reward, accumulate r
-            base = _col(reward, n, "reward")
-        start = (_col(current[keys.start], n, keys.start) if keys.start in current
-                 else np.zeros((max(1, n), 1), np.int64))  # a subgoal series starts every episode in z = 0
-        shaping = (*cols[1:], setup.table, setup.shared, setup.eta, self.gamma, self.value_gamma, lr,
-                   self.zero_terminal_potential, self._start_mode, start)
-        abstraction = setup.abstraction
-        if isinstance(abstraction, SubgoalTables):
-            t = abstraction._np
-            assert obs is not None
-            _kernels.advance_and_shape(
-                cols[0], abstraction.rows(obs).numpy(), t["pattern"], t["lo"], t["hi"], t["centre"], t["weight"],
-                t["radius2"], t["succ"], *shaping, z_next[1], rh_out[1], k_out[1], shaped[1], *extra,
-            )
+        # the step's z, r_h and k are usually last step's outputs (TorchRL moves them from "next" to the root):
+        # their numpy views are kept, which saves the tensor-to-numpy crossings
+        last = self._last_outputs
+        z_col = last[1] if last[0] is z else _col(z, n, keys.index)
+        rh_col = last[3] if last[2] is r_h else _col(r_h, n, keys.ret)
+        k_col = last[5] if last[4] is k else _col(k, n, keys.steps)
+        reward_col = _col(env_reward, n, "env reward")
+        start = _col(current[keys.start], n, keys.start) if keys.start in current else setup.z_start
+        shaping = (
+            _col(current[keys.achieved], n, keys.achieved) if keys.achieved in current else z_col,
+            rh_col, k_col, reward_col, _col(done, n, "done"),
+            _col(terminated, n, "terminated"), setup.table, setup.shared, setup.eta, self.gamma, self.value_gamma,
+            lr, self.zero_terminal_potential, self._start_mode, start,
+        )
+        if setup.regions:
+            rows = setup.abstraction.rows(obs).numpy()  # type: ignore[union-attr]
+            if not _kernels.advance_and_shape(z_col, rows, *setup.regions, *shaping, z_next[1], rh_out[1], k_out[1],
+                                              shaped[1], *extra):
+                _check_finite(reward, obs, self.reward_key, self.observation_key)  # raises, naming the entry
+                raise ValueError(f"SubgoalPotentialTransform: {self.reward_key!r} is not finite or "
+                                 f"{self.observation_key!r} holds a NaN")
         else:
-            assert obs is not None
-            z_next = (abstraction.advance(z, obs), np.empty(0))
-            _kernels.shape_step(cols[0], _col(z_next[0], n, "z'"), *shaping, rh_out[1], k_out[1], shaped[1], *extra)
-        if reward is not env_reward:
-            shaped[1][:] += base - cols[4]
+            z_next = (setup.abstraction.advance(z, obs), np.empty(0))
+            _kernels.shape_step(z_col, _col(z_next[0], n, "z'"), *shaping, rh_out[1], k_out[1], shaped[1], *extra)
+        if reward is not env_reward:  # a second transform: shape the (already shaped) reward, accumulate r
+            shaped[1][:] += _col(reward, n, "reward") - reward_col
         out: dict[str, Any] = {
             keys.index: z_next[0], keys.ret: rh_out[0], keys.steps: k_out[0], self.reward_key: shaped[0],
         }
+        if setup.regions:
+            self._last_outputs = (*z_next, *rh_out, *k_out)
         if reward is env_reward:
             out[self.env_reward_key] = reward
         if self._keeps_achieved:
@@ -896,20 +916,20 @@ class SubgoalPotentialTransform(Transform):
         z, z_next, done = flat(data, keys.index), flat(nxt, keys.index), flat(nxt, self.done_key)
         assert z is not None and z_next is not None and done is not None
         terminated = flat(nxt, self.terminated_key)
-        emit = ((z_next != z) | done).reshape(-1)
+        rows = ((z_next != z) | done).reshape(-1).nonzero().squeeze(1)  # found once, gathered per entry
         reward = flat(nxt, self.env_reward_key)
         reward = flat(nxt, self.reward_key) if reward is None else reward
         assert reward is not None
         k, ret = flat(data, keys.steps), flat(data, keys.ret)
         assert k is not None and ret is not None
-        k = k[emit]
-        r_h = ret[emit] + reward[emit].to(torch.float32) * self.value_gamma**k
-        inputs = {key: v[emit] for key in in_keys if (v := flat(data, key)) is not None}
-        next_inputs = {key: v[emit] for key in in_keys if (v := flat(nxt, key)) is not None}
-        done = done[emit]
+        k = k.index_select(0, rows)
+        r_h = ret.index_select(0, rows) + reward.index_select(0, rows).to(torch.float32) * self.value_gamma**k
+        inputs = {key: v.index_select(0, rows) for key in in_keys if (v := flat(data, key)) is not None}
+        next_inputs = {key: v.index_select(0, rows) for key in in_keys if (v := flat(nxt, key)) is not None}
+        done = done.index_select(0, rows)
         return _transition(
-            torch.Size([done.shape[0]]), inputs, next_inputs, r_h, k + 1, torch.ones_like(z[emit]).bool(), done,
-            done if terminated is None else terminated[emit],
+            torch.Size([done.shape[0]]), inputs, next_inputs, r_h, k + 1, torch.ones_like(done), done,
+            done if terminated is None else terminated.index_select(0, rows),
         )
 
     # ------------------------------------------------------------------ stored data
@@ -1086,13 +1106,15 @@ def _col(t: torch.Tensor, n: int, name: str) -> np.ndarray:
 
 
 def _empty_like(t: torch.Tensor) -> tuple[torch.Tensor, np.ndarray]:
-    """A new tensor shaped like ``t`` and its ``[n, 1]`` numpy view, for kernel outputs."""
+    """A new tensor shaped like ``t`` and its ``[n, 1]`` numpy view, for kernel outputs (allocated by
+    numpy: cheaper than ``torch.empty`` and ``.numpy()``)."""
     a: np.ndarray = np.empty((max(1, t.numel()), 1), dtype=_NUMPY_DTYPES[t.dtype])
     out = torch.from_numpy(a)
     return (out if out.shape == t.shape else out.view(t.shape)), a
 
 
 _NUMPY_DTYPES = {torch.float32: np.float32, torch.float64: np.float64, torch.int64: np.int64, torch.bool: np.bool_}
+
 
 
 def _transition(
