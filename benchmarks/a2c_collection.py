@@ -18,19 +18,26 @@ The set-ups run in turn, in a rotating order, ``--repeats`` times; each round
 gives every set-up's time over the plain iteration's of the same round, and
 the cost reported is the median of those ratios (with their range), by the
 process's CPU time (what other processes on a busy machine disturb least)
-and by wall time. The load average is printed with them.
+and by wall time. The load average is printed with them. ``--calls`` also
+counts the Python function calls of one round of every set-up (cProfile's
+count, over the same plain iteration): unlike times, the count does not move
+with the machine's load, and its ratios track the quiet machine's CPU-time
+ratios (see docs/torchrl.md).
 
     python benchmarks/a2c_collection.py            # the figures in docs/torchrl.md
     python benchmarks/a2c_collection.py --quick
     python benchmarks/a2c_collection.py --part 2 --repeats 15
+    python benchmarks/a2c_collection.py --part 2 --quick --calls
 """
 
 from __future__ import annotations
 
 import argparse
 import copy
+import cProfile
 import functools
 import os
+import pstats
 import statistics
 import sys
 import time
@@ -82,6 +89,19 @@ def paired_costs(
             for i, clock in enumerate(("cpu", "wall")):
                 ratios[name][clock].append(per_frame[name][i] / per_frame[base][i] - 1.0)
     return {n: {c: (statistics.median(v), min(v), max(v)) for c, v in clocks.items()} for n, clocks in ratios.items()}
+
+
+def call_counts(setups: dict[str, Callable[[], int]]) -> dict[str, float]:
+    """Python function calls per frame of one call of each set-up (cProfile's count: it does not depend on
+    the machine's load, only on the work done; calls into C count one each)."""
+    counts = {}
+    for name, run in setups.items():
+        profile = cProfile.Profile()
+        profile.enable()
+        frames = run()
+        profile.disable()
+        counts[name] = pstats.Stats(profile).total_calls / frames  # type: ignore[attr-defined]
+    return counts
 
 
 def load_average() -> str:
@@ -175,6 +195,8 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer repeats")
     parser.add_argument("--part", choices=["1", "2", "both"], default="both", help="which part to run")
     parser.add_argument("--repeats", type=int, default=0, help="rounds (default 7, --quick 3; part 2: 11 / 5)")
+    parser.add_argument("--calls", action="store_true",
+                        help="part 2: also count Python function calls per iteration (independent of the load)")
     args = parser.parse_args()
     if args.repeats < 0:
         parser.error(f"--repeats must be >= 0, got {args.repeats}")
@@ -185,7 +207,7 @@ def main() -> None:
     if args.part != "2":
         collector_throughput(args.repeats or repeats, batches)
     if args.part != "1":
-        transform_cost(config, args.repeats or (5 if args.quick else 11), batches)
+        transform_cost(config, args.repeats or (5 if args.quick else 11), batches, args.calls)
 
 
 def collector_throughput(repeats: int, batches: int) -> None:
@@ -211,7 +233,7 @@ def collector_throughput(repeats: int, batches: int) -> None:
 
 
 
-def transform_cost(config: A2CConfig, repeats: int, batches: int) -> None:
+def transform_cost(config: A2CConfig, repeats: int, batches: int, calls: bool = False) -> None:
     """Part 2."""
     print("Part 2: A2C iteration (collect 256 frames + GAE + A2C step [+ potential step]), recipe settings,")
     print("        every set-up with the same policy (trained briefly by plain A2C, then kept: lr 0)")
@@ -237,6 +259,12 @@ def transform_cost(config: A2CConfig, repeats: int, batches: int) -> None:
         cpu, wall = clocks["cpu"], clocks["wall"]
         print(f"  {name:34s} CPU {100 * cpu[0]:+5.1f}% [{100 * cpu[1]:+5.1f}, {100 * cpu[2]:+5.1f}]   "
               f"wall {100 * wall[0]:+5.1f}% [{100 * wall[1]:+5.1f}, {100 * wall[2]:+5.1f}]")
+    if calls:
+        counts = call_counts(setups)
+        per_iteration = config.frames_per_batch
+        print(f"        Python function calls per iteration ({per_iteration} frames), one call of every set-up:")
+        for name, count in counts.items():
+            print(f"  {name:34s} {count * per_iteration:8.0f}   {100 * (count / counts['plain A2C'] - 1):+5.1f}%")
 
 
 if __name__ == "__main__":
