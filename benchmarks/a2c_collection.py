@@ -138,13 +138,15 @@ def a2c_iterations(
     shaping: Shaping | None, config: A2CConfig, batches: int, online: bool,
     networks: tuple[TensorDictModuleBase, TensorDictModuleBase] | None = None, lr: float | None = None,
     keys_only: bool = False,
+    kept: int = 3,
 ) -> tuple[Callable[[], int], tuple[TensorDictModuleBase, TensorDictModuleBase]]:
     """One A2C learner as ``train_a2c`` runs it, ``batches`` iterations per call (and its networks).
 
     With ``networks`` the learner starts from copies of them; ``lr=0`` keeps the policy as it is
     (every set-up then collects with the same policy, so episodes end as often in each).
     ``keys_only`` appends a transform that writes the shaping transform's entries without
-    computing them: what TorchRL's per-entry bookkeeping costs any such transform.
+    computing them: what TorchRL's per-entry bookkeeping costs any such transform (``kept``: how many of
+    the three carried entries it writes).
     """
     env = shaped_env(four_rooms_env, config.num_envs, shaping=shaping, gamma=config.gamma,
                      value_lr=config.value_lr if online else None)
@@ -152,7 +154,7 @@ def a2c_iterations(
         sys.path.insert(0, str(Path(__file__).resolve().parent))
         from four_rooms_step import KeysOnly
 
-        env.transform.insert(1, KeysOnly())
+        env.transform.insert(1, KeysOnly(kept))
     actor, critic = (copy.deepcopy(networks[0]), copy.deepcopy(networks[1])) if networks else actor_critic(
         env, features=config.features, hidden=config.hidden)
     advantage = GAE(gamma=config.gamma, lmbda=config.gae_lambda, value_network=critic)
@@ -260,6 +262,9 @@ def transform_cost(config: A2CConfig, repeats: int, batches: int, calls: bool = 
         print(f"  {name:34s} CPU {100 * cpu[0]:+5.1f}% [{100 * cpu[1]:+5.1f}, {100 * cpu[2]:+5.1f}]   "
               f"wall {100 * wall[0]:+5.1f}% [{100 * wall[1]:+5.1f}, {100 * wall[2]:+5.1f}]")
     if calls:
+        # the floor of smaller entry formats: env_reward and the shaped reward, and 0-2 carried entries
+        setups |= {f"keys-only, {kept} of 3 carried entries": a2c_iterations(
+            None, config, batches, False, networks, lr=0.0, keys_only=True, kept=kept)[0] for kept in (2, 1, 0)}
         counts = call_counts(setups)
         per_iteration = config.frames_per_batch
         print(f"        Python function calls per iteration ({per_iteration} frames), one call of every set-up:")

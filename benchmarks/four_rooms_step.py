@@ -52,13 +52,23 @@ def shaping(n: int, write: bool) -> SubgoalPotentialTransform:
 
 
 class KeysOnly(Transform):
-    """Writes the entries the shaping transform writes, without computing anything."""
+    """Writes the entries the shaping transform writes, without computing anything.
+
+    ``observations`` keeps only the first that many of its three carried entries
+    (``subgoal_index``, ``subgoal_return``, ``subgoal_steps``): what a smaller entry
+    format would cost TorchRL's per-entry bookkeeping (``env_reward`` and the shaped
+    ``reward`` are always written).
+    """
 
     DTYPES: ClassVar[dict[str, torch.dtype]] = {INDEX: torch.long, RETURN: torch.float32, STEPS: torch.long}
 
+    def __init__(self, observations: int = 3) -> None:
+        super().__init__()
+        self.dtypes = dict(list(self.DTYPES.items())[:observations])
+
     def transform_observation_spec(self, observation_spec: TensorSpec) -> TensorSpec:
         assert isinstance(observation_spec, Composite)
-        for key, dtype in self.DTYPES.items():
+        for key, dtype in self.dtypes.items():
             observation_spec[key] = Unbounded(shape=(*observation_spec.shape, 1), dtype=dtype)
         return observation_spec
 
@@ -68,7 +78,7 @@ class KeysOnly(Transform):
         return reward_spec
 
     def _zeros(self, batch_shape: torch.Size) -> dict[str, torch.Tensor]:
-        return {key: torch.zeros((*batch_shape, 1), dtype=dtype) for key, dtype in self.DTYPES.items()}
+        return {key: torch.zeros((*batch_shape, 1), dtype=dtype) for key, dtype in self.dtypes.items()}
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         reward = next_tensordict.get("reward")
@@ -77,7 +87,8 @@ class KeysOnly(Transform):
         return next_tensordict
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
-        tensordict_reset.update(self._zeros(tensordict_reset.batch_size))
+        if self.dtypes:
+            tensordict_reset.update(self._zeros(tensordict_reset.batch_size))
         return tensordict_reset
 
 
