@@ -703,3 +703,25 @@ def test_potential_value_is_reused_only_while_inputs_and_parameters_are_unchange
             optimizer.step()
         elif change in ("data", "shared"):
             net.net.bias.data.add_(0.1)
+
+
+def test_fused_step_reads_state_entries_written_in_place_or_moved_to_other_memory() -> None:
+    # the step reuses the numpy views of last step's outputs: writes into them, and a storage swapped
+    # under the same tensor object, must still be what the kernel reads
+    t = SubgoalPotentialTransform(SubgoalSeries([Cell(3, 6), Cell(7, 9)]), TabularPotential(3), gamma=0.9,
+                                  observation_key="cell")
+    env = TransformedEnv(FourRoomsEnv(4), t)
+    td = env.reset()
+    td["action"] = torch.zeros(4, dtype=torch.long)
+    _, td = env.step_and_maybe_reset(td)
+    steps, ret = td["subgoal_steps"], td["subgoal_return"]
+    steps.set_(torch.full_like(steps, 7))  # same object, other memory
+    ret.fill_(0.5)  # same memory, written in place
+    td["action"] = torch.zeros(4, dtype=torch.long)
+    out, _ = env.step_and_maybe_reset(td)
+    nxt = out["next"]
+    kept = (nxt["subgoal_index"] == out["subgoal_index"]) & ~nxt["done"]
+    assert kept.any()
+    assert (nxt["subgoal_steps"][kept] == 8).all()
+    expected = 0.5 + 0.9**7 * nxt["env_reward"][kept]
+    assert torch.allclose(nxt["subgoal_return"][kept], expected)

@@ -340,8 +340,8 @@ class SubgoalPotentialTransform(Transform):
         self._has_value_lr = value_lr is not None
         self._online: _Setup | None = None
         self._layout: tuple[int, bool] | None = None
-        # the last fused step's z', r_h', k' outputs and their numpy views (tensor, array, ...)
-        self._last_outputs: tuple[Any, ...] = (None,) * 6
+        # the last fused step's z', r_h', k' outputs: (tensor, its numpy view, its data pointer) each
+        self._last_outputs: tuple[tuple[torch.Tensor, np.ndarray, int], ...] = ()
         self._table_ptr = 0
 
     # ------------------------------------------------------------------ set-up
@@ -731,10 +731,8 @@ class SubgoalPotentialTransform(Transform):
         lr = self._value_lr if learn else 0.0
         # the step's z, r_h and k are usually last step's outputs (TorchRL moves them from "next" to the root):
         # their numpy views are kept, which saves the tensor-to-numpy crossings
-        last = self._last_outputs
-        z_col = last[1] if last[0] is z else _col(z, n, keys.index)
-        rh_col = last[3] if last[2] is r_h else _col(r_h, n, keys.ret)
-        k_col = last[5] if last[4] is k else _col(k, n, keys.steps)
+        z_col, rh_col, k_col = (self._kept_view(i, t, n, name)
+                                for i, (t, name) in enumerate(((z, keys.index), (r_h, keys.ret), (k, keys.steps))))
         reward_col = _col(env_reward, n, "env reward")
         start = _col(current[keys.start], n, keys.start) if keys.start in current else setup.z_start
         shaping = (
@@ -759,7 +757,7 @@ class SubgoalPotentialTransform(Transform):
             keys.index: z_next[0], keys.ret: rh_out[0], keys.steps: k_out[0], self.reward_key: shaped[0],
         }
         if setup.regions:
-            self._last_outputs = (*z_next, *rh_out, *k_out)
+            self._last_outputs = tuple((t, a, t.data_ptr()) for t, a in (z_next, rh_out, k_out))
         if reward is env_reward:
             out[self.env_reward_key] = reward
         if self._keeps_achieved:
@@ -775,6 +773,15 @@ class SubgoalPotentialTransform(Transform):
             out[key] = _transition(setup.batch_shape, inputs, next_inputs, rh_acc[0], k_acc[0], emit[0], done,
                                    terminated)
         return out
+
+    def _kept_view(self, slot: int, t: torch.Tensor, n: int, name: str) -> np.ndarray:
+        """``_col(t)``, or the numpy view kept with the last step's output ``slot`` when ``t`` is that
+        tensor still on the same memory (in-place writes are seen; a moved storage is converted again)."""
+        if slot < len(self._last_outputs):
+            tensor, array, pointer = self._last_outputs[slot]
+            if tensor is t and t.data_ptr() == pointer:
+                return array
+        return _col(t, n, name)
 
     def _value(
         self, entries: dict[str, torch.Tensor], batch_shape: torch.Size, slot: str | None = None
