@@ -731,8 +731,15 @@ class SubgoalPotentialTransform(Transform):
         lr = self._value_lr if learn else 0.0
         # the step's z, r_h and k are usually last step's outputs (TorchRL moves them from "next" to the root):
         # their numpy views are kept, which saves the tensor-to-numpy crossings
-        z_col, rh_col, k_col = (self._kept_view(i, t, n, name)
-                                for i, (t, name) in enumerate(((z, keys.index), (r_h, keys.ret), (k, keys.steps))))
+        # (in line: this runs every step) a view is reused only while its tensor is on the same memory
+        kept = self._last_outputs
+        if kept:
+            (zt, za, zp), (rt, ra, rp), (kt, ka, kp) = kept
+            z_col = za if zt is z and z.data_ptr() == zp else _col(z, n, keys.index)
+            rh_col = ra if rt is r_h and r_h.data_ptr() == rp else _col(r_h, n, keys.ret)
+            k_col = ka if kt is k and k.data_ptr() == kp else _col(k, n, keys.steps)
+        else:
+            z_col, rh_col, k_col = _col(z, n, keys.index), _col(r_h, n, keys.ret), _col(k, n, keys.steps)
         reward_col = _col(env_reward, n, "env reward")
         start = _col(current[keys.start], n, keys.start) if keys.start in current else setup.z_start
         shaping = (
@@ -757,7 +764,8 @@ class SubgoalPotentialTransform(Transform):
             keys.index: z_next[0], keys.ret: rh_out[0], keys.steps: k_out[0], self.reward_key: shaped[0],
         }
         if setup.regions:
-            self._last_outputs = tuple((t, a, t.data_ptr()) for t, a in (z_next, rh_out, k_out))
+            self._last_outputs = ((z_next[0], z_next[1], z_next[0].data_ptr()), (rh_out[0], rh_out[1], rh_out[0].data_ptr()),
+                                  (k_out[0], k_out[1], k_out[0].data_ptr()))
         if reward is env_reward:
             out[self.env_reward_key] = reward
         if self._keeps_achieved:
@@ -773,15 +781,6 @@ class SubgoalPotentialTransform(Transform):
             out[key] = _transition(setup.batch_shape, inputs, next_inputs, rh_acc[0], k_acc[0], emit[0], done,
                                    terminated)
         return out
-
-    def _kept_view(self, slot: int, t: torch.Tensor, n: int, name: str) -> np.ndarray:
-        """``_col(t)``, or the numpy view kept with the last step's output ``slot`` when ``t`` is that
-        tensor still on the same memory (in-place writes are seen; a moved storage is converted again)."""
-        if slot < len(self._last_outputs):
-            tensor, array, pointer = self._last_outputs[slot]
-            if tensor is t and t.data_ptr() == pointer:
-                return array
-        return _col(t, n, name)
 
     def _value(
         self, entries: dict[str, torch.Tensor], batch_shape: torch.Size, slot: str | None = None
