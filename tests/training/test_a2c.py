@@ -121,6 +121,17 @@ def test_pinball_env_factory_is_seeded_from_torch() -> None:
     assert torch.equal(*rollouts)
 
 
+def test_pinball_default_step_is_the_papers_divided_by_the_feature_norm() -> None:
+    """PinBall A2C's Adam rate is the paper's 0.01 over ``‖φ‖`` on visited states (0.01 itself was unstable)."""
+    d = a2c_domain("pinball")
+    torch.manual_seed(0)
+    env = d.make_env(8)
+    obs = env.rollout(200, break_when_any_done=False)["observation"].reshape(-1, 4)
+    spec = env.observation_spec["observation"].space
+    norm = FourierFeatures(spec.low[0], spec.high[0], d.a2c.fourier_order)(obs).norm(dim=-1).mean()
+    assert d.a2c.lr == pytest.approx(0.01 / float(norm), rel=0.15)
+
+
 def test_train_a2c_on_a_single_env_batched_by_serial_env() -> None:
     """The documented path for a user's unbatched env: ``batched(make_single)`` (a SerialEnv,
     which is closed until started: the probe env used to raise on close)."""
