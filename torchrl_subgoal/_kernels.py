@@ -726,8 +726,9 @@ def _qac_learner(b, w, theta, phi, probs, a_taken, reward, obs_next, terminated,
     if not terminated:
         delta += gamma * q_next
     c = critic_lr * scale * delta
+    first = np.uint64(a_taken * n_features)  # an unsigned index: no negative-index test, so the loop vectorises
     for f in range(n_features):
-        w[b, a_taken * n_features + f] += c * phi[b, f]
+        w[b, first + np.uint64(f)] += c * phi[b, f]
     if done:
         fourier_features(obs_root, low, inv_range, order, half, scratch, phi_next)
         a_next = _policy_sample(theta[b], phi_next, uniform(streams, b), probs[b])
