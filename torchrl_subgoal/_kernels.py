@@ -551,21 +551,21 @@ def _dot(x, y):
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
 def _basis_exponentials(trig, k, first_dim, end_dim, out):
-    """``out[i] = exp(iπ c_i · s̃)`` over dimensions ``[first_dim, end_dim)``, with ``c_i``
-    the base-``k`` digits of ``i`` (last dimension least significant), as (re, im) pairs.
+    """``out[:, i] = exp(iπ c_i · s̃)`` over dimensions ``[first_dim, end_dim)``, with ``c_i``
+    the base-``k`` digits of ``i`` (last dimension least significant), as rows (re, im).
 
     Built from the last dimension up, each product ``(exponentials of the later dimensions)
     × trig[d, c]``, in place: the products of :func:`fourier_features`' definition in the
     same order, without recomputing a dimension's cosines for every entry.
     """
-    out[0, 0], out[0, 1] = 1.0, 0.0
+    out[0, 0], out[1, 0] = 1.0, 0.0
     size = 1
     for d in range(end_dim - 1, first_dim - 1, -1):
         for c in range(k - 1, -1, -1):  # c = 0 last: it overwrites the entries it reads
             cr, ci = trig[d, c, 0], trig[d, c, 1]
             for j in range(size):
-                re, im = out[j, 0], out[j, 1]
-                out[c * size + j, 0], out[c * size + j, 1] = re * cr - im * ci, re * ci + im * cr
+                re, im = out[0, j], out[1, j]
+                out[0, c * size + j], out[1, c * size + j] = re * cr - im * ci, re * ci + im * cr
         size *= k
 
 
@@ -593,10 +593,13 @@ def fourier_features(obs, low, inv_range, order, half, scratch, out):
             trig[d, c, 0], trig[d, c, 1] = re * cr - im * ci, re * ci + im * cr
     _basis_exponentials(trig, k, 0, half, first)
     _basis_exponentials(trig, k, half, obs.shape[0], second)
-    n_second = second.shape[0]
-    for a in range(first.shape[0]):
+    n_second = second.shape[1]
+    second_re, second_im = second[0], second[1]  # rows: the loop below reads contiguous entries
+    for a in range(first.shape[1]):
+        first_re, first_im = first[0, a], first[1, a]
+        out_a = out[a * n_second:(a + 1) * n_second]
         for b in range(n_second):
-            out[a * n_second + b] = first[a, 0] * second[b, 0] - first[a, 1] * second[b, 1]
+            out_a[b] = first_re * second_re[b] - first_im * second_im[b]
 
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
@@ -646,7 +649,7 @@ def ac_act(theta, phi, probs, obs, low, inv_range, order, half, streams, action_
 def _feature_scratch(order, half, dim, n_features):
     """Scratch arrays of :func:`fourier_features` (the two halves' exponentials and the per-dimension
     ones) and a feature vector."""
-    scratch = (np.empty(((order + 1) ** half, 2)), np.empty(((order + 1) ** (dim - half), 2)),
+    scratch = (np.empty((2, (order + 1) ** half)), np.empty((2, (order + 1) ** (dim - half))),
                np.empty((dim, order + 1, 2)))
     return scratch, np.empty(n_features)
 
@@ -723,8 +726,9 @@ def _qac_learner(b, w, theta, phi, probs, a_taken, reward, obs_next, terminated,
     if not terminated:
         delta += gamma * q_next
     c = critic_lr * scale * delta
+    first = np.uint64(a_taken * n_features)  # an unsigned index: no negative-index test, so the loop vectorises
     for f in range(n_features):
-        w[b, a_taken * n_features + f] += c * phi[b, f]
+        w[b, first + np.uint64(f)] += c * phi[b, f]
     if done:
         fourier_features(obs_root, low, inv_range, order, half, scratch, phi_next)
         a_next = _policy_sample(theta[b], phi_next, uniform(streams, b), probs[b])
