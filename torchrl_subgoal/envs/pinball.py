@@ -418,7 +418,7 @@ class BallKernelState(NamedTuple):
     thrust_penalty: float
 
 
-_NO_THRUST = ACTION_NAMES.index("none")
+_NUM_ACTIONS, _NO_THRUST = len(ACTION_NAMES), ACTION_NAMES.index("none")  # ints: numba reads them as constants
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -435,7 +435,7 @@ def ball_step(balls: BallKernelState, b: int, a: int, candidates: np.ndarray, ow
         >>> bool(vx > 0.0), int(balls.steps[0]), bool(done)
         (True, 1, False)
     """
-    executed = _kernels._random_action(a, balls.streams, b, balls.random_prob, len(ACTION_NAMES))
+    executed = _kernels._random_action(a, balls.streams, b, balls.random_prob, _NUM_ACTIONS)
     px, py, vx, vy, terminated = step_ball(
         balls.position[b, 0], balls.position[b, 1], balls.velocity[b, 0], balls.velocity[b, 1], executed,
         balls.edges, balls.boxes, balls.first_edge, balls.ball_radius, balls.target_x, balls.target_y,
