@@ -143,14 +143,14 @@ def _advance_one(regions, b, zb, o):
     empty); the first region ``j`` that ``succ[p, zb]`` allows and that contains
     ``o`` gives ``j + offset``; when none does, ``zb`` is kept. A subgoal series
     has ``offset`` 1 (``z`` counts the subgoals achieved), a region
-    aggregation ``offset`` 0 and every region allowed.
+    aggregation ``offset`` 0 and every region allowed. The record is unpacked
+    once here and its arrays indexed directly (see the note above :func:`shaping_advance`).
     """
-    p = regions.pattern[b] if regions.pattern.shape[0] > 0 else 0
-    lo, hi, centre, weight, radius2 = regions.lo[p], regions.hi[p], regions.centre[p], regions.weight[p], regions.radius2[p]
-    allowed = regions.succ[p, zb]
-    for j in range(lo.shape[0]):
-        if allowed[j] and _in_region(o, lo[j], hi[j], centre[j], weight[j], radius2[j]):
-            return j + regions.offset
+    pattern, lo, hi, centre, weight, radius2, succ, offset = regions
+    p = pattern[b] if pattern.shape[0] > 0 else 0
+    for j in range(lo.shape[1]):
+        if succ[p, zb, j] and _in_region(o, lo[p, j], hi[p, j], centre[p, j], weight[p, j], radius2[p, j]):
+            return j + offset
     return zb
 
 
@@ -309,52 +309,60 @@ def _shape_shared(
 
 # --------------------------------------------------------------------------- shaping in a fused loop
 #
-# A fused loop keeps each learner's abstract state in a ShapingKernelState
-# (torchrl_subgoal.transform): per step it calls shaping_advance, shaping_step
-# and, after the env's reset, shaping_carry, whatever the env and the learner.
+# A fused loop unpacks a ShapingKernelState (torchrl_subgoal.transform) once, ``kind, regions, lookup,
+# potential, learners = shaping``, and per step calls shaping_advance and shaping_step (when
+# ``kind != NO_SHAPING``), then shaping_carry with shaping_start's abstract state where the env reset,
+# whatever the env and the learner. Each takes only the parts it reads: numba counts references
+# to every array of a tuple passed to an inlined function, and passing the whole record three times
+# a step doubled the cost of a four-rooms learner-step.
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def shaping_advance(shaping, b, zb, o, s):
-    """Learner ``b``'s next abstract state from ``zb``: its regions on the observation ``o``, or
-    the lookup of the state number ``s``; ``zb`` without shaping."""
-    if shaping.kind == REGION_SHAPING:
-        return _advance_one(shaping.regions, b, zb, o)
-    if shaping.kind == LOOKUP_SHAPING:
-        return shaping.lookup[s]
+def shaping_advance(kind, regions, lookup, b, zb, observations, s):
+    """Learner ``b``'s next abstract state from ``zb``: its regions on the observation ``observations[s]``,
+    or the lookup of the state number ``s``; ``zb`` without shaping."""
+    if kind == REGION_SHAPING:
+        return _advance_one(regions, b, zb, observations[s])
+    if kind == LOOKUP_SHAPING:
+        return lookup[s]
     return zb
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def shaping_step(shaping, b, zb, znb, reward, done, terminated):
-    """The shaping transform's step for learner ``b``: ``(reward as float32, r_h', k')``
-    (:func:`_shape_learner` with the learner's own table row)."""
-    if shaping.kind == NO_SHAPING:
-        return reward, 0.0, 0
-    shaped, r, kb, emit = _shape_learner(shaping.potential, b, zb, znb, shaping.achieved[b, 0], shaping.r_h[b, 0],
-                                         shaping.k[b, 0], reward, done, terminated, shaping.z_start[b, 0])
+def shaping_start(kind, regions, lookup, b, observations, s):
+    """Learner ``b``'s abstract state at a reset to ``observations[s]`` (state number ``s``): 0 for a
+    subgoal series or no shaping, the region or lookup of the reset state for an aggregation."""
+    if kind == LOOKUP_SHAPING:
+        return lookup[s]
+    if kind == REGION_SHAPING and regions.offset == 0:  # a region aggregation
+        return _advance_one(regions, b, 0, observations[s])
+    return 0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def shaping_step(potential, learners, b, zb, znb, reward, done, terminated):
+    """The shaping transform's step for learner ``b`` (``learners``: its abstract-state arrays):
+    ``(reward as float32, r_h', k')``, :func:`_shape_learner` with the learner's own table row."""
+    shaped, r, kb, emit = _shape_learner(potential, b, zb, znb, learners.achieved[b, 0], learners.r_h[b, 0],
+                                         learners.k[b, 0], reward, done, terminated, learners.z_start[b, 0])
     return np.float32(shaped), (0.0 if emit else r), (0 if emit else kb)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def shaping_carry(shaping, b, reset, zb, znb, rh_new, k_new, o_root, s_root):
-    """Learner ``b``'s abstract state for the next step: this step's outputs, or where ``reset`` the
-    abstract state of the reset observation ``o_root`` (state number ``s_root``)."""
+def shaping_carry(learners, b, reset, z_reset, zb, znb, rh_new, k_new):
+    """Learner ``b``'s abstract state for the next step: this step's outputs, or ``z_reset``
+    (:func:`shaping_start`) where ``reset``."""
+    z, achieved, r_h, k, _ = learners
     if reset:
-        z0 = 0  # a subgoal series starts in z = 0
-        if shaping.kind == LOOKUP_SHAPING:
-            z0 = shaping.lookup[s_root]
-        elif shaping.kind == REGION_SHAPING and shaping.regions.offset == 0:  # a region aggregation
-            z0 = _advance_one(shaping.regions, b, 0, o_root)
-        shaping.z[b, 0] = z0
-        shaping.achieved[b, 0] = False
-        shaping.r_h[b, 0] = 0.0
-        shaping.k[b, 0] = 0
-    elif shaping.kind != NO_SHAPING:
-        shaping.achieved[b, 0] = znb != zb
-        shaping.z[b, 0] = znb
-        shaping.r_h[b, 0] = rh_new
-        shaping.k[b, 0] = k_new
+        z[b, 0] = z_reset
+        achieved[b, 0] = False
+        r_h[b, 0] = 0.0
+        k[b, 0] = 0
+    else:
+        achieved[b, 0] = znb != zb
+        z[b, 0] = znb
+        r_h[b, 0] = rh_new
+        k[b, 0] = k_new
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -550,6 +558,7 @@ def sarsa_grid_run(grid, observations, shaping, sarsa, action, max_steps_run, re
     learner, episodes filed)``: the steps the TorchRL loop's batch would take.
     """
     scratch = np.empty(sarsa.q.shape[2])
+    kind, regions, lookup, potential, learners = shaping
     active, n_active = _active_learners(records.episode, records.steps.shape[1])
     filed_total = 0
     taken = 0
@@ -557,16 +566,20 @@ def sarsa_grid_run(grid, observations, shaping, sarsa, action, max_steps_run, re
         b = active[i]
         steps = max_steps_run
         for step in range(max_steps_run):
-            s_prev, zb = grid.state[b], shaping.z[b, 0]
+            s_prev, zb = grid.state[b], learners.z[b, 0]
             s, reward, terminated, done = grid_step_one(grid, b, action[b])
-            znb = shaping_advance(shaping, b, zb, observations[s], s)
-            shaped, rh_new, k_new = shaping_step(shaping, b, zb, znb, reward, done, terminated)
+            znb, shaped, rh_new, k_new = zb, reward, 0.0, 0
+            if kind != NO_SHAPING:  # the transform's step
+                znb = shaping_advance(kind, regions, lookup, b, zb, observations, s)
+                shaped, rh_new, k_new = shaping_step(potential, learners, b, zb, znb, reward, done, terminated)
+            z_reset = 0
             if done:  # the env and the transform reset this learner
                 grid_reset_one(grid, b)
-            s_root = grid.state[b]
-            shaping_carry(shaping, b, done, zb, znb, rh_new, k_new, observations[s_root], s_root)
-            action[b] = sarsa_learner_step(sarsa, b, s_prev, zb, action[b], shaped, s, znb, terminated, done, s_root,
-                                           shaping.z[b, 0], scratch)
+                z_reset = shaping_start(kind, regions, lookup, b, observations, grid.state[b])
+            if kind != NO_SHAPING or done:
+                shaping_carry(learners, b, done, z_reset, zb, znb, rh_new, k_new)
+            action[b] = sarsa_learner_step(sarsa, b, s_prev, zb, action[b], shaped, s, znb, terminated, done,
+                                           grid.state[b], learners.z[b, 0], scratch)
             filed, finished = _record_and_stop(b, done, terminated, reward, records)
             filed_total += filed
             if finished:

@@ -27,7 +27,7 @@ from torchrl_subgoal.subgoals import (
     SubgoalTables,
 )
 
-__all__ = ["PotentialKernelState", "ShapingKernelState", "SubgoalKeys", "SubgoalPotentialTransform"]
+__all__ = ["AbstractStates", "PotentialKernelState", "ShapingKernelState", "SubgoalKeys", "SubgoalPotentialTransform"]
 
 RETURN = "subgoal_return"
 STEPS = "subgoal_steps"
@@ -116,17 +116,38 @@ class PotentialKernelState(NamedTuple):
     start_mode: int  #: ``_kernels.START_VALUE``, ``START_ZERO`` or ``START_NONPOSITIVE``
 
 
+class AbstractStates(NamedTuple):
+    """Every learner's abstract-state entries as ``[N, 1]`` arrays (a compiled loop updates them in place).
+
+    Examples:
+        >>> AbstractStates.zeros(2).z.shape
+        (2, 1)
+    """
+
+    z: np.ndarray  #: int64 abstract state of every learner
+    achieved: np.ndarray  #: bool: the last step changed it
+    r_h: np.ndarray  #: float32 discounted return since it was entered
+    k: np.ndarray  #: int64 steps since it was entered
+    z_start: np.ndarray  #: int64 abstract state the episode started in
+
+    @classmethod
+    def zeros(cls, n: int) -> AbstractStates:
+        """Every learner in ``z = 0`` at the start of an episode."""
+        return cls(np.zeros((n, 1), np.int64), np.zeros((n, 1), np.bool_), np.zeros((n, 1), np.float32),
+                   np.zeros((n, 1), np.int64), np.zeros((n, 1), np.int64))
+
+
 class ShapingKernelState(NamedTuple):
     """The shaping transform for a compiled loop: its abstraction, its potential and every learner's
     abstract state (``[N, 1]`` arrays, updated in place), from :meth:`SubgoalPotentialTransform.kernel_state`.
 
     A loop advances a learner with :func:`~torchrl_subgoal._kernels.shaping_advance`, shapes its reward
-    with :func:`~torchrl_subgoal._kernels.shaping_step` and carries its state over (or resets it) with
-    :func:`~torchrl_subgoal._kernels.shaping_carry`.
+    with :func:`~torchrl_subgoal._kernels.shaping_step` and carries its state over (or resets it to
+    :func:`~torchrl_subgoal._kernels.shaping_start`'s) with :func:`~torchrl_subgoal._kernels.shaping_carry`.
 
     Examples:
         >>> state = ShapingKernelState.unshaped(3)
-        >>> state.kind == _kernels.NO_SHAPING, state.z.shape
+        >>> state.kind == _kernels.NO_SHAPING, state.learners.z.shape
         (True, (3, 1))
     """
 
@@ -134,11 +155,7 @@ class ShapingKernelState(NamedTuple):
     regions: RegionTables  #: the regions (``REGION_SHAPING``)
     lookup: np.ndarray  #: ``[S]`` abstract state of every state number (``LOOKUP_SHAPING``)
     potential: PotentialKernelState
-    z: np.ndarray  #: ``[N, 1]`` int64 abstract state of every learner
-    achieved: np.ndarray  #: ``[N, 1]`` bool: the last step changed it
-    r_h: np.ndarray  #: ``[N, 1]`` float32 discounted return since it was entered
-    k: np.ndarray  #: ``[N, 1]`` int64 steps since it was entered
-    z_start: np.ndarray  #: ``[N, 1]`` int64 abstract state the episode started in
+    learners: AbstractStates  #: every learner's abstract state
 
     @classmethod
     def unshaped(cls, n: int) -> ShapingKernelState:
@@ -147,9 +164,7 @@ class ShapingKernelState(NamedTuple):
         regions = RegionTables(np.zeros(0, np.int64), empty3, empty3, empty3, empty3, np.zeros((1, 1), np.float32),
                                np.zeros((1, 1, 1), np.bool_), 1)
         potential = PotentialKernelState(_NO_TABLE, 0.0, 0.0, 0.0, 0.0, False, _kernels.START_VALUE)
-        return cls(_kernels.NO_SHAPING, regions, np.zeros(1, np.int64), potential, np.zeros((n, 1), np.int64),
-                   np.zeros((n, 1), np.bool_), np.zeros((n, 1), np.float32), np.zeros((n, 1), np.int64),
-                   np.zeros((n, 1), np.int64))
+        return cls(_kernels.NO_SHAPING, regions, np.zeros(1, np.int64), potential, AbstractStates.zeros(n))
 
 
 @dataclass
@@ -565,7 +580,8 @@ class SubgoalPotentialTransform(Transform):
         keys = self.keys
         z, r_h, k = (tensordict.get(name).reshape(n, 1).numpy().copy() for name in (keys.index, keys.ret, keys.steps))
         # both envs of the fused engine start every episode in the same place
-        return ShapingKernelState(kind, regions, lookup, potential, z, np.zeros((n, 1), np.bool_), r_h, k, z.copy())
+        return ShapingKernelState(kind, regions, lookup, potential,
+                                  AbstractStates(z, np.zeros((n, 1), np.bool_), r_h, k, z.copy()))
 
     def _check_potential(self, n_learners: int) -> None:
         pot = self.potential

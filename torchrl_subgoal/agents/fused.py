@@ -191,12 +191,13 @@ def _pinball_ac_run(balls, shaping, learner, action, max_steps_run, records):
     learner; returns ``(steps of the longest-running learner, episodes filed)``:
     the steps the TorchRL loop's batch would take for the same block.
     """
-    obs = np.empty(4, np.float32)
+    obs = np.empty((1, 4), np.float32)  # one row: the shaping reads observations[0]
     obs_next = np.empty(4, np.float64)
-    obs_root = np.empty(4, np.float64)
+    obs_root = np.empty((1, 4), np.float64)
     candidates = np.empty(balls.edges.shape[0], np.int64)
     owners = np.empty(balls.edges.shape[0], np.int64)
     scratch, phi_next = _kernels._feature_scratch(learner.order, learner.half, 4, learner.theta.shape[2])
+    kind, regions, lookup, potential, learners = shaping
     active, n_active = _kernels._active_learners(records.episode, records.steps.shape[1])
     filed_total = 0
     taken = 0
@@ -205,21 +206,26 @@ def _pinball_ac_run(balls, shaping, learner, action, max_steps_run, records):
         steps = max_steps_run
         for step in range(max_steps_run):
             px, py, vx, vy, reward, terminated, done = ball_step(balls, b, action[b], candidates, owners)
-            obs[0], obs[1], obs[2], obs[3] = px, py, vx, vy
-            zb = shaping.z[b, 0]
-            znb = _kernels.shaping_advance(shaping, b, zb, obs, 0)
-            shaped, rh_new, k_new = _kernels.shaping_step(shaping, b, zb, znb, reward, done, terminated)
+            obs[0, 0], obs[0, 1], obs[0, 2], obs[0, 3] = px, py, vx, vy
+            zb = learners.z[b, 0]
+            znb, shaped, rh_new, k_new = zb, reward, 0.0, 0
+            if kind != _kernels.NO_SHAPING:  # the transform's step
+                znb = _kernels.shaping_advance(kind, regions, lookup, b, zb, obs, 0)
+                shaped, rh_new, k_new = _kernels.shaping_step(potential, learners, b, zb, znb, reward, done,
+                                                              terminated)
             for d in range(4):
-                obs_next[d] = obs[d]
+                obs_next[d] = obs[0, d]
             if done:  # the env and the transform reset this ball
                 px, py, vx, vy = ball_reset(balls, b)
-            obs_root[0] = np.float32(px)
-            obs_root[1] = np.float32(py)
-            obs_root[2] = np.float32(vx)
-            obs_root[3] = np.float32(vy)
-            _kernels.shaping_carry(shaping, b, done, zb, znb, rh_new, k_new, obs_root, 0)
-            action[b] = _kernels.ac_learner_step(learner, b, action[b], shaped, obs_next, terminated, done, obs_root,
-                                                 scratch, phi_next)
+            obs_root[0, 0] = np.float32(px)
+            obs_root[0, 1] = np.float32(py)
+            obs_root[0, 2] = np.float32(vx)
+            obs_root[0, 3] = np.float32(vy)
+            z_reset = _kernels.shaping_start(kind, regions, lookup, b, obs_root, 0) if done else 0
+            if kind != _kernels.NO_SHAPING or done:
+                _kernels.shaping_carry(learners, b, done, z_reset, zb, znb, rh_new, k_new)
+            action[b] = _kernels.ac_learner_step(learner, b, action[b], shaped, obs_next, terminated, done,
+                                                 obs_root[0], scratch, phi_next)
             filed, finished = _kernels._record_and_stop(b, done, terminated, reward, records)
             filed_total += filed
             if finished:
