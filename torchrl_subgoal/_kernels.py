@@ -135,28 +135,39 @@ def _in_region(o, lo, hi, centre, weight, radius2):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _advance_one(zb, o, p, lo, hi, centre, weight, radius2, succ):
-    """The abstract state after observing ``o`` in ``zb`` for a learner of pattern ``p``."""
+def _advance_one(regions, b, zb, o):
+    """The abstract state of learner ``b`` after observing ``o`` in ``zb`` (the one region search).
+
+    ``regions`` is a :class:`~torchrl_subgoal.subgoals.RegionTables`: learner
+    ``b`` reads pattern ``regions.pattern[b]`` (pattern 0 when ``pattern`` is
+    empty); the first region ``j`` that ``succ[p, zb]`` allows and that contains
+    ``o`` gives ``j + offset``; when none does, ``zb`` is kept. A subgoal series
+    has ``offset`` 1 (``z`` counts the subgoals achieved), a region
+    aggregation ``offset`` 0 and every region allowed. The record is unpacked
+    once here and its arrays indexed directly (see the note above :func:`shaping_advance`).
+    """
+    pattern, lo, hi, centre, weight, radius2, succ, offset = regions
+    p = pattern[b] if pattern.shape[0] > 0 else 0
     for j in range(lo.shape[1]):
         if succ[p, zb, j] and _in_region(o, lo[p, j], hi[p, j], centre[p, j], weight[p, j], radius2[p, j]):
-            return j + 1
+            return j + offset
     return zb
 
 
 @numba.njit(cache=True, nogil=True)
-def advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_out):
-    """``z_out[b]``: abstract state after observing ``obs[b]`` in ``z[b]`` (see SubgoalTables).
+def advance_regions(regions, z, obs, z_out):
+    """``z_out[b]``: abstract state after observing ``obs[b]`` in ``z[b]`` (:func:`_advance_one` per learner).
 
-    Learner ``b`` follows pattern ``pattern[b]``; the region tables are per pattern
-    (``[P, J, D]``), which keeps them in cache whatever the number of learners.
-    See :func:`_in_region` for how an observation is compared (NaN is never inside).
+    The region tables are per pattern (``[P, J, D]``), which keeps them in
+    cache whatever the number of learners. See :func:`_in_region` for how an
+    observation is compared (NaN is never inside).
     """
     for b in range(z.shape[0]):
-        z_out[b, 0] = _advance_one(z[b, 0], obs[b], pattern[b], lo, hi, centre, weight, radius2, succ)
+        z_out[b, 0] = _advance_one(regions, b, z[b, 0], obs[b])
 
 
 START_VALUE, START_ZERO, START_NONPOSITIVE = 0, 1, 2  # SubgoalPotentialTransform's start_potential
-NO_SHAPING, SUBGOAL_SHAPING, LOOKUP_SHAPING = 0, 1, 2  # what the fused runs shape with
+NO_SHAPING, REGION_SHAPING, LOOKUP_SHAPING = 0, 1, 2  # what a fused loop shapes with (ShapingKernelState.kind)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -198,34 +209,88 @@ def _shaped_reward(table, row, zb, znb, achieved_prev, terminated, z_start, rewa
     return reward + gamma * phi_next - phi
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _shape_learner(potential, row, zb, znb, achieved_prev, r_h, k, reward, done, terminated, z_start):
+    """The shaping step of one learner whose potential is ``potential.table[row]`` (its own row):
+    ``(shaped reward, r_h + γ_v^k r, k + 1, emit)``.
+
+    Accumulates the SMDP return, applies the online TD update of the
+    potential when the abstract state changes or the episode ends (``value_lr
+    > 0``), then shapes the reward with the potential as it is now (see
+    :func:`_shaped_reward`). ``potential`` is a
+    :class:`~torchrl_subgoal.transform.PotentialKernelState`. The one
+    implementation of the step: the fused loops (:func:`shaping_step`) and
+    the transform's compiled path (:func:`shape_step`) call it.
+    """
+    emit, r, discount, kb = _smdp_accumulate(zb, znb, r_h, k, reward, done, potential.value_gamma)
+    table = potential.table
+    if emit and potential.value_lr > 0.0 and table.shape[0] > 0:
+        delta = _td_error(table, row, zb, znb, terminated, r, discount, potential.value_gamma)
+        if delta != 0.0:
+            table[row, zb] += potential.value_lr * delta
+    shaped = _shaped_reward(table, row, zb, znb, achieved_prev, terminated, z_start, reward, potential.eta,
+                            potential.gamma, potential.zero_terminal, potential.start_mode)
+    return shaped, r, kb, emit
+
+
 @numba.njit(cache=True, nogil=True)
 def shape_step(
-    z, z_next, achieved_prev, r_h, k, reward, done, terminated,
-    table, shared, eta, gamma, value_gamma, lr, zero_terminal, start_mode, z_start,
+    potential, shared, z, z_next, achieved_prev, r_h, k, reward, done, terminated, z_start,
     rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out,
 ):
-    """Accumulate ``r_h, k``, update a tabular potential online, and shape the reward.
+    """Accumulate ``r_h, k``, update a tabular potential online, and shape the reward, for every row.
 
-    ``table`` is ``[B or 1, Z]`` (``shared`` = one table for all envs); an
-    empty table means the naive potential ``Φ = eta · achieved``. ``lr = 0``
-    disables the update. ``start_mode`` shifts a table's potential by ``V(z_0)``
-    (``START_ZERO``) or ``max(V(z_0), 0)`` (``START_NONPOSITIVE``), with
-    ``z_start[b]`` the abstract state learner ``b``'s episode started in.
-    ``rh_acc_out``, ``k_acc_out`` and ``emit_out`` (the
-    SMDP transition's ``r_h``, ``k`` and mask) are filled when not empty.
-    The update equals one SGD step of
-    :class:`~torchrl_subgoal.SubgoalValueLoss` (reduction ``"sum"``): every
-    TD error is computed with the table as it was, then all are applied.
+    ``potential`` is a :class:`~torchrl_subgoal.transform.PotentialKernelState`
+    (its ``table`` is ``[B or 1, Z]``, empty for the naive potential
+    ``Φ = eta · achieved``; ``value_lr = 0`` disables the update;
+    ``start_mode`` shifts a table's potential by ``V(z_0)`` (``START_ZERO``)
+    or ``max(V(z_0), 0)`` (``START_NONPOSITIVE``), with ``z_start[b]`` the
+    abstract state row ``b``'s episode started in). ``rh_acc_out``,
+    ``k_acc_out`` and ``emit_out`` (the SMDP transition's ``r_h``, ``k`` and
+    mask) are filled when not empty.
+
+    With a table per row this is :func:`_shape_learner` row by row, as in the
+    fused loops. With one ``shared`` table the update is one SGD step of
+    :class:`~torchrl_subgoal.SubgoalValueLoss` (reduction ``"sum"``) over the
+    batch: every TD error is computed with the table as it was, then all are
+    applied, then every reward is shaped; row by row would let a row's update
+    change the next row's TD error.
     """
     n = z.shape[0]
-    learn = lr > 0.0 and table.shape[0] > 0
+    fill = emit_out.shape[0] > 0
+    if shared:
+        _shape_shared(potential, z, z_next, achieved_prev, r_h, k, reward, done, terminated, z_start, rh_out, k_out,
+                      reward_out, rh_acc_out, k_acc_out, emit_out)
+        return
+    for b in range(n):
+        shaped, r, kb, emit = _shape_learner(potential, b, z[b, 0], z_next[b, 0], achieved_prev[b, 0], r_h[b, 0],
+                                             k[b, 0], reward[b, 0], done[b, 0], terminated[b, 0], z_start[b, 0])
+        reward_out[b, 0] = shaped
+        rh_out[b, 0] = 0.0 if emit else r
+        k_out[b, 0] = 0 if emit else kb
+        if fill:
+            rh_acc_out[b, 0] = r
+            k_acc_out[b, 0] = kb
+            emit_out[b, 0] = emit
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _shape_shared(
+    potential, z, z_next, achieved_prev, r_h, k, reward, done, terminated, z_start,
+    rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out,
+):
+    """:func:`shape_step` with one table for every row: :func:`_shape_learner`'s three parts
+    (accumulate and TD error; update; shape) each over the whole batch."""
+    n = z.shape[0]
+    table = potential.table
+    learn = potential.value_lr > 0.0 and table.shape[0] > 0
     delta = np.zeros(n)
     for b in range(n):
         emit, r, discount, kb = _smdp_accumulate(z[b, 0], z_next[b, 0], r_h[b, 0], k[b, 0], reward[b, 0],
-                                                 done[b, 0], value_gamma)
+                                                 done[b, 0], potential.value_gamma)
         if emit and learn:
-            delta[b] = _td_error(table, 0 if shared else b, z[b, 0], z_next[b, 0], terminated[b, 0], r, discount,
-                                 value_gamma)
+            delta[b] = _td_error(table, 0, z[b, 0], z_next[b, 0], terminated[b, 0], r, discount,
+                                 potential.value_gamma)
         rh_out[b, 0] = 0.0 if emit else r
         k_out[b, 0] = 0 if emit else kb
         if emit_out.shape[0] > 0:
@@ -235,36 +300,65 @@ def shape_step(
     if learn:
         for b in range(n):
             if delta[b] != 0.0:
-                table[0 if shared else b, z[b, 0]] += lr * delta[b]
+                table[0, z[b, 0]] += potential.value_lr * delta[b]
     for b in range(n):
-        reward_out[b, 0] = _shaped_reward(table, 0 if shared else b, z[b, 0], z_next[b, 0], achieved_prev[b, 0],
-                                          terminated[b, 0], z_start[b, 0], reward[b, 0], eta, gamma, zero_terminal,
-                                          start_mode)
+        reward_out[b, 0] = _shaped_reward(table, 0, z[b, 0], z_next[b, 0], achieved_prev[b, 0], terminated[b, 0],
+                                          z_start[b, 0], reward[b, 0], potential.eta, potential.gamma,
+                                          potential.zero_terminal, potential.start_mode)
+
+
+# --------------------------------------------------------------------------- shaping in a fused loop
+#
+# A fused loop unpacks a ShapingKernelState (torchrl_subgoal.transform) once, ``kind, regions, lookup,
+# potential, learners = shaping``, and per step calls shaping_advance and shaping_step (when
+# ``kind != NO_SHAPING``), then shaping_carry with shaping_start's abstract state where the env reset,
+# whatever the env and the learner. Each takes only the parts it reads: numba counts references
+# to every array of a tuple passed to an inlined function, and passing the whole record three times
+# a step doubled the cost of a four-rooms learner-step.
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _shape_learner(b, zb, znb, achieved_prev, r_h, k, reward, done, terminated, table, eta, gamma, value_gamma, lr,
-                   zero_terminal, start_mode, z_start):
-    """:func:`shape_step` for learner ``b`` alone (its own table row): ``(shaped reward, r_h', k')``."""
-    emit, r, discount, kb = _smdp_accumulate(zb, znb, r_h[b, 0], k[b, 0], reward, done, value_gamma)
-    if emit and lr > 0.0 and table.shape[0] > 0:
-        delta = _td_error(table, b, zb, znb, terminated, r, discount, value_gamma)
-        if delta != 0.0:
-            table[b, zb] += lr * delta
-    shaped = _shaped_reward(table, b, zb, znb, achieved_prev, terminated, z_start[b, 0], reward, eta, gamma,
-                            zero_terminal, start_mode)
-    return shaped, (0.0 if emit else r), (0 if emit else kb)
+def shaping_advance(kind, regions, lookup, b, zb, observations, s):
+    """Learner ``b``'s next abstract state from ``zb``: its regions on the observation ``observations[s]``,
+    or the lookup of the state number ``s``; ``zb`` without shaping."""
+    if kind == REGION_SHAPING:
+        return _advance_one(regions, b, zb, observations[s])
+    if kind == LOOKUP_SHAPING:
+        return lookup[s]
+    return zb
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _carry_learner(b, reset, shaping, initial_z, zb, znb, z, achieved, r_h, k, rh_new, k_new):
-    """:func:`carry_abstract_states` for learner ``b``."""
+def shaping_start(kind, regions, lookup, b, observations, s):
+    """Learner ``b``'s abstract state at a reset to ``observations[s]`` (state number ``s``): 0 for a
+    subgoal series or no shaping, the region or lookup of the reset state for an aggregation."""
+    if kind == LOOKUP_SHAPING:
+        return lookup[s]
+    if kind == REGION_SHAPING and regions.offset == 0:  # a region aggregation
+        return _advance_one(regions, b, 0, observations[s])
+    return 0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def shaping_step(potential, learners, b, zb, znb, reward, done, terminated):
+    """The shaping transform's step for learner ``b`` (``learners``: its abstract-state arrays):
+    ``(reward as float32, r_h', k')``, :func:`_shape_learner` with the learner's own table row."""
+    shaped, r, kb, emit = _shape_learner(potential, b, zb, znb, learners.achieved[b, 0], learners.r_h[b, 0],
+                                         learners.k[b, 0], reward, done, terminated, learners.z_start[b, 0])
+    return np.float32(shaped), (0.0 if emit else r), (0 if emit else kb)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def shaping_carry(learners, b, reset, z_reset, zb, znb, rh_new, k_new):
+    """Learner ``b``'s abstract state for the next step: this step's outputs, or ``z_reset``
+    (:func:`shaping_start`) where ``reset``."""
+    z, achieved, r_h, k, _ = learners
     if reset:
-        z[b, 0] = initial_z
+        z[b, 0] = z_reset
         achieved[b, 0] = False
         r_h[b, 0] = 0.0
         k[b, 0] = 0
-    elif shaping != NO_SHAPING:
+    else:
         achieved[b, 0] = znb != zb
         z[b, 0] = znb
         r_h[b, 0] = rh_new
@@ -329,23 +423,36 @@ def sarsa_step(
                                        streams, b, lr, gamma, inv_temperature, scratch)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def grid_step_one(grid, b, a):
+    """Learner ``b``'s move ``a`` in a grid env (a :class:`~torchrl_subgoal.envs.four_rooms.GridKernelState`,
+    updated in place): ``(next state, reward as float32, terminated, done)``."""
+    s = grid.transitions[grid.state[b], a]
+    grid.state[b] = s
+    grid.t[b] += 1
+    terminated = s == grid.goal
+    done = terminated or grid.t[b] >= grid.max_steps
+    return s, np.float32(grid.goal_reward if terminated else grid.step_reward), terminated, done
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def grid_reset_one(grid, b):
+    """Put learner ``b`` of a grid env back at the start."""
+    grid.state[b] = grid.start
+    grid.t[b] = 0
+
+
 @numba.njit(cache=True, nogil=True)
-def grid_step(
-    state, t, action, transitions, cells, goal, max_steps, goal_reward, step_reward, reward, terminated, truncated,
-    cell_out,
-):
-    """Deterministic grid moves for a batch: next state, step count, reward (``goal_reward``
-    on reaching the goal, else ``step_reward``) and flags."""
-    for b in range(state.shape[0]):
-        s = transitions[state[b], action[b]]
-        state[b] = s
-        t[b] += 1
-        term = s == goal
+def grid_step(grid, action, reward, terminated, truncated, cell_out):
+    """Deterministic grid moves for a batch (:func:`grid_step_one` per learner): next state, step
+    count, reward (``goal_reward`` on reaching the goal, else ``step_reward``), flags and cells."""
+    for b in range(grid.state.shape[0]):
+        s, r, term, done = grid_step_one(grid, b, action[b])
         terminated[b] = term
-        truncated[b] = (not term) and t[b] >= max_steps
-        reward[b] = goal_reward if term else step_reward
-        cell_out[b, 0] = cells[s, 0]
-        cell_out[b, 1] = cells[s, 1]
+        truncated[b] = done and not term
+        reward[b] = r
+        cell_out[b, 0] = grid.cells[s, 0]
+        cell_out[b, 1] = grid.cells[s, 1]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -365,23 +472,13 @@ def record_episodes(
 
 
 @numba.njit(cache=True, nogil=True)
-def grid_reset(state, t, reset, start, cells, cell_out):
-    """Put the learners flagged in ``reset`` back at ``start``; write every learner's cell."""
-    for b in range(state.shape[0]):
+def grid_reset(grid, reset, cell_out):
+    """Put the learners flagged in ``reset`` back at the start; write every learner's cell."""
+    for b in range(grid.state.shape[0]):
         if reset[b]:
-            state[b] = start
-            t[b] = 0
-        cell_out[b, 0] = cells[state[b], 0]
-        cell_out[b, 1] = cells[state[b], 1]
-
-
-@numba.njit(cache=True, nogil=True)
-def carry_abstract_states(reset, shaping, initial_z, z, achieved, r_h, k, z_next, rh_out, k_out):
-    """Each learner's abstract state for the next step: the reset one where ``reset``,
-    else this step's outputs (left alone without shaping)."""
-    for b in range(z.shape[0]):
-        _carry_learner(b, reset[b, 0], shaping, initial_z, z[b, 0], z_next[b, 0], z, achieved, r_h, k, rh_out[b, 0],
-                       k_out[b, 0])
+            grid_reset_one(grid, b)
+        cell_out[b, 0] = grid.cells[grid.state[b], 0]
+        cell_out[b, 1] = grid.cells[grid.state[b], 1]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -416,38 +513,39 @@ def _record_learner(b, done, terminated, reward, t, ret, episode, steps_out, ret
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _transform_learner(b, shaping, zb, znb, achieved, r_h, k, reward, done, terminated, table, eta, gamma,
-                       value_gamma, value_lr, zero_terminal, start_mode, z_start):
-    """The shaping transform's step for learner ``b`` in a fused loop: ``(reward as float32, r_h', k')``."""
-    if shaping == NO_SHAPING:
-        return reward, 0.0, 0
-    shaped, rh_new, k_new = _shape_learner(b, zb, znb, achieved[b, 0], r_h, k, reward, done, terminated, table, eta,
-                                           gamma, value_gamma, value_lr, zero_terminal, start_mode, z_start)
-    return np.float32(shaped), rh_new, k_new
+def _record_and_stop(b, done, terminated, reward, records):
+    """File learner ``b``'s step in ``records`` (an :class:`~torchrl_subgoal.agents.records.EpisodeArrays`):
+    ``(episodes filed, whether it has them all)``, for the fused loops, which run each learner until it
+    has them all."""
+    filed = 1 if _record_learner(b, done, terminated, reward, records.t, records.ret, records.episode,
+                                 records.steps, records.returns, records.success) else 0
+    return filed, records.episode[b] >= records.steps.shape[1]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _record_and_stop(b, done, terminated, reward, t, ret, episode, steps_out, returns_out, success_out):
-    """File learner ``b``'s step (:func:`_record_learner`): ``(episodes filed, whether it has them all)``,
-    for the fused loops, which run each learner until it has them all."""
-    filed = 1 if _record_learner(b, done, terminated, reward, t, ret, episode, steps_out, returns_out,
-                                 success_out) else 0
-    return filed, episode[b] >= steps_out.shape[1]
+def _sarsa_row(sarsa, s, z):
+    """The table row of state ``s`` in abstract state ``z``: ``s · Z + z`` (``s`` when ``Z = 1``)."""
+    return s * sarsa.abstract_states + (z if sarsa.abstract_states > 1 else 0)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def sarsa_learner_step(sarsa, b, s, z, a, reward, s_next, z_next, terminated, done, s_root, z_root, scratch):
+    """:func:`_sarsa_learner` for learner ``b`` of a :class:`~torchrl_subgoal.agents.sarsa.SarsaKernelState`,
+    from states and abstract states; returns its next action."""
+    return _sarsa_learner(sarsa.q[b], _sarsa_row(sarsa, s, z), a, reward, _sarsa_row(sarsa, s_next, z_next),
+                          terminated, done, _sarsa_row(sarsa, s_root, z_root), sarsa.streams, b, sarsa.lr,
+                          sarsa.gamma, sarsa.inv_temperature, scratch)
 
 
 @numba.njit(cache=True, nogil=True)
-def sarsa_grid_run(
-    # the grid env (its state arrays are updated in place)
-    state, t_env, transitions, cells, start, goal, max_steps, goal_reward, step_reward,
-    # the shaping transform: which abstraction, its tables, its per-learner state and the potential
-    shaping, observe_cell, pattern, lo, hi, centre, weight, radius2, succ, lookup, initial_z,
-    z, achieved, r_h, k, table, eta, gamma_shaping, value_gamma, value_lr, zero_terminal, start_mode, z_start,
-    # the SARSA learners and their random streams
-    q, abstract_states, action, lr, gamma, inv_temperature, streams, max_steps_run,
-    # episode records
-    t_rec, ret, episode, steps_out, returns_out, success_out,
-):
+def sarsa_grid_run(grid, observations, shaping, sarsa, action, max_steps_run, records):
     """Run steps of grid world + shaping + SARSA until every learner has its episodes.
+
+    ``grid``, ``shaping`` and ``sarsa`` are the records the env, the shaping
+    transform and the learner give (``kernel_state()``), updated in place;
+    ``observations[s]`` is what the shaping reads in state ``s`` (its cell, or
+    the state number); ``action[b]`` is learner ``b``'s next action; episodes
+    are filed in ``records`` (:class:`~torchrl_subgoal.agents.records.EpisodeArrays`).
 
     Per learner, the same kernels in the same order with the same random
     numbers as one iteration of :func:`torchrl_subgoal.agents.run_episodes`
@@ -459,66 +557,36 @@ def sarsa_grid_run(
     ``max_steps_run`` steps per learner; returns ``(steps of the longest-running
     learner, episodes filed)``: the steps the TorchRL loop's batch would take.
     """
-    n = state.shape[0]
-    state2 = state.reshape((n, 1))  # the state number as a one-entry observation
-    scratch = np.empty(q.shape[2])
-    max_episodes = steps_out.shape[1]
-    active, n_active = _active_learners(episode, max_episodes)
+    scratch = np.empty(sarsa.q.shape[2])
+    kind, regions, lookup, potential, learners = shaping
+    active, n_active = _active_learners(records.episode, records.steps.shape[1])
     filed_total = 0
     taken = 0
     for i in range(n_active):
         b = active[i]
         steps = max_steps_run
         for step in range(max_steps_run):
-            zb = z[b, 0]
-            row = state[b] * abstract_states + (zb if abstract_states > 1 else 0)
-            s = transitions[state[b], action[b]]  # the grid env's step
-            state[b] = s
-            t_env[b] += 1
-            terminated = s == goal
-            done = terminated or t_env[b] >= max_steps
-            reward = np.float32(goal_reward if terminated else step_reward)
-            znb = 0
-            if shaping == SUBGOAL_SHAPING:  # the transform's step
-                obs = cells[s] if observe_cell else state2[b]
-                znb = _advance_one(zb, obs, pattern[b], lo, hi, centre, weight, radius2, succ)
-            elif shaping == LOOKUP_SHAPING:
-                znb = lookup[s]
-            shaped, rh_new, k_new = _transform_learner(b, shaping, zb, znb, achieved, r_h, k, reward, done, terminated,
-                                                       table, eta, gamma_shaping, value_gamma, value_lr,
-                                                       zero_terminal, start_mode, z_start)
-            row_next = s * abstract_states + (znb if abstract_states > 1 else 0)
+            s_prev, zb = grid.state[b], learners.z[b, 0]
+            s, reward, terminated, done = grid_step_one(grid, b, action[b])
+            znb, shaped, rh_new, k_new = zb, reward, 0.0, 0
+            if kind != NO_SHAPING:  # the transform's step
+                znb = shaping_advance(kind, regions, lookup, b, zb, observations, s)
+                shaped, rh_new, k_new = shaping_step(potential, learners, b, zb, znb, reward, done, terminated)
+            z_reset = 0
             if done:  # the env and the transform reset this learner
-                state[b] = start
-                t_env[b] = 0
-            _carry_learner(b, done, shaping, initial_z, zb, znb, z, achieved, r_h, k, rh_new, k_new)
-            row_root = state[b] * abstract_states + (z[b, 0] if abstract_states > 1 else 0)
-            action[b] = _sarsa_learner(q[b], row, action[b], shaped, row_next, terminated, done, row_root, streams,
-                                       b, lr, gamma, inv_temperature, scratch)
-            filed, finished = _record_and_stop(b, done, terminated, reward, t_rec, ret, episode, steps_out,
-                                               returns_out, success_out)
+                grid_reset_one(grid, b)
+                z_reset = shaping_start(kind, regions, lookup, b, observations, grid.state[b])
+            if kind != NO_SHAPING or done:
+                shaping_carry(learners, b, done, z_reset, zb, znb, rh_new, k_new)
+            action[b] = sarsa_learner_step(sarsa, b, s_prev, zb, action[b], shaped, s, znb, terminated, done,
+                                           grid.state[b], learners.z[b, 0], scratch)
+            filed, finished = _record_and_stop(b, done, terminated, reward, records)
             filed_total += filed
             if finished:
                 steps = step + 1
                 break
         taken = max(taken, steps)
     return taken, filed_total
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _first_region_one(zb, o, lo, hi, centre, weight, radius2):
-    """The first region (shared ``[J, D]`` tables) containing ``o``, else ``zb``."""
-    for j in range(lo.shape[0]):
-        if _in_region(o, lo[j], hi[j], centre[j], weight[j], radius2[j]):
-            return j
-    return zb
-
-
-@numba.njit(cache=True, nogil=True)
-def first_region(z, obs, lo, hi, centre, weight, radius2, z_out):
-    """``z_out[b]``: the first region (shared ``[J, D]`` tables) containing ``obs[b]``, else ``z[b]``."""
-    for b in range(obs.shape[0]):
-        z_out[b, 0] = _first_region_one(z[b, 0], obs[b], lo, hi, centre, weight, radius2)
 
 
 # --------------------------------------------------------------------------- linear actor-critics
@@ -761,6 +829,20 @@ def qac_step(
                                      gamma, normalize, scratch, phi_next)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def ac_learner_step(learner, b, a, reward, obs_next, terminated, done, obs_root, scratch, phi_next):
+    """Learner ``b``'s step of an :class:`~torchrl_subgoal.agents.actor_critic.ActorCriticKernelState`
+    (:func:`_qac_learner` or :func:`_ac_learner`, by its critic); returns its next action."""
+    L = learner
+    if L.q_critic:
+        return _qac_learner(b, L.w, L.theta, L.phi, L.probs, a, reward, obs_next, terminated, done, obs_root, L.low,
+                            L.inv_range, L.order, L.half, L.streams, L.actor_lr, L.critic_lr, L.gamma, L.normalize,
+                            scratch, phi_next)
+    return _ac_learner(b, L.w, L.theta, L.phi, L.probs, a, reward, obs_next, terminated, done, obs_root, L.low,
+                       L.inv_range, L.order, L.half, L.streams, L.actor_lr, L.critic_lr, L.gamma, L.normalize,
+                       scratch, phi_next)
+
+
 @numba.njit(cache=True, nogil=True)
 def random_actions(action, streams, probability, n_actions, out):
     """``out[b]``: ``action[b]``, or with ``probability`` a uniform one of ``n_actions``, drawn
@@ -779,8 +861,7 @@ def _random_action(a, streams, b, probability, n_actions):
 
 @numba.njit(cache=True, nogil=True)
 def advance_and_shape(
-    z, obs, pattern, lo, hi, centre, weight, radius2, succ, achieved, r_h, k, reward, done, terminated,
-    table, shared, eta, gamma, value_gamma, value_lr, zero_terminal, start_mode, z_start,
+    regions, potential, shared, z, obs, achieved, r_h, k, reward, done, terminated, z_start,
     z_out, rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out,
 ):
     """:func:`advance_regions` then :func:`shape_step`: one transform step in one call.
@@ -790,10 +871,9 @@ def advance_and_shape(
     """
     if not finite_inputs(reward, obs):
         return False
-    advance_regions(z, obs, pattern, lo, hi, centre, weight, radius2, succ, z_out)
-    shape_step(z, z_out, achieved, r_h, k, reward, done, terminated, table, shared, eta, gamma,
-               value_gamma, value_lr, zero_terminal, start_mode, z_start, rh_out, k_out, reward_out, rh_acc_out,
-               k_acc_out, emit_out)
+    advance_regions(regions, z, obs, z_out)
+    shape_step(potential, shared, z, z_out, achieved, r_h, k, reward, done, terminated, z_start, rh_out, k_out,
+               reward_out, rh_acc_out, k_acc_out, emit_out)
     return True
 
 

@@ -35,7 +35,7 @@ import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, NamedTuple, NoReturn
 
 import numpy as np
 import torch
@@ -50,6 +50,7 @@ __all__ = [
     "Circle",
     "Condition",
     "Predicate",
+    "RegionTables",
     "State",
     "StateAggregation",
     "SubgoalFileError",
@@ -1094,6 +1095,33 @@ def _misfit(pred: Predicate, size: int, one_hot: bool) -> str | None:
     return f"reads entry {beyond[0]}" if beyond else None
 
 
+class RegionTables(NamedTuple):
+    """Regions as the compiled region search reads them (:func:`~torchrl_subgoal._kernels._advance_one`).
+
+    Learner ``b`` follows pattern ``pattern[b]`` (pattern 0 for every learner when ``pattern`` is
+    empty). From abstract state ``z`` it moves to ``j + offset`` for the first region ``j`` that
+    ``succ[p, z]`` allows and that contains the observation, and stays in ``z`` when none does.
+    :meth:`SubgoalTables.kernel_state` gives a subgoal series' (``offset`` 1), and
+    :meth:`StateAggregation.from_regions` a region aggregation's (``offset`` 0, every region allowed).
+
+    Examples:
+        >>> import torch
+        >>> tables = SubgoalTables([SubgoalSeries([State(1), State(3)])], torch.zeros(2, dtype=torch.long), 1)
+        >>> regions = tables.kernel_state()
+        >>> regions.lo.shape, regions.succ.shape, regions.offset  # [P, J, D], [P, J + 1, J]
+        ((1, 2, 1), (1, 3, 2), 1)
+    """
+
+    pattern: np.ndarray  #: ``[N]`` int64 pattern of every learner (empty: all follow pattern 0)
+    lo: np.ndarray  #: ``[P, J, D]`` float32 lower bounds (``+inf``: padding, never inside)
+    hi: np.ndarray  #: ``[P, J, D]`` float32 upper bounds
+    centre: np.ndarray  #: ``[P, J, D]`` float32 circle centres
+    weight: np.ndarray  #: ``[P, J, D]`` float32 weights of the circle's distance (0: not read)
+    radius2: np.ndarray  #: ``[P, J]`` float32 squared radii (``inf``: no circle)
+    succ: np.ndarray  #: ``[P, Z, J]`` bool: which regions count from each abstract state
+    offset: int  #: ``z`` of region ``j`` is ``j + offset``
+
+
 class SubgoalTables:
     """Subgoal series of a batch of learners, compiled for one vectorised test.
 
@@ -1177,11 +1205,19 @@ class SubgoalTables:
         self._rows = torch.arange(flat.numel())
         self.conditions = [(pred, where[flat]) for pred, where in slots.items()]
         # the kernels read per-pattern tables and each learner's pattern (small, stays in cache)
-        self._np = {
-            "pattern": flat.contiguous().numpy(),
-            "lo": lo.numpy(), "hi": hi.numpy(), "centre": centre.numpy(), "weight": weight.numpy(),
-            "radius2": radius2.numpy(), "succ": succ.numpy(),
-        }
+        self._kernel_tables = RegionTables(flat.contiguous().numpy(), lo.numpy(), hi.numpy(), centre.numpy(),
+                                           weight.numpy(), radius2.numpy(), succ.numpy(), 1)
+
+    def kernel_state(self) -> RegionTables:
+        """The region tables as the compiled kernels read them (numpy, per pattern; CPU).
+
+        Examples:
+            >>> import torch
+            >>> tables = SubgoalTables([SubgoalSeries([State(1)])], torch.zeros(3, dtype=torch.long), 1)
+            >>> tables.kernel_state().pattern.tolist()
+            [0, 0, 0]
+        """
+        return self._kernel_tables
 
     @property
     def fusable(self) -> bool:
@@ -1255,10 +1291,7 @@ class SubgoalTables:
         zf = z.numpy().reshape(n, 1)
         obs = self.rows(observation).numpy()
         out = np.empty((n, 1), dtype=np.int64)
-        t = self._np
-        _kernels.advance_regions(
-            zf, obs, t["pattern"], t["lo"], t["hi"], t["centre"], t["weight"], t["radius2"], t["succ"], out,
-        )
+        _kernels.advance_regions(self._kernel_tables, zf, obs, out)
         result = torch.from_numpy(out)
         return result if result.shape == z.shape else result.view(z.shape)
 
@@ -1326,7 +1359,7 @@ class StateAggregation:
     ) -> None:
         self.mapping = mapping
         self.num_states = int(num_states)
-        self.regions: dict[str, np.ndarray] | None = None
+        self.regions: RegionTables | None = None  # from_regions: the regions, as the kernels read them
         if isinstance(mapping, torch.Tensor):
             if mapping.dtype != torch.long or mapping.ndim != 1:
                 raise ValueError("a lookup aggregation must be a 1-D long tensor indexed by state")
@@ -1349,13 +1382,14 @@ class StateAggregation:
             raise ValueError("from_regions needs at least one region")
         compiled = [p.region(observation_size) for p in regions]
         agg = cls(None, len(regions))
-        agg.regions = {
-            "lo": torch.stack([r.lo for r in compiled]).numpy(),
-            "hi": torch.stack([r.hi for r in compiled]).numpy(),
-            "centre": torch.stack([r.centre for r in compiled]).numpy(),
-            "weight": torch.stack([r.weight for r in compiled]).numpy(),
-            "radius2": np.array([r.radius2 for r in compiled], dtype=np.float32),
-        }
+        j = len(compiled)
+
+        def table(name: str) -> np.ndarray:
+            return torch.stack([getattr(r, name) for r in compiled])[None].numpy()  # [1, J, D]: one pattern
+
+        agg.regions = RegionTables(  # every region allowed from every z; region j is z = j
+            np.zeros(0, np.int64), table("lo"), table("hi"), table("centre"), table("weight"),
+            np.array([[r.radius2 for r in compiled]], dtype=np.float32), np.ones((1, j, j), np.bool_), 0)
         return agg
 
     def _g(self, observation: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
@@ -1368,11 +1402,7 @@ class StateAggregation:
         assert self.regions is not None
         n = z.numel()
         out = np.empty((n, 1), dtype=np.int64)
-        r = self.regions
-        _kernels.first_region(
-            z.numpy().reshape(n, 1), observation.cpu().numpy().reshape(n, -1), r["lo"], r["hi"],
-            r["centre"], r["weight"], r["radius2"], out,
-        )
+        _kernels.advance_regions(self.regions, z.numpy().reshape(n, 1), observation.cpu().numpy().reshape(n, -1), out)
         return torch.from_numpy(out).view(z.shape).to(z.device)
 
     def initial(self, observation: torch.Tensor | None, batch_shape: torch.Size) -> torch.Tensor:

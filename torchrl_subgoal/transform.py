@@ -6,7 +6,7 @@ import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import torch
@@ -19,9 +19,15 @@ from torchrl.envs.transforms import Transform
 from torchrl_subgoal import _kernels
 from torchrl_subgoal.loss import SubgoalValueLoss
 from torchrl_subgoal.potentials import NaivePotential, TabularPotential, check_value
-from torchrl_subgoal.subgoals import State, StateAggregation, SubgoalSeries, SubgoalTables
+from torchrl_subgoal.subgoals import (
+    RegionTables,
+    State,
+    StateAggregation,
+    SubgoalSeries,
+    SubgoalTables,
+)
 
-__all__ = ["SubgoalKeys", "SubgoalPotentialTransform"]
+__all__ = ["AbstractStates", "PotentialKernelState", "ShapingKernelState", "SubgoalKeys", "SubgoalPotentialTransform"]
 
 RETURN = "subgoal_return"
 STEPS = "subgoal_steps"
@@ -86,6 +92,81 @@ class SubgoalKeys:
         return (self.achieved, self.anchor, self.learner)
 
 
+class PotentialKernelState(NamedTuple):
+    """A tabular or naive potential and the transform's settings, as the compiled shaping step reads them
+    (:func:`~torchrl_subgoal._kernels._shape_learner`).
+
+    Examples:
+        >>> from torchrl_subgoal import NaivePotential, SubgoalPotentialTransform
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> from torchrl.envs import TransformedEnv
+        >>> shaping = SubgoalPotentialTransform(SubgoalSeries([State(3)]), NaivePotential(eta=2.0), gamma=0.9)
+        >>> env = TransformedEnv(FourRoomsEnv(num_envs=2), shaping)
+        >>> potential = shaping.kernel_state(env.reset()).potential
+        >>> potential.table.shape, potential.eta, potential.gamma  # the naive potential has no table
+        ((0, 1), 2.0, 0.9)
+    """
+
+    table: np.ndarray  #: ``[B or 1, Z]`` float32 view of the potential's table (updated in place); ``[0, 1]``: naive
+    eta: float  #: the naive potential's ``η`` (``Φ = η`` once a subgoal is achieved)
+    gamma: float  #: ``γ`` of the shaping term
+    value_gamma: float  #: ``γ_v`` of the SMDP return
+    value_lr: float  #: ``α_v`` of the online update (0: none)
+    zero_terminal: bool  #: ``Φ = 0`` at a terminal state
+    start_mode: int  #: ``_kernels.START_VALUE``, ``START_ZERO`` or ``START_NONPOSITIVE``
+
+
+class AbstractStates(NamedTuple):
+    """Every learner's abstract-state entries as ``[N, 1]`` arrays (a compiled loop updates them in place).
+
+    Examples:
+        >>> AbstractStates.zeros(2).z.shape
+        (2, 1)
+    """
+
+    z: np.ndarray  #: int64 abstract state of every learner
+    achieved: np.ndarray  #: bool: the last step changed it
+    r_h: np.ndarray  #: float32 discounted return since it was entered
+    k: np.ndarray  #: int64 steps since it was entered
+    z_start: np.ndarray  #: int64 abstract state the episode started in
+
+    @classmethod
+    def zeros(cls, n: int) -> AbstractStates:
+        """Every learner in ``z = 0`` at the start of an episode."""
+        return cls(np.zeros((n, 1), np.int64), np.zeros((n, 1), np.bool_), np.zeros((n, 1), np.float32),
+                   np.zeros((n, 1), np.int64), np.zeros((n, 1), np.int64))
+
+
+class ShapingKernelState(NamedTuple):
+    """The shaping transform for a compiled loop: its abstraction, its potential and every learner's
+    abstract state (``[N, 1]`` arrays, updated in place), from :meth:`SubgoalPotentialTransform.kernel_state`.
+
+    A loop advances a learner with :func:`~torchrl_subgoal._kernels.shaping_advance`, shapes its reward
+    with :func:`~torchrl_subgoal._kernels.shaping_step` and carries its state over (or resets it to
+    :func:`~torchrl_subgoal._kernels.shaping_start`'s) with :func:`~torchrl_subgoal._kernels.shaping_carry`.
+
+    Examples:
+        >>> state = ShapingKernelState.unshaped(3)
+        >>> state.kind == _kernels.NO_SHAPING, state.learners.z.shape
+        (True, (3, 1))
+    """
+
+    kind: int  #: ``_kernels.NO_SHAPING``, ``REGION_SHAPING`` (subgoal series, region aggregation) or ``LOOKUP_SHAPING``
+    regions: RegionTables  #: the regions (``REGION_SHAPING``)
+    lookup: np.ndarray  #: ``[S]`` abstract state of every state number (``LOOKUP_SHAPING``)
+    potential: PotentialKernelState
+    learners: AbstractStates  #: every learner's abstract state
+
+    @classmethod
+    def unshaped(cls, n: int) -> ShapingKernelState:
+        """No shaping, for ``n`` learners (a bare env)."""
+        empty3 = np.zeros((1, 1, 1), np.float32)
+        regions = RegionTables(np.zeros(0, np.int64), empty3, empty3, empty3, empty3, np.zeros((1, 1), np.float32),
+                               np.zeros((1, 1, 1), np.bool_), 1)
+        potential = PotentialKernelState(_NO_TABLE, 0.0, 0.0, 0.0, 0.0, False, _kernels.START_VALUE)
+        return cls(_kernels.NO_SHAPING, regions, np.zeros(1, np.int64), potential, AbstractStates.zeros(n))
+
+
 @dataclass
 class _Setup:
     """What shaping a batch of a given shape needs: the compiled abstraction, each row's learner,
@@ -97,14 +178,13 @@ class _Setup:
     table: np.ndarray | None  # None: not fusable (neural potential, conditions, not CPU)
     shared: bool = False
     eta: float = 0.0
-    regions: tuple[np.ndarray, ...] = ()  # a SubgoalTables' arrays as the kernel reads them (looked up once)
+    regions: RegionTables | None = None  # a SubgoalTables' regions as the kernel reads them (looked up once)
     z_start: np.ndarray = field(default_factory=lambda: np.zeros((1, 1), np.int64))
 
     def __post_init__(self) -> None:
         abstraction = self.abstraction
         if isinstance(abstraction, SubgoalTables):
-            t = abstraction._np
-            self.regions = tuple(t[k] for k in ("pattern", "lo", "hi", "centre", "weight", "radius2", "succ"))
+            self.regions = abstraction.kernel_state()
         # a subgoal series starts every episode in z = 0: the kernels' z_0 column, allocated once
         self.z_start = np.zeros((max(1, self.batch_shape.numel()), 1), np.int64)
 
@@ -449,6 +529,60 @@ class SubgoalPotentialTransform(Transform):
             "one per env, or pattern_index"
         )
 
+    def kernel_state(self, tensordict: TensorDictBase) -> ShapingKernelState:
+        """This transform for a compiled loop: its abstraction, its potential and each learner's abstract
+        state as ``tensordict`` (a reset of the env through this transform) holds it, copied.
+
+        Needs the CPU, a subgoal series (regions only, no conditions), a lookup or a region aggregation, and
+        a tabular or naive potential; anything else is a ``TypeError`` that says so.
+
+        Examples:
+            >>> from torchrl_subgoal import TabularPotential
+            >>> from torchrl_subgoal.envs import FourRoomsEnv
+            >>> from torchrl.envs import TransformedEnv
+            >>> shaping = SubgoalPotentialTransform(SubgoalSeries([State(3), State(7)]), TabularPotential(3, [2]),
+            ...                                     gamma=0.9, value_lr=0.1)
+            >>> env = TransformedEnv(FourRoomsEnv(num_envs=2), shaping)
+            >>> state = shaping.kernel_state(env.reset())
+            >>> state.kind == _kernels.REGION_SHAPING, state.potential.table.shape, state.potential.value_lr
+            (True, (2, 3), 0.1)
+        """
+        abstraction = self.abstraction
+        if abstraction is None:
+            raise TypeError("kernel_state needs the env reset through the transform first (env.reset())")
+        n = self._online.batch_shape.numel() if self._online is not None else 0
+        lookup = np.zeros(1, np.int64)
+        regions = ShapingKernelState.unshaped(0).regions
+        if isinstance(abstraction, SubgoalTables):
+            if not abstraction.fusable:
+                raise TypeError("a compiled loop advances subgoal regions, not conditions")
+            kind, regions = _kernels.REGION_SHAPING, abstraction.kernel_state()
+        elif isinstance(abstraction.mapping, torch.Tensor):
+            kind, lookup = _kernels.LOOKUP_SHAPING, abstraction.mapping.numpy()
+        elif abstraction.regions is not None:
+            kind, regions = _kernels.REGION_SHAPING, abstraction.regions
+        else:
+            raise TypeError("a compiled loop needs a subgoal series, a lookup or a region aggregation, "
+                            "not a function aggregation")
+        pot = self.potential
+        table, eta = _NO_TABLE, 0.0
+        if isinstance(pot, TabularPotential):
+            if pot.table.device.type != "cpu":
+                raise TypeError(f"a compiled loop reads the potential's table on the CPU, not {pot.table.device}")
+            table = pot.table.detach().numpy().reshape(-1, pot.num_states)
+        elif isinstance(pot, NaivePotential):
+            eta = pot.eta
+        else:
+            raise TypeError(f"a compiled loop shapes with tabular or naive potentials, not {type(pot).__name__}")
+        potential = PotentialKernelState(table, eta, self.gamma, self.value_gamma,
+                                         self._value_lr if self.learning else 0.0, self.zero_terminal_potential,
+                                         self._start_mode)
+        keys = self.keys
+        z, r_h, k = (tensordict.get(name).reshape(n, 1).numpy().copy() for name in (keys.index, keys.ret, keys.steps))
+        # both envs of the fused engine start every episode in the same place
+        return ShapingKernelState(kind, regions, lookup, potential,
+                                  AbstractStates(z, np.zeros((n, 1), np.bool_), r_h, k, z.copy()))
+
     def _check_potential(self, n_learners: int) -> None:
         pot = self.potential
         if isinstance(pot, TabularPotential):
@@ -728,7 +862,9 @@ class SubgoalPotentialTransform(Transform):
             extra = (rh_acc[1], k_acc[1], emit[1])
         else:
             extra = _NO_TRANSITION
-        lr = self._value_lr if learn else 0.0
+        potential = PotentialKernelState(setup.table, setup.eta, self.gamma, self.value_gamma,
+                                         self._value_lr if learn else 0.0, self.zero_terminal_potential,
+                                         self._start_mode)
         # the step's z, r_h and k are usually last step's outputs (TorchRL moves them from "next" to the root):
         # their numpy views are kept, which saves the tensor-to-numpy crossings
         # (in line: this runs every step) a view is reused only while its tensor is on the same memory
@@ -744,20 +880,19 @@ class SubgoalPotentialTransform(Transform):
         start = _col(current[keys.start], n, keys.start) if keys.start in current else setup.z_start
         shaping = (
             _col(current[keys.achieved], n, keys.achieved) if keys.achieved in current else z_col,
-            rh_col, k_col, reward_col, _col(done, n, "done"),
-            _col(terminated, n, "terminated"), setup.table, setup.shared, setup.eta, self.gamma, self.value_gamma,
-            lr, self.zero_terminal_potential, self._start_mode, start,
+            rh_col, k_col, reward_col, _col(done, n, "done"), _col(terminated, n, "terminated"), start,
         )
-        if setup.regions:
+        if setup.regions is not None:
             rows = setup.abstraction.rows(obs).numpy()  # type: ignore[union-attr]
-            if not _kernels.advance_and_shape(z_col, rows, *setup.regions, *shaping, z_next[1], rh_out[1], k_out[1],
-                                              shaped[1], *extra):
+            if not _kernels.advance_and_shape(setup.regions, potential, setup.shared, z_col, rows, *shaping,
+                                              z_next[1], rh_out[1], k_out[1], shaped[1], *extra):
                 _check_finite(reward, obs, self.reward_key, self.observation_key)  # raises, naming the entry
                 raise ValueError(f"SubgoalPotentialTransform: {self.reward_key!r} is not finite or "
                                  f"{self.observation_key!r} holds a NaN")
         else:
             z_next = (setup.abstraction.advance(z, obs), np.empty(0))
-            _kernels.shape_step(z_col, _col(z_next[0], n, "z'"), *shaping, rh_out[1], k_out[1], shaped[1], *extra)
+            _kernels.shape_step(potential, setup.shared, z_col, _col(z_next[0], n, "z'"), *shaping, rh_out[1],
+                                k_out[1], shaped[1], *extra)
         if reward is not env_reward:  # a second transform: shape the (already shaped) reward, accumulate r
             shaped[1][:] += _col(reward, n, "reward") - reward_col
         out: dict[str, Any] = {

@@ -5,7 +5,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 import torch
@@ -14,7 +14,7 @@ from tensordict.utils import NestedKey
 
 from torchrl_subgoal import _kernels
 
-__all__ = ["AC_PRESETS", "ActorCriticConfig", "FourierActorCritic", "fourier_coefficients"]
+__all__ = ["AC_PRESETS", "ActorCriticConfig", "ActorCriticKernelState", "FourierActorCritic", "fourier_coefficients"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +73,32 @@ def fourier_coefficients(order: int, dim: int) -> torch.Tensor:
         torch.Size([256, 4])
     """
     return torch.tensor(list(itertools.product(range(order + 1), repeat=dim)), dtype=torch.float64)
+
+
+class ActorCriticKernelState(NamedTuple):
+    """A :class:`FourierActorCritic`'s weights, scratch and settings for compiled loops (arrays updated in place).
+
+    Examples:
+        >>> agent = FourierActorCritic(2, [0.0] * 4, [1.0] * 4, 5, AC_PRESETS["released"], seed=0)
+        >>> state = agent.kernel_state()
+        >>> state.w.shape, state.theta.shape, state.q_critic  # the released agent's critic is Q(s, a)
+        ((2, 1280), (2, 5, 256), True)
+    """
+
+    w: np.ndarray  #: ``[N, F]`` (or ``[N, A·F]`` for the ``"action"`` critic) critic weights
+    theta: np.ndarray  #: ``[N, A, F]`` actor weights
+    phi: np.ndarray  #: ``[N, F]`` features of each learner's current state
+    probs: np.ndarray  #: ``[N, A]`` the policy at that state (scratch for the ``"action"`` critic)
+    streams: np.ndarray  #: ``[N, 4]`` uint64 random stream of every learner
+    low: np.ndarray  #: ``[D]`` lower bounds of the observation
+    inv_range: np.ndarray  #: ``[D]`` ``1 / (high − low)``
+    order: int  #: order of the Fourier basis
+    half: int  #: dimensions in the first half of the feature product
+    actor_lr: float  #: actor learning rate
+    critic_lr: float  #: critic learning rate
+    gamma: float  #: discount
+    normalize: bool  #: divide both rates by ``‖φ(s)‖``
+    q_critic: bool  #: the ``"action"`` critic ``Q(s, a)`` (else ``V(s)``)
 
 
 class FourierActorCritic:
@@ -148,6 +174,20 @@ class FourierActorCritic:
         self.streams = _kernels.new_streams(_kernels.learner_keys(seed, num_learners), _kernels.AGENT_STREAM)
         self.observation_key = observation_key
         self._step_kernel = _kernels.qac_step if q_critic else _kernels.ac_step
+
+    def kernel_state(self) -> ActorCriticKernelState:
+        """The weights, features, random streams and settings, as a compiled loop reads them (numpy views).
+
+        Examples:
+            >>> agent = FourierActorCritic(2, [0.0] * 4, [1.0] * 4, 5, AC_PRESETS["paper"], seed=0)
+            >>> state = agent.kernel_state()
+            >>> state.w.shape, state.order, state.q_critic
+            ((2, 256), 3, False)
+        """
+        cfg = self.config
+        return ActorCriticKernelState(self.w, self.theta, self.phi, self.probs, self.streams, self.low,
+                                      self.inv_range, cfg.order, self.half, cfg.actor_lr, cfg.critic_lr, cfg.gamma,
+                                      cfg.normalize_lr, cfg.critic == "action")
 
     def features(self, observation: torch.Tensor) -> torch.Tensor:
         """``φ(s)`` of a batch of observations ``[N, D]`` (the kernel's features, for inspection)."""

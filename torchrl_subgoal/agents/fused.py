@@ -35,7 +35,7 @@ refused here.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import TypeVar
 
 import numba
 import numpy as np
@@ -45,13 +45,12 @@ from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal import _kernels
 from torchrl_subgoal.agents.actor_critic import FourierActorCritic
-from torchrl_subgoal.agents.records import EpisodeRecords
+from torchrl_subgoal.agents.records import EpisodeArrays, EpisodeRecords
 from torchrl_subgoal.agents.sarsa import SoftmaxSarsa
 from torchrl_subgoal.envs.four_rooms import FourRoomsEnv
-from torchrl_subgoal.envs.pinball import PinBallEnv, step_ball
-from torchrl_subgoal.potentials import NaivePotential, TabularPotential
-from torchrl_subgoal.subgoals import StateAggregation, SubgoalTables
-from torchrl_subgoal.transform import SubgoalPotentialTransform
+from torchrl_subgoal.envs.pinball import PinBallEnv, ball_reset, ball_step
+from torchrl_subgoal.potentials import TabularPotential
+from torchrl_subgoal.transform import ShapingKernelState, SubgoalPotentialTransform
 
 __all__ = ["run_episodes_fused", "run_four_rooms_fused", "run_pinball_fused"]
 
@@ -77,67 +76,31 @@ def _unwrap(env: EnvBase, base_type: type[B]) -> tuple[B, SubgoalPotentialTransf
 def _run_blocks(
     n: int,
     episodes: int,
-    run_block: Callable[[tuple[np.ndarray, ...]], tuple[int, int]],
+    run_block: Callable[[EpisodeArrays], tuple[int, int]],
     progress: Callable[[int], None] | None,
 ) -> EpisodeRecords:
     """Call ``run_block(records)`` (one compiled block of steps) until every learner has
     ``episodes`` episodes; ``records`` are the arrays the kernels file episodes into."""
-    steps = torch.zeros(n, episodes, dtype=torch.long)
-    returns = torch.zeros(n, episodes)
-    success = torch.zeros(n, episodes, dtype=torch.bool)
-    done_episodes = np.zeros(n, np.int64)
-    records = (np.zeros(n, np.int64), np.zeros(n), done_episodes, steps.numpy(), returns.numpy(), success.numpy())
-    env_steps = 0
-    while done_episodes.min() < episodes:
+    out = EpisodeRecords(torch.zeros(n, episodes, dtype=torch.long), torch.zeros(n, episodes),
+                         torch.zeros(n, episodes, dtype=torch.bool))
+    records = EpisodeArrays.zeros(out)
+    while records.episode.min() < episodes:
         taken, filed = run_block(records)
-        env_steps += taken
+        out.env_steps += taken
         if progress is not None and filed:
             progress(filed)
-    return EpisodeRecords(steps, returns, success, env_steps)
+    return out
 
 
-def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase, n: int) -> dict[str, Any]:
-    """The transform's tables, its per-learner state after reset and its potential, as arrays."""
-    empty3 = np.zeros((n, 1, 1), np.float32)
-    state: dict[str, Any] = {
-        "kind": _kernels.NO_SHAPING,
-        "regions": (np.zeros(n, np.int64), empty3, empty3, empty3, empty3, np.zeros((n, 1), np.float32),
-                    np.zeros((n, 1, 1), np.bool_)),
-        "lookup": np.zeros(1, np.int64),
-        "z": np.zeros((n, 1), np.int64), "achieved": np.zeros((n, 1), np.bool_),
-        "r_h": np.zeros((n, 1), np.float32), "k": np.zeros((n, 1), np.int64),
-        "table": np.zeros((0, 1), np.float32), "shared": False, "eta": 0.0,
-        "gamma": 0.0, "value_gamma": 0.0, "value_lr": 0.0, "zero_terminal": False, "start_mode": _kernels.START_VALUE,
-        "z_start": np.zeros((n, 1), np.int64),
-    }
+def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase, n: int) -> ShapingKernelState:
+    """The transform's record (no shaping without one); a potential shared by all learners is refused."""
     if shaping is None:
-        return state
-    abstraction = shaping.abstraction
-    if isinstance(abstraction, SubgoalTables):
-        t = abstraction._np
-        state["kind"] = _kernels.SUBGOAL_SHAPING
-        state["regions"] = (t["pattern"], t["lo"], t["hi"], t["centre"], t["weight"], t["radius2"], t["succ"])
-    elif isinstance(abstraction, StateAggregation) and isinstance(abstraction.mapping, torch.Tensor):
-        state["kind"] = _kernels.LOOKUP_SHAPING
-        state["lookup"] = abstraction.mapping.numpy()
-    elif not (isinstance(abstraction, StateAggregation) and abstraction.regions is not None):
-        raise TypeError("the fused engine needs a subgoal series, a lookup or a region aggregation")
-    potential = shaping.potential
-    if isinstance(potential, TabularPotential):
-        state["table"] = potential.table.detach().numpy().reshape(-1, potential.num_states)
-        state["shared"] = state["table"].shape[0] == 1 and not potential.batch_shape
-    elif isinstance(potential, NaivePotential):
-        state["eta"] = potential.eta
-    else:
-        raise TypeError(f"the fused engine shapes with tabular or naive potentials, not {type(potential).__name__}")
-    for key, name in (("z", "subgoal_index"), ("r_h", "subgoal_return"), ("k", "subgoal_steps")):
-        state[key] = td.get(name).reshape(n, 1).numpy().copy()
-    state["z_start"] = state["z"].copy()  # both envs start every episode in the same place
-    state["gamma"], state["value_gamma"] = shaping.gamma, shaping.value_gamma
-    state["value_lr"] = shaping._value_lr if shaping.learning else 0.0
-    state["zero_terminal"] = shaping.zero_terminal_potential
-    state["start_mode"] = shaping._start_mode
-    return state
+        return ShapingKernelState.unshaped(n)
+    pot = shaping.potential
+    if isinstance(pot, TabularPotential) and not pot.batch_shape:
+        raise TypeError("the fused engine stops learners that have their episodes, so each needs its own "
+                        "potential table (a TabularPotential with the env's batch shape); use engine='torchrl'")
+    return shaping.kernel_state(td)
 
 
 def run_episodes_fused(
@@ -194,125 +157,76 @@ def run_four_rooms_fused(
     n = max(1, base.batch_size.numel())
     action = td.get("action").reshape(-1).numpy().copy()
     state = _shaping_state(shaping, td, n)
-    observe_cell = shaping is not None and shaping.observation_key == "cell"
-    if shaping is not None and shaping.observation_key not in ("cell", "observation"):
-        raise TypeError(f"the fused engine reads 'cell' or 'observation', not {shaping.observation_key!r}")
-    if state["kind"] == _kernels.LOOKUP_SHAPING and observe_cell:
-        raise TypeError("a lookup aggregation reads the state number ('observation')")
-    initial_z = int(state["lookup"][base.start_state]) if state["kind"] == _kernels.LOOKUP_SHAPING else 0
-    _check_own_tables(state)
-    cfg = agent.config
-    grid, q = base.kernel_state(), agent.q.numpy()
+    grid = base.kernel_state()
+    observations = np.arange(grid.cells.shape[0]).reshape(-1, 1)  # what the shaping reads: the state number…
+    if shaping is not None:
+        if shaping.observation_key not in ("cell", "observation"):
+            raise TypeError(f"the fused engine reads 'cell' or 'observation', not {shaping.observation_key!r}")
+        if shaping.observation_key == "cell":
+            if state.kind == _kernels.LOOKUP_SHAPING:
+                raise TypeError("a lookup aggregation reads the state number ('observation')")
+            observations = grid.cells  # … or its cell
+    sarsa = agent.kernel_state()
 
-    def run_block(records: tuple[np.ndarray, ...]) -> tuple[int, int]:
-        return _kernels.sarsa_grid_run(
-            *grid,
-            base.start_state, base.goal_state, base.max_steps, base.goal_reward, base.step_reward,
-            state["kind"], observe_cell, *state["regions"], state["lookup"], initial_z,
-            state["z"], state["achieved"], state["r_h"], state["k"], state["table"],
-            state["eta"], state["gamma"], state["value_gamma"], state["value_lr"], state["zero_terminal"],
-            state["start_mode"], state["z_start"], q, agent.abstract_states, action, cfg.lr, cfg.gamma,
-            1.0 / cfg.temperature, agent.streams, block, *records,
-        )
+    def run_block(records: EpisodeArrays) -> tuple[int, int]:
+        return _kernels.sarsa_grid_run(grid, observations, state, sarsa, action, block, records)
 
     return _run_blocks(n, episodes, run_block, progress)
-
-
-def _check_own_tables(state: dict[str, Any]) -> None:
-    """The fused engine stops learners that have their episodes: each must own its potential table."""
-    if state["shared"]:
-        raise TypeError("the fused engine stops learners that have their episodes, so each needs its own "
-                        "potential table (a TabularPotential with the env's batch shape); use engine='torchrl'")
 
 
 # --------------------------------------------------------------------------- PinBall
 
 
 @numba.njit(cache=True, nogil=True)
-def _pinball_ac_run(
-    # the env: state arrays updated in place, geometry, dynamics settings, the balls' random streams
-    position, velocity, env_steps, start_x, start_y, edges, boxes, first_edge, ball_radius,
-    target_x, target_y, target_radius, velocity_limit, max_steps, random_prob, goal_reward,
-    step_penalty, thrust_penalty, env_streams,
-    # the shaping transform
-    shaping, pattern, lo, hi, centre, weight, radius2, succ, region_lo, region_hi, region_centre, region_weight,
-    region_radius2, z, achieved, r_h, k, table, eta, gamma_shaping, value_gamma, value_lr, zero_terminal,
-    start_mode, z_start,
-    # the actor-critic learners and their random streams
-    w, theta, phi, probs, action, low, inv_range, order, half, agent_streams, actor_lr, critic_lr, gamma, normalize,
-    q_critic, max_steps_run,
-    # records
-    t_rec, ret, episode, steps_out, returns_out, success_out,
-):
+def _pinball_ac_run(balls, shaping, learner, action, max_steps_run, records):
     """PinBall + shaping + actor-critic, per learner the TorchRL loop's kernels in its order (see module doc).
 
+    ``balls``, ``shaping`` and ``learner`` are the records the env, the shaping
+    transform and the learner give (``kernel_state()``), updated in place;
+    ``action[b]`` is learner ``b``'s next action; episodes are filed in
+    ``records`` (:class:`~torchrl_subgoal.agents.records.EpisodeArrays`).
     Learners are independent (own streams, own tables), so each runs its
     steps of the block in one go (its tables stay in the core's cache) and
     one that has all its episodes stops. At most ``max_steps_run`` steps per
     learner; returns ``(steps of the longest-running learner, episodes filed)``:
     the steps the TorchRL loop's batch would take for the same block.
     """
-    n_actions = 5
-    obs = np.empty(4, np.float32)
+    obs = np.empty((1, 4), np.float32)  # one row: the shaping reads observations[0]
     obs_next = np.empty(4, np.float64)
-    obs_root = np.empty(4, np.float64)
-    candidates = np.empty(edges.shape[0], np.int64)
-    owners = np.empty(edges.shape[0], np.int64)
-    scratch, phi_next = _kernels._feature_scratch(order, half, 4, theta.shape[2])
-    max_episodes = steps_out.shape[1]
-    active, n_active = _kernels._active_learners(episode, max_episodes)
+    obs_root = np.empty((1, 4), np.float64)
+    candidates = np.empty(balls.edges.shape[0], np.int64)
+    owners = np.empty(balls.edges.shape[0], np.int64)
+    scratch, phi_next = _kernels._feature_scratch(learner.order, learner.half, 4, learner.theta.shape[2])
+    kind, regions, lookup, potential, learners = shaping
+    active, n_active = _kernels._active_learners(records.episode, records.steps.shape[1])
     filed_total = 0
     taken = 0
     for i in range(n_active):
         b = active[i]
         steps = max_steps_run
         for step in range(max_steps_run):
-            executed = _kernels._random_action(action[b], env_streams, b, random_prob, n_actions)
-            px, py, vx, vy, terminated = step_ball(
-                position[b, 0], position[b, 1], velocity[b, 0], velocity[b, 1], executed, edges, boxes, first_edge,
-                ball_radius, target_x, target_y, target_radius, velocity_limit, candidates, owners)
-            env_steps[b] += 1
-            done = terminated or env_steps[b] >= max_steps
-            r = goal_reward if terminated else 0.0
-            if step_penalty != 0.0 or thrust_penalty != 0.0:
-                r += thrust_penalty if executed != n_actions - 1 else step_penalty
-            reward = np.float32(r)
-            obs[0], obs[1], obs[2], obs[3] = px, py, vx, vy
-            zb = z[b, 0]
-            znb = zb
-            if shaping == _kernels.SUBGOAL_SHAPING:
-                znb = _kernels._advance_one(zb, obs, pattern[b], lo, hi, centre, weight, radius2, succ)
-            elif shaping == _kernels.LOOKUP_SHAPING:
-                znb = _kernels._first_region_one(zb, obs, region_lo, region_hi, region_centre, region_weight,
-                                                 region_radius2)
-            shaped, rh_new, k_new = _kernels._transform_learner(
-                b, shaping, zb, znb, achieved, r_h, k, reward, done, terminated, table, eta, gamma_shaping,
-                value_gamma, value_lr, zero_terminal, start_mode, z_start)
-            _kernels._carry_learner(b, done, shaping, 0, zb, znb, z, achieved, r_h, k, rh_new, k_new)
+            px, py, vx, vy, reward, terminated, done = ball_step(balls, b, action[b], candidates, owners)
+            obs[0, 0], obs[0, 1], obs[0, 2], obs[0, 3] = px, py, vx, vy
+            zb = learners.z[b, 0]
+            znb, shaped, rh_new, k_new = zb, reward, 0.0, 0
+            if kind != _kernels.NO_SHAPING:  # the transform's step
+                znb = _kernels.shaping_advance(kind, regions, lookup, b, zb, obs, 0)
+                shaped, rh_new, k_new = _kernels.shaping_step(potential, learners, b, zb, znb, reward, done,
+                                                              terminated)
             for d in range(4):
-                obs_next[d] = obs[d]
+                obs_next[d] = obs[0, d]
             if done:  # the env and the transform reset this ball
-                px, py, vx, vy = start_x, start_y, 0.0, 0.0
-                env_steps[b] = 0
-            position[b, 0], position[b, 1] = px, py
-            velocity[b, 0], velocity[b, 1] = vx, vy
-            obs_root[0] = np.float32(px)
-            obs_root[1] = np.float32(py)
-            obs_root[2] = np.float32(vx)
-            obs_root[3] = np.float32(vy)
-            if shaping == _kernels.LOOKUP_SHAPING and done:  # region aggregation: z of the reset state
-                z[b, 0] = _kernels._first_region_one(z[b, 0], obs_root, region_lo, region_hi, region_centre,
-                                                     region_weight, region_radius2)
-            if q_critic:
-                action[b] = _kernels._qac_learner(b, w, theta, phi, probs, action[b], shaped, obs_next, terminated,
-                                                  done, obs_root, low, inv_range, order, half, agent_streams,
-                                                  actor_lr, critic_lr, gamma, normalize, scratch, phi_next)
-            else:
-                action[b] = _kernels._ac_learner(b, w, theta, phi, probs, action[b], shaped, obs_next, terminated,
-                                                 done, obs_root, low, inv_range, order, half, agent_streams,
-                                                 actor_lr, critic_lr, gamma, normalize, scratch, phi_next)
-            filed, finished = _kernels._record_and_stop(b, done, terminated, reward, t_rec, ret, episode, steps_out,
-                                                        returns_out, success_out)
+                px, py, vx, vy = ball_reset(balls, b)
+            obs_root[0, 0] = np.float32(px)
+            obs_root[0, 1] = np.float32(py)
+            obs_root[0, 2] = np.float32(vx)
+            obs_root[0, 3] = np.float32(vy)
+            z_reset = _kernels.shaping_start(kind, regions, lookup, b, obs_root, 0) if done else 0
+            if kind != _kernels.NO_SHAPING or done:
+                _kernels.shaping_carry(learners, b, done, z_reset, zb, znb, rh_new, k_new)
+            action[b] = _kernels.ac_learner_step(learner, b, action[b], shaped, obs_next, terminated, done,
+                                                 obs_root[0], scratch, phi_next)
+            filed, finished = _kernels._record_and_stop(b, done, terminated, reward, records)
             filed_total += filed
             if finished:
                 steps = step + 1
@@ -347,32 +261,12 @@ def run_pinball_fused(
     td = agent.act(env.reset())
     n = base.batch_size.numel()
     action = td.get("action").reshape(-1).numpy().copy()
-    region: dict[str, np.ndarray] = {k: np.zeros((1, 4), np.float32) for k in ("lo", "hi", "centre", "weight")}
-    region["radius2"] = np.zeros(1, np.float32)
     state = _shaping_state(shaping, td, n)
-    kind = state["kind"]
-    if shaping is not None and isinstance(shaping.abstraction, StateAggregation):
-        if shaping.abstraction.regions is None:
-            raise TypeError("the fused PinBall engine needs a region aggregation (StateAggregation.from_regions)")
-        region = shaping.abstraction.regions
-        kind = _kernels.LOOKUP_SHAPING
-    _check_own_tables(state)
-    g = base.physics.geometry
-    tx, ty, tr = g.target
-    cfg = agent.config
-    balls = base.kernel_state()
+    if state.kind == _kernels.LOOKUP_SHAPING:
+        raise TypeError("the fused PinBall engine needs a region aggregation (StateAggregation.from_regions)")
+    balls, learner = base.kernel_state(), agent.kernel_state()
 
-    def run_block(records: tuple[np.ndarray, ...]) -> tuple[int, int]:
-        return _pinball_ac_run(
-            *balls, base.start[0], base.start[1],
-            g.edges, g.boxes, g.first_edge, g.ball_radius, tx, ty, tr, base.physics.velocity_limit,
-            base.max_steps, base.random_action_prob, base.goal_reward, base.step_penalty, base.thrust_penalty,
-            base.streams, kind, *state["regions"], region["lo"], region["hi"], region["centre"], region["weight"],
-            region["radius2"], state["z"], state["achieved"], state["r_h"], state["k"], state["table"],
-            state["eta"], state["gamma"], state["value_gamma"], state["value_lr"],
-            state["zero_terminal"], state["start_mode"], state["z_start"], agent.w, agent.theta, agent.phi,
-            agent.probs, action, agent.low, agent.inv_range, cfg.order, agent.half, agent.streams, cfg.actor_lr,
-            cfg.critic_lr, cfg.gamma, cfg.normalize_lr, cfg.critic == "action", block, *records,
-        )
+    def run_block(records: EpisodeArrays) -> tuple[int, int]:
+        return _pinball_ac_run(balls, state, learner, action, block, records)
 
     return _run_blocks(n, episodes, run_block, progress)

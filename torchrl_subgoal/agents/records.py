@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
+import numpy as np
 import torch
 
-__all__ = ["EpisodeRecords"]
+__all__ = ["EpisodeArrays", "EpisodeRecords"]
 
 
 @dataclass
@@ -27,3 +29,29 @@ class EpisodeRecords:
     returns: torch.Tensor
     success: torch.Tensor
     env_steps: int = 0
+
+
+class EpisodeArrays(NamedTuple):
+    """The arrays a compiled loop files episodes into (numpy, updated in place): per-learner
+    counters, then ``[num_learners, num_episodes]`` results (views of an :class:`EpisodeRecords`'s).
+
+    Examples:
+        >>> arrays = EpisodeArrays.zeros(EpisodeRecords(torch.zeros(2, 3, dtype=torch.long), torch.zeros(2, 3),
+        ...                                             torch.zeros(2, 3, dtype=torch.bool)))
+        >>> arrays.steps.shape, arrays.episode.tolist()
+        ((2, 3), [0, 0])
+    """
+
+    t: np.ndarray  #: ``[N]`` steps into the current episode
+    ret: np.ndarray  #: ``[N]`` return of the current episode so far
+    episode: np.ndarray  #: ``[N]`` episodes filed
+    steps: np.ndarray  #: ``[N, E]`` steps of every episode
+    returns: np.ndarray  #: ``[N, E]`` returns
+    success: np.ndarray  #: ``[N, E]`` whether it terminated
+
+    @classmethod
+    def zeros(cls, records: EpisodeRecords) -> EpisodeArrays:
+        """Zero counters and views of ``records``' tensors (CPU)."""
+        n = records.steps.shape[0]
+        return cls(np.zeros(n, np.int64), np.zeros(n), np.zeros(n, np.int64), records.steps.numpy(),
+                   records.returns.numpy(), records.success.numpy())

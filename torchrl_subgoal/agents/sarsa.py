@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -12,7 +13,7 @@ from tensordict.utils import NestedKey
 
 from torchrl_subgoal import _kernels
 
-__all__ = ["SARSA_PRESETS", "SarsaConfig", "SoftmaxSarsa"]
+__all__ = ["SARSA_PRESETS", "SarsaConfig", "SarsaKernelState", "SoftmaxSarsa"]
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,24 @@ SARSA_PRESETS: dict[str, SarsaConfig] = {
     "paper": SarsaConfig(lr=0.01, gamma=0.99, temperature=0.01, value_lr=0.01),
     "released": SarsaConfig(lr=0.25, gamma=0.99, temperature=0.01, value_lr=0.25),
 }
+
+
+class SarsaKernelState(NamedTuple):
+    """A :class:`SoftmaxSarsa`'s tables and settings for compiled loops (arrays are views, updated in place).
+
+    Examples:
+        >>> agent = SoftmaxSarsa(2, 104, 4, SARSA_PRESETS["released"], seed=0, abstract_states=3)
+        >>> state = agent.kernel_state()
+        >>> state.q.shape, state.streams.shape, state.abstract_states
+        ((2, 312, 4), (2, 4), 3)
+    """
+
+    q: np.ndarray  #: ``[N, S·Z, A]`` float32 Q table of every learner (a view of :attr:`SoftmaxSarsa.q`)
+    streams: np.ndarray  #: ``[N, 4]`` uint64 random stream of every learner
+    abstract_states: int  #: ``Z``: rows are ``s · Z + z`` when > 1
+    lr: float  #: ``α``
+    gamma: float  #: ``γ``
+    inv_temperature: float  #: ``1 / τ``
 
 
 class SoftmaxSarsa:
@@ -113,6 +132,19 @@ class SoftmaxSarsa:
         self.observation_key = observation_key
         self._rows = torch.arange(num_learners)
         self._q = self.q.numpy()  # the kernels update the table in place through this view
+
+    def kernel_state(self) -> SarsaKernelState:
+        """The table, the random streams and the settings, as a compiled loop reads them (numpy views).
+
+        Examples:
+            >>> agent = SoftmaxSarsa(2, 5, 4, SARSA_PRESETS["released"], seed=0)
+            >>> agent.kernel_state().q[0, 1, 2] = 1.0  # a view: the agent's table changes
+            >>> float(agent.q[0, 1, 2])
+            1.0
+        """
+        cfg = self.config
+        return SarsaKernelState(self.q.numpy(), self.streams, self.abstract_states, cfg.lr, cfg.gamma,
+                                1.0 / cfg.temperature)
 
     def sample(self, state: torch.Tensor) -> torch.Tensor:
         """Softmax actions for each learner's table row ``[N]`` (see :meth:`state`)."""

@@ -111,7 +111,8 @@ def check_subgoal(predicate: Predicate) -> str | None:
 
 
 class GridKernelState(NamedTuple):
-    """A :class:`FourRoomsEnv`'s state and tables as numpy views, for compiled loops (updated in place).
+    """A :class:`FourRoomsEnv`'s state and tables as numpy views, and its settings, for compiled loops
+    (:func:`~torchrl_subgoal._kernels.grid_step_one` steps one learner in place).
 
     Examples:
         >>> state = FourRoomsEnv(num_envs=2).kernel_state()
@@ -123,6 +124,11 @@ class GridKernelState(NamedTuple):
     t: np.ndarray  #: ``[N]`` steps into the episode
     transitions: np.ndarray  #: ``[S, 4]`` next state of every state and action
     cells: np.ndarray  #: ``[S, 2]`` (row, column) of every state
+    start: int  #: the start state
+    goal: int  #: the goal state
+    max_steps: int  #: steps before truncation
+    goal_reward: float  #: reward on reaching the goal
+    step_reward: float  #: reward of every other step
 
 
 class FourRoomsEnv(EnvBase):
@@ -212,8 +218,7 @@ class FourRoomsEnv(EnvBase):
         mask = torch.ones(n, dtype=torch.bool, device=self.device) if reset is None else reset.reshape(-1)
         cell = torch.empty((*shape, 2), dtype=torch.long, device=self.device)
         if self.device.type == "cpu":
-            _kernels.grid_reset(self._state.numpy(), self._t.numpy(), mask.numpy(), self.start_state,
-                                self._cells_np, cell.numpy().reshape(n, 2))
+            _kernels.grid_reset(self.kernel_state(), mask.numpy(), cell.numpy().reshape(n, 2))
         else:
             self._state.masked_fill_(mask, self.start_state)
             self._t.masked_fill_(mask, 0)
@@ -240,12 +245,8 @@ class FourRoomsEnv(EnvBase):
         truncated = torch.empty((*shape, 1), dtype=torch.bool, device=self.device)
         cell = torch.empty((*shape, 2), dtype=torch.long, device=self.device)
         if self.device.type == "cpu":
-            _kernels.grid_step(
-                self._state.numpy(), self._t.numpy(), action.numpy(), self._transitions_np, self._cells_np,
-                self.goal_state, self.max_steps, self.goal_reward, self.step_reward,
-                reward.numpy().reshape(n), terminated.numpy().reshape(n),
-                truncated.numpy().reshape(n), cell.numpy().reshape(n, 2),
-            )
+            _kernels.grid_step(self.kernel_state(), action.numpy(), reward.numpy().reshape(n),
+                               terminated.numpy().reshape(n), truncated.numpy().reshape(n), cell.numpy().reshape(n, 2))
         else:
             self._state = self.transitions[self._state, action]
             self._t += 1
@@ -278,7 +279,8 @@ class FourRoomsEnv(EnvBase):
         """
         if self.device.type != "cpu":
             raise TypeError(f"kernel_state needs a CPU env, not {self.device}")
-        return GridKernelState(self._state.numpy(), self._t.numpy(), self._transitions_np, self._cells_np)
+        return GridKernelState(self._state.numpy(), self._t.numpy(), self._transitions_np, self._cells_np,
+                               self.start_state, self.goal_state, self.max_steps, self.goal_reward, self.step_reward)
 
     def shortest_path_length(self) -> int:
         """Steps of the shortest start-to-goal path (breadth-first search; 20)."""

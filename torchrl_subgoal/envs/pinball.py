@@ -388,7 +388,8 @@ def step_ball(
 
 
 class BallKernelState(NamedTuple):
-    """A :class:`PinBallEnv`'s balls as numpy views, for compiled loops (updated in place).
+    """A :class:`PinBallEnv`'s balls as numpy views, its map and its settings, for compiled loops
+    (:func:`ball_step` steps one ball in place).
 
     Examples:
         >>> state = PinBallEnv(3, seed=0).kernel_state()
@@ -399,6 +400,69 @@ class BallKernelState(NamedTuple):
     position: np.ndarray  #: ``[N, 2]`` ball centres
     velocity: np.ndarray  #: ``[N, 2]`` velocities
     steps: np.ndarray  #: ``[N]`` steps into the episode
+    streams: np.ndarray  #: ``[N, 4]`` the balls' random streams (random actions)
+    start_x: float  #: start position
+    start_y: float
+    edges: np.ndarray  #: the map's edges, polygon boxes and first edge per polygon (see :func:`step_ball`)
+    boxes: np.ndarray
+    first_edge: np.ndarray
+    ball_radius: float
+    target_x: float
+    target_y: float
+    target_radius: float
+    velocity_limit: float
+    max_steps: int  #: steps before truncation
+    random_prob: float  #: probability that a random action replaces the chosen one
+    goal_reward: float
+    step_penalty: float
+    thrust_penalty: float
+
+
+_NUM_ACTIONS, _NO_THRUST = len(ACTION_NAMES), ACTION_NAMES.index("none")  # ints: numba reads them as constants
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def ball_step(balls: BallKernelState, b: int, a: int, candidates: np.ndarray, owners: np.ndarray,
+              ) -> tuple[float, float, float, float, np.float32, bool, bool]:
+    """Ball ``b``'s env step with action ``a`` (``balls`` updated in place), as :meth:`PinBallEnv.step` does it:
+    ``(x, y, vx, vy, reward as float32, terminated, done)``. ``candidates``, ``owners``: :func:`step_ball`'s scratch.
+
+    Examples:
+        >>> import numpy as np
+        >>> balls = PinBallEnv(1, seed=0).kernel_state()
+        >>> scratch = np.empty(balls.edges.shape[0], dtype=np.int64)
+        >>> x, y, vx, vy, reward, terminated, done = ball_step(balls, 0, 0, scratch, scratch.copy())
+        >>> bool(vx > 0.0), int(balls.steps[0]), bool(done)
+        (True, 1, False)
+    """
+    executed = _kernels._random_action(a, balls.streams, b, balls.random_prob, _NUM_ACTIONS)
+    px, py, vx, vy, terminated = step_ball(
+        balls.position[b, 0], balls.position[b, 1], balls.velocity[b, 0], balls.velocity[b, 1], executed,
+        balls.edges, balls.boxes, balls.first_edge, balls.ball_radius, balls.target_x, balls.target_y,
+        balls.target_radius, balls.velocity_limit, candidates, owners)
+    balls.position[b, 0], balls.position[b, 1] = px, py
+    balls.velocity[b, 0], balls.velocity[b, 1] = vx, vy
+    balls.steps[b] += 1
+    done = terminated or balls.steps[b] >= balls.max_steps
+    r = balls.goal_reward if terminated else 0.0
+    if balls.step_penalty != 0.0 or balls.thrust_penalty != 0.0:
+        r += balls.thrust_penalty if executed != _NO_THRUST else balls.step_penalty
+    return px, py, vx, vy, np.float32(r), terminated, done
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def ball_reset(balls: BallKernelState, b: int) -> tuple[float, float, float, float]:
+    """Put ball ``b`` back at the start, at rest: ``(x, y, vx, vy)``.
+
+    Examples:
+        >>> balls = PinBallEnv(1, seed=0).kernel_state()
+        >>> ball_reset(balls, 0)[2:], int(balls.steps[0])
+        ((0.0, 0.0), 0)
+    """
+    balls.position[b, 0], balls.position[b, 1] = balls.start_x, balls.start_y
+    balls.velocity[b, 0], balls.velocity[b, 1] = 0.0, 0.0
+    balls.steps[b] = 0
+    return balls.start_x, balls.start_y, 0.0, 0.0
 
 
 def _step_balls(
@@ -814,7 +878,12 @@ class PinBallEnv(EnvBase):
         """
         if self.device.type != "cpu":
             raise TypeError(f"kernel_state needs a CPU env, not {self.device}")
-        return BallKernelState(self._position.numpy(), self._velocity.numpy(), self._steps.numpy())
+        g = self.physics.geometry
+        tx, ty, tr = g.target
+        return BallKernelState(
+            self._position.numpy(), self._velocity.numpy(), self._steps.numpy(), self.streams, self.start[0],
+            self.start[1], g.edges, g.boxes, g.first_edge, g.ball_radius, tx, ty, tr, self.physics.velocity_limit,
+            self.max_steps, self.random_action_prob, self.goal_reward, self.step_penalty, self.thrust_penalty)
 
     def sample_free_positions(
         self, n: int, generator: torch.Generator | None = None
