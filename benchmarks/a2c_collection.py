@@ -6,8 +6,10 @@ second of the bare batched env stepped with ``step_and_maybe_reset``, of a
 ``ParallelEnv`` of 1 and 2 env workers (8 + 8 envs with 2).
 
 Part 2, the shaping transform's cost inside an A2C iteration at the recipe's
-settings (``recipes/a2c.py --domain four_rooms``: 16 envs, 256 frames per
-batch, one-hot policy): the time of one iteration — collect a batch, GAE, one
+settings of ``--domain`` (``recipes/a2c.py --domain four_rooms``: 16 envs, 256
+frames per batch, one-hot policy; ``--domain pinball``: 16 envs, 256 frames
+per batch, order-3 Fourier policy, reward x 1e-4, HRS with the first
+participant's subgoals): the time of one iteration — collect a batch, GAE, one
 A2C step, and for HRS one step of the potential on the batch's SMDP
 transitions — with and without the transform (the HRS potential trained
 centrally, as the recipe does, and online). Every set-up collects with the
@@ -28,6 +30,7 @@ ratios (see docs/torchrl.md).
     python benchmarks/a2c_collection.py --quick
     python benchmarks/a2c_collection.py --part 2 --repeats 15
     python benchmarks/a2c_collection.py --part 2 --quick --calls
+    python benchmarks/a2c_collection.py --part 2 --domain pinball --calls
 """
 
 from __future__ import annotations
@@ -52,10 +55,11 @@ from torchrl.envs import EnvBase, ParallelEnv
 from torchrl.objectives import A2CLoss
 from torchrl.objectives.value import GAE
 
-from torchrl_subgoal import Cell, SubgoalSeries, SubgoalValueLoss, TabularPotential
+from torchrl_subgoal import Cell, SubgoalSeries, SubgoalValueLoss, TabularPotential, load_patterns
 from torchrl_subgoal.envs import FourRoomsEnv
+from torchrl_subgoal.methods import paper_methods, shaping_parts
 from torchrl_subgoal.training import A2CConfig, Shaping, actor_critic, shaped_env, smdp_transitions
-from torchrl_subgoal.training.domains import a2c_domain, four_rooms_env
+from torchrl_subgoal.training.domains import A2CDomain, a2c_domain
 
 HALLWAYS = SubgoalSeries([Cell(3, 6), Cell(7, 9)])
 
@@ -73,22 +77,27 @@ def best_rate(make_steps: dict[str, Callable[[], int]], repeats: int) -> dict[st
 
 def paired_costs(
     setups: dict[str, Callable[[], int]], repeats: int, base: str
-) -> dict[str, dict[str, tuple[float, float, float]]]:
+) -> tuple[dict[str, dict[str, tuple[float, float, float]]], dict[str, float]]:
     """Run the set-ups in turn ``repeats`` times (the order rotates every round); each round, every
     set-up's seconds per frame over ``base``'s of the same round, minus 1. Returns, per set-up and
-    clock (``"cpu"``: this process's CPU time; ``"wall"``), the (median, lowest, highest) cost."""
+    clock (``"cpu"``: this process's CPU time; ``"wall"``), the (median, lowest, highest) cost; and
+    per clock ``base``'s median seconds per frame."""
     names = list(setups)
     ratios: dict[str, dict[str, list[float]]] = {n: {"cpu": [], "wall": []} for n in names}
+    base_times: dict[str, list[float]] = {"cpu": [], "wall": []}
     for r in range(repeats):
         per_frame: dict[str, tuple[float, float]] = {}
         for name in names[r % len(names):] + names[:r % len(names)]:
             cpu, wall = time.process_time(), time.perf_counter()
             frames = setups[name]()
             per_frame[name] = ((time.process_time() - cpu) / frames, (time.perf_counter() - wall) / frames)
+        for i, clock in enumerate(("cpu", "wall")):
+            base_times[clock].append(per_frame[base][i])
         for name in names:
             for i, clock in enumerate(("cpu", "wall")):
                 ratios[name][clock].append(per_frame[name][i] / per_frame[base][i] - 1.0)
-    return {n: {c: (statistics.median(v), min(v), max(v)) for c, v in clocks.items()} for n, clocks in ratios.items()}
+    costs = {n: {c: (statistics.median(v), min(v), max(v)) for c, v in clocks.items()} for n, clocks in ratios.items()}
+    return costs, {c: statistics.median(v) for c, v in base_times.items()}
 
 
 def call_counts(setups: dict[str, Callable[[], int]]) -> dict[str, float]:
@@ -134,8 +143,29 @@ def collector_batches(collector: Collector, batches: int) -> Callable[[], int]:
     return run
 
 
+def hrs_shaping(domain: A2CDomain) -> Shaping:
+    """The HRS shaping part 2 times: four-rooms, the two hallways (a tabular potential over 3
+    states); PinBall, the recipe's HRS learner of the first participant's pattern.
+
+    Examples:
+        >>> hrs_shaping(a2c_domain("four_rooms")).options
+        {'observation_key': 'cell'}
+        >>> shaping = hrs_shaping(a2c_domain("pinball"))
+        >>> type(shaping.potential).__name__, shaping.options["start_potential"]
+        ('TabularPotential', 'value')
+    """
+    if domain.name == "four_rooms":
+        return Shaping(HALLWAYS, TabularPotential(3), {"observation_key": "cell"})
+    patterns = list(load_patterns(domain.participants, domain=domain.name).values())[:1]
+    parts = shaping_parts(paper_methods(baseline="A2C")["HRS"], (), patterns=patterns, eta=domain.eta,
+                          observation_key=domain.subgoal_key, aggregation_key=domain.aggregation_key,
+                          start_potential="value")  # recipes/a2c.py's default
+    assert parts is not None
+    return Shaping(*parts)
+
+
 def a2c_iterations(
-    shaping: Shaping | None, config: A2CConfig, batches: int, online: bool,
+    shaping: Shaping | None, domain: A2CDomain, config: A2CConfig, batches: int, online: bool,
     networks: tuple[TensorDictModuleBase, TensorDictModuleBase] | None = None, lr: float | None = None,
     keys_only: bool = False,
     kept: int = 3,
@@ -148,15 +178,16 @@ def a2c_iterations(
     computing them: what TorchRL's per-entry bookkeeping costs any such transform (``kept``: how many of
     the three carried entries it writes).
     """
-    env = shaped_env(four_rooms_env, config.num_envs, shaping=shaping, gamma=config.gamma,
-                     value_lr=config.value_lr if online else None)
+    env = shaped_env(domain.make_env, config.num_envs, shaping=shaping, gamma=config.gamma,
+                     value_lr=config.value_lr if online else None, reward_scale=config.reward_scale)
     if keys_only:
         sys.path.insert(0, str(Path(__file__).resolve().parent))
         from four_rooms_step import KeysOnly
 
         env.transform.insert(1, KeysOnly(kept))
     actor, critic = (copy.deepcopy(networks[0]), copy.deepcopy(networks[1])) if networks else actor_critic(
-        env, features=config.features, hidden=config.hidden)
+        env, domain.observation_key, features=config.features, hidden=config.hidden,
+        fourier_order=config.fourier_order)
     advantage = GAE(gamma=config.gamma, lmbda=config.gae_lambda, value_network=critic)
     loss = A2CLoss(actor, critic, entropy_coeff=config.entropy_coeff, critic_coeff=config.critic_coeff,
                    loss_critic_type="l2")
@@ -197,6 +228,8 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer repeats")
     parser.add_argument("--part", choices=["1", "2", "both"], default="both", help="which part to run")
     parser.add_argument("--repeats", type=int, default=0, help="rounds (default 7, --quick 3; part 2: 11 / 5)")
+    parser.add_argument("--domain", choices=["four_rooms", "pinball"], default="four_rooms",
+                        help="part 2: the A2C recipe's domain whose settings are timed")
     parser.add_argument("--calls", action="store_true",
                         help="part 2: also count Python function calls per iteration (independent of the load)")
     args = parser.parse_args()
@@ -204,12 +237,12 @@ def main() -> None:
         parser.error(f"--repeats must be >= 0, got {args.repeats}")
     torch.set_num_threads(1)
     repeats, batches = (3, 10) if args.quick else (7, 30)
-    config = a2c_domain("four_rooms").a2c
+    domain = a2c_domain(args.domain)
 
     if args.part != "2":
         collector_throughput(args.repeats or repeats, batches)
     if args.part != "1":
-        transform_cost(config, args.repeats or (5 if args.quick else 11), batches, args.calls)
+        transform_cost(domain, args.repeats or (5 if args.quick else 11), batches, args.calls)
 
 
 def collector_throughput(repeats: int, batches: int) -> None:
@@ -235,26 +268,29 @@ def collector_throughput(repeats: int, batches: int) -> None:
 
 
 
-def transform_cost(config: A2CConfig, repeats: int, batches: int, calls: bool = False) -> None:
+def transform_cost(domain: A2CDomain, repeats: int, batches: int, calls: bool = False) -> None:
     """Part 2."""
-    print("Part 2: A2C iteration (collect 256 frames + GAE + A2C step [+ potential step]), recipe settings,")
+    config = domain.a2c
+    print(f"Part 2: A2C iteration (collect {config.frames_per_batch} frames + GAE + A2C step [+ potential step]), "
+          f"recipe settings of {domain.name} ({config.num_envs} envs, {config.features} features),")
     print("        every set-up with the same policy (trained briefly by plain A2C, then kept: lr 0)")
     torch.manual_seed(0)
-    pretrain, networks = a2c_iterations(None, config, 120, online=False)
-    pretrain()  # ~30k frames: episodes of ~50-100 steps, so resets happen as in training
-    hrs = Shaping(HALLWAYS, TabularPotential(3), {"observation_key": "cell"})
-    hrs_online = Shaping(HALLWAYS, TabularPotential(3), {"observation_key": "cell"})
+    pretrain, networks = a2c_iterations(None, domain, config, 120, online=False)
+    pretrain()  # ~30k frames (four-rooms: episodes of ~50-100 steps, so resets happen as in training)
     setups = {
-        "plain A2C": a2c_iterations(None, config, batches, False, networks, lr=0.0)[0],
-        "keys-only transform (floor)": a2c_iterations(None, config, batches, False, networks, lr=0.0,
+        "plain A2C": a2c_iterations(None, domain, config, batches, False, networks, lr=0.0)[0],
+        "keys-only transform (floor)": a2c_iterations(None, domain, config, batches, False, networks, lr=0.0,
                                                       keys_only=True)[0],
-        "HRS, potential trained per batch": a2c_iterations(hrs, config, batches, False, networks, lr=0.0)[0],
-        "HRS, potential trained online": a2c_iterations(hrs_online, config, batches, True, networks, lr=0.0)[0],
+        "HRS, potential trained per batch": a2c_iterations(hrs_shaping(domain), domain, config, batches, False,
+                                                           networks, lr=0.0)[0],
+        "HRS, potential trained online": a2c_iterations(hrs_shaping(domain), domain, config, batches, True,
+                                                        networks, lr=0.0)[0],
     }
     print(f"        {repeats} rounds; load average before {load_average()}")
-    costs = paired_costs(setups, repeats, "plain A2C")
-    print(f"        load average after {load_average()}; cost = time over the plain iteration's in the same "
-          "round - 1, median [lowest, highest]")
+    costs, plain = paired_costs(setups, repeats, "plain A2C")
+    print(f"        load average after {load_average()}; plain A2C iteration (median): CPU "
+          f"{1e3 * plain['cpu'] * config.frames_per_batch:.1f} ms, wall {1e3 * plain['wall'] * config.frames_per_batch:.1f} ms")
+    print("        cost = time over the plain iteration's in the same round - 1, median [lowest, highest]")
     for name, clocks in costs.items():
         if name == "plain A2C":
             continue
@@ -264,7 +300,7 @@ def transform_cost(config: A2CConfig, repeats: int, batches: int, calls: bool = 
     if calls:
         # the floor of smaller entry formats: env_reward and the shaped reward, and 0-2 carried entries
         setups |= {f"keys-only, {kept} of 3 carried entries": a2c_iterations(
-            None, config, batches, False, networks, lr=0.0, keys_only=True, kept=kept)[0] for kept in (2, 1, 0)}
+            None, domain, config, batches, False, networks, lr=0.0, keys_only=True, kept=kept)[0] for kept in (2, 1, 0)}
         counts = call_counts(setups)
         per_iteration = config.frames_per_batch
         print(f"        Python function calls per iteration ({per_iteration} frames), one call of every set-up:")
