@@ -24,8 +24,8 @@ from torchrl.envs import TransformedEnv
 from torchrl_subgoal import load_patterns
 from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
-from torchrl_subgoal.experiments.cli import check, parse_config, setting
-from torchrl_subgoal.experiments.recipe import RECIPE_ERRORS, fail
+from torchrl_subgoal.experiments.cli import check, setting
+from torchrl_subgoal.experiments.recipe import config_main
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 
 PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")
@@ -69,12 +69,8 @@ def greedy_walks(agent: SoftmaxSarsa, env: FourRoomsEnv, limit: int = 100) -> tu
     return steps, revisits, seen
 
 
-def main(argv: list[str] | None = None) -> int:
-    torch.set_num_threads(1)
-    try:
-        cfg = parse_config(Config, argv, description=__doc__.splitlines()[0] if __doc__ else None)
-    except RECIPE_ERRORS as exc:
-        return fail(exc)
+def run(cfg: Config) -> int:
+    """Train the learners of each convention and print one row of the table per convention."""
     patterns = list(load_patterns(PARTICIPANTS, domain="four_rooms").values())
     n = cfg.learnings * len(patterns)
     sarsa = SARSA_PRESETS["released"]
@@ -98,6 +94,10 @@ def main(argv: list[str] | None = None) -> int:
               f"{gap.median():.3f} | {(gap < sarsa.temperature).double().mean():.0%} | "
               f"{int((steps == 20).sum())} of {n} | {int(revisits.sum())} of {n} |")
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return config_main(Config, run, argv, description=__doc__.splitlines()[0] if __doc__ else None)
 
 
 if __name__ == "__main__":

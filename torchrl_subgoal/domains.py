@@ -24,14 +24,20 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from torchrl.envs import EnvBase
 
+    from torchrl_subgoal.agents.loop import OnlineAgent
     from torchrl_subgoal.experiments.paper import PaperResults
     from torchrl_subgoal.subgoals import Predicate
+    from torchrl_subgoal.training.domains import A2CDomain
 
-__all__ = ["Domain", "FormError", "Limit", "UnknownDomainError", "find", "get", "names", "register"]
+__all__ = ["Domain", "FormError", "Limit", "UnknownDomainError", "find", "get", "having", "names", "register"]
 
 #: ``draw_map(ax, patterns, options)``: draw the map and ``patterns`` (name -> SubgoalSeries) on a
 #: matplotlib ``Axes``; ``options`` is the ``report.map`` section of a sweep's config.
 MapHook = Callable[[Any, Mapping[str, Any], Mapping[str, Any]], None]
+#: ``learner(learners, seed, max_steps, map)``: a fresh batched env (``max_steps`` and ``map`` ``None``:
+#: the domain's own) and the paper's online learner for it, with the settings of its shaping
+#: transform (``gamma``, ``value_lr``, ``observation_key``).
+LearnerHook = Callable[[int, int, int | None, str | None], tuple["EnvBase", "OnlineAgent", Mapping[str, Any]]]
 
 #: The built-in domains' names.
 _BUILT_IN_NAMES = ("four_rooms", "pinball", "pick_and_place")
@@ -129,6 +135,11 @@ class Domain:
         from_page: a subgoal the studio sent (without its name) as the file's predicate,
             and where it is (for messages); the identity by default.
         try_note: why "Try it" is off for this domain (it is on when ``limits`` is given).
+        learner: ``learner(learners, seed, max_steps, map)``, a fresh env and the paper's online
+            learner for it with its shaping settings: what the studio's "Try it" runs, on the fused
+            engine (today FourRoomsEnv with SoftmaxSarsa or PinBallEnv with FourierActorCritic).
+        a2c: ``a2c()``, the A2C recipe's set-up of this domain
+            (:class:`~torchrl_subgoal.training.A2CDomain`).
 
     Examples:
         >>> from torchrl_subgoal import State
@@ -152,6 +163,8 @@ class Domain:
     to_page: Callable[[Predicate], dict[str, Any]] = _file_form
     from_page: Callable[[dict[str, Any], str], dict[str, Any]] = _as_sent
     try_note: str = ""
+    learner: LearnerHook | None = None
+    a2c: Callable[[], A2CDomain] | None = None
 
     def describe(self) -> dict[str, Any]:
         """What the studio's ``/api/domains`` says about this domain."""
@@ -196,6 +209,16 @@ def names() -> list[str]:
         ['four_rooms', 'pinball', 'pick_and_place']
     """
     return [*_BUILT_IN_NAMES, *(n for n in _REGISTRY if n not in _BUILT_IN_NAMES)]
+
+
+def having(field_name: str) -> list[str]:
+    """The known domains whose optional field ``field_name`` is set (the built-in ones are imported now).
+
+    Examples:
+        >>> having("learner")
+        ['four_rooms', 'pinball']
+    """
+    return [n for n in names() if getattr(find(n), field_name, None)]
 
 
 def find(name: str) -> Domain | None:

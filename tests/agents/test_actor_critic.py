@@ -29,11 +29,11 @@ def test_one_update_matches_autograd(normalize: bool) -> None:
     n, cfg = 3, ActorCriticConfig(actor_lr=0.05, critic_lr=0.1, gamma=0.9, value_lr=0.0, normalize_lr=normalize)
     agent = FourierActorCritic(n, LOW, HIGH, 5, cfg, seed=0)
     g = torch.Generator().manual_seed(0)
-    agent.w[:] = torch.randn(n, 256, generator=g, dtype=torch.float64).numpy() * 0.1
-    agent.theta[:] = torch.randn(n, 5, 256, generator=g, dtype=torch.float64).numpy() * 0.1
+    agent.w[:] = torch.randn(n, 256, generator=g, dtype=torch.float64) * 0.1
+    agent.theta[:] = torch.randn(n, 5, 256, generator=g, dtype=torch.float64) * 0.1
     obs, obs_next = torch.rand(n, 4, generator=g), torch.rand(n, 4, generator=g)
     agent.act(TensorDict({"observation": obs}, [n]))
-    w0, theta0 = torch.from_numpy(agent.w.copy()), torch.from_numpy(agent.theta.copy()).requires_grad_(True)
+    w0, theta0 = agent.w.clone(), agent.theta.clone().requires_grad_(True)
     action = torch.tensor([0, 3, 4])
     reward = torch.tensor([[1.0], [-2.0], [5.0]])
     terminated = torch.tensor([[False], [False], [True]])
@@ -53,8 +53,8 @@ def test_one_update_matches_autograd(normalize: bool) -> None:
     log_pi.sum().backward()
     expected_theta = theta0.detach() + (0.05 * scale * delta)[:, None, None] * theta0.grad
     expected_w = w0 + (0.1 * scale * delta)[:, None] * phi
-    assert np.allclose(agent.theta, expected_theta.numpy(), atol=1e-10)
-    assert np.allclose(agent.w, expected_w.numpy(), atol=1e-10)
+    assert torch.allclose(agent.theta, expected_theta, atol=1e-10)
+    assert torch.allclose(agent.w, expected_w, atol=1e-10)
 
 
 def test_same_seed_same_learning() -> None:
@@ -82,12 +82,12 @@ def test_q_actor_critic_update_matches_autograd(normalize: bool) -> None:
     agent = FourierActorCritic(n, LOW, HIGH, 5, cfg, seed=0)
     assert agent.w.shape == (n, 5 * 256)
     g = torch.Generator().manual_seed(1)
-    agent.w[:] = torch.randn(n, 5 * 256, generator=g, dtype=torch.float64).numpy() * 0.1
-    agent.theta[:] = torch.randn(n, 5, 256, generator=g, dtype=torch.float64).numpy() * 0.1
+    agent.w[:] = torch.randn(n, 5 * 256, generator=g, dtype=torch.float64) * 0.1
+    agent.theta[:] = torch.randn(n, 5, 256, generator=g, dtype=torch.float64) * 0.1
     obs, obs_next, obs_reset = (torch.rand(n, 4, generator=g) for _ in range(3))
     agent.act(TensorDict({"observation": obs}, [n]))
-    w0 = torch.from_numpy(agent.w.copy()).view(n, 5, 256)
-    theta0 = torch.from_numpy(agent.theta.copy()).requires_grad_(True)
+    w0 = agent.w.clone().view(n, 5, 256)
+    theta0 = agent.theta.clone().requires_grad_(True)
     action = torch.tensor([0, 3, 4])
     reward = torch.tensor([[1.0], [-2.0], [5.0]])
     terminated = torch.tensor([[False], [False], [True]])
@@ -100,7 +100,7 @@ def test_q_actor_critic_update_matches_autograd(normalize: bool) -> None:
     )
     root = TensorDict({"observation": torch.where(terminated | truncated, obs_reset, obs_next)}, [n])
     drawn = np.empty((n, 2))
-    _kernels.draw_uniforms(agent.streams.copy(), 2, drawn)  # each learner's next two draws
+    _kernels.draw_uniforms(agent.streams.numpy().copy(), 2, drawn)  # each learner's next two draws
     u = np.concatenate([drawn[:, 0], drawn[:, 1]])  # a' for all, then the reset draws
     agent.step(transition, root)
 
@@ -117,11 +117,11 @@ def test_q_actor_critic_update_matches_autograd(normalize: bool) -> None:
     expected_theta = theta0.detach() + (0.05 * scale * q)[:, None, None] * theta0.grad
     expected_w = w0.clone()
     expected_w[rows, action] += (0.1 * scale * delta)[:, None] * phi
-    assert np.allclose(agent.theta, expected_theta.numpy(), atol=1e-10)
-    assert np.allclose(agent.w, expected_w.reshape(n, -1).numpy(), atol=1e-10)
+    assert torch.allclose(agent.theta, expected_theta, atol=1e-10)
+    assert torch.allclose(agent.w, expected_w.reshape(n, -1), atol=1e-10)
     assert np.allclose(agent.q_values(obs)[rows, action].numpy(), (expected_w[rows, action] * phi).sum(-1).numpy())
     # the next action: a' where the episode goes on, a draw at the reset state (updated θ) where it ended
     reset_probs = torch.softmax(torch.einsum("naf,nf->na", expected_theta, phi_reset), -1)
     expected_action = torch.where((terminated | truncated).squeeze(-1), _inverse_cdf(reset_probs, u[n:]), a_next)
     assert torch.equal(root["action"], expected_action)
-    assert np.allclose(agent.phi, torch.where((terminated | truncated), phi_reset, phi_next).numpy())
+    assert torch.allclose(agent.phi, torch.where((terminated | truncated), phi_reset, phi_next))

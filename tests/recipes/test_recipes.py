@@ -159,3 +159,13 @@ def test_pinball_shorter_than_the_report_window(tmp_path: Path) -> None:
     assert pinball.main([*args, "--results", str(tmp_path)]) == 0
     assert json.loads((tmp_path / "config.json").read_text())["config"]["report"]["window"] == 2
     assert (tmp_path / "report.md").exists()
+
+
+def test_four_rooms_greedy_recipe(capsys: pytest.CaptureFixture[str]) -> None:
+    """Not a sweep: its own table, through the recipes' shared ``config_main`` (one-line errors)."""
+    greedy = recipe("four_rooms_greedy")
+    assert greedy.main(["--learnings", "1", "--episodes", "3"]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ")]
+    assert len(rows) == 1 + len(greedy.CONVENTIONS) and "10 HRS learners" in rows[0]
+    assert greedy.main(["--episodes", "0"]) == 2
+    assert capsys.readouterr().err == "error: --episodes: must be >= 1, got 0\n"

@@ -10,6 +10,7 @@ import torch
 
 from torchrl_subgoal import Cell, NaivePotential, State, SubgoalSeries, TabularPotential, _kernels
 from torchrl_subgoal.envs import PinBallEnv
+from torchrl_subgoal.envs.four_rooms_domain import four_rooms_env
 from torchrl_subgoal.training import (
     A2CConfig,
     FourierFeatures,
@@ -20,7 +21,6 @@ from torchrl_subgoal.training import (
     shaped_env,
     train_a2c,
 )
-from torchrl_subgoal.training.domains import four_rooms_env
 
 from ..line_env import LineEnv
 
@@ -107,6 +107,14 @@ def test_naive_potential_is_not_trained() -> None:
 def test_bad_settings(bad: dict) -> None:
     with pytest.raises(ValueError):
         A2CConfig(**bad)
+
+
+def test_a2c_domains_come_from_the_registry() -> None:
+    assert a2c_domain("four_rooms").name == "four_rooms" and a2c_domain("pinball").a2c.features == "fourier"
+    with pytest.raises(ValueError, match=r"^unknown A2C domain 'chess'; these have one: four_rooms, pinball"):
+        a2c_domain("chess")
+    with pytest.raises(ValueError, match=r"^no A2C set-up \(Domain.a2c\) for domain 'pick_and_place'"):
+        a2c_domain("pick_and_place")
 
 
 def test_pinball_env_factory_is_seeded_from_torch() -> None:

@@ -13,6 +13,7 @@ from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
 from torchrl_subgoal import _kernels
+from torchrl_subgoal.agents.module import KernelLearner
 
 __all__ = ["AC_PRESETS", "ActorCriticConfig", "ActorCriticKernelState", "FourierActorCritic", "fourier_coefficients"]
 
@@ -101,7 +102,7 @@ class ActorCriticKernelState(NamedTuple):
     q_critic: bool  #: the ``"action"`` critic ``Q(s, a)`` (else ``V(s)``)
 
 
-class FourierActorCritic:
+class FourierActorCritic(KernelLearner):
     """Linear actor-critic with a Fourier basis for a batch of independent learners.
 
     Features ``φ_c(s) = cos(π c·s̃)`` for every ``c ∈ {0..order}^D`` on the state
@@ -120,6 +121,14 @@ class FourierActorCritic:
     draws from its own random stream (Philox keyed by its seed): one uniform
     per step (with the ``"action"`` critic one more for the reset state when
     an episode ends). One fused kernel per step.
+
+    An ``nn.Module``: the critic's weights ``w``, the actor's ``theta``, each
+    learner's current features ``phi`` and policy ``probs`` and its random
+    ``streams`` are buffers (float64, the streams uint64), so ``state_dict()``
+    checkpoints a learner (a reloaded one continues as the original would)
+    and ``.to(dtype=...)`` casts the tables; it learns on the CPU (see
+    :class:`~torchrl_subgoal.agents.module.KernelLearner`). Calling the module
+    is :meth:`act`.
 
     Args:
         num_learners: learners (env batch size).
@@ -142,7 +151,15 @@ class FourierActorCritic:
         torch.Size([4, 2])
         >>> agent.q_values(env.reset()["observation"]).shape  # the released agent: Q(s, ·)
         torch.Size([4, 5])
+        >>> list(agent.state_dict())
+        ['w', 'theta', 'phi', 'probs', 'streams']
     """
+
+    w: torch.Tensor
+    theta: torch.Tensor
+    phi: torch.Tensor
+    probs: torch.Tensor
+    streams: torch.Tensor
 
     def __init__(
         self,
@@ -155,6 +172,7 @@ class FourierActorCritic:
         seed: int | Sequence[int] | np.ndarray | np.random.Generator = 0,
         observation_key: NestedKey = "observation",
     ) -> None:
+        super().__init__()
         self.config = config
         self.low = np.asarray(torch.as_tensor(low, dtype=torch.float64))
         high_ = np.asarray(torch.as_tensor(high, dtype=torch.float64))
@@ -162,16 +180,20 @@ class FourierActorCritic:
             raise ValueError("low and high must be 1-D, the same size, with high > low")
         self.inv_range = 1.0 / (high_ - self.low)
         dim = self.low.shape[0]
-        self.half = dim // 2
+        self.half_dim = dim // 2  # not `half`: nn.Module.half() casts to float16
         self.num_features = (config.order + 1) ** dim
         self.num_actions = num_actions
         q_critic = config.critic == "action"
+        # the kernels update these in place through numpy views (numpy_view)
         # the Q critic is [B, A·F]: row-major per action, one layout for both critics in the fused kernels
-        self.w = np.zeros((num_learners, self.num_features * (num_actions if q_critic else 1)))
-        self.theta = np.zeros((num_learners, num_actions, self.num_features))
-        self.phi = np.zeros((num_learners, self.num_features))  # φ of each learner's current state
-        self.probs = np.full((num_learners, num_actions), 1.0 / num_actions)  # π(·|s) at that state
-        self.streams = _kernels.new_streams(_kernels.learner_keys(seed, num_learners), _kernels.AGENT_STREAM)
+        f64 = torch.float64
+        self.register_buffer("w", torch.zeros(num_learners, self.num_features * (num_actions if q_critic else 1),
+                                              dtype=f64))
+        self.register_buffer("theta", torch.zeros(num_learners, num_actions, self.num_features, dtype=f64))
+        self.register_buffer("phi", torch.zeros(num_learners, self.num_features, dtype=f64))  # φ of the current state
+        self.register_buffer("probs", torch.full((num_learners, num_actions), 1.0 / num_actions, dtype=f64))  # π(·|s)
+        streams = _kernels.new_streams(_kernels.learner_keys(seed, num_learners), _kernels.AGENT_STREAM)
+        self.register_buffer("streams", torch.from_numpy(streams))
         self.observation_key = observation_key
         self._step_kernel = _kernels.qac_step if q_critic else _kernels.ac_step
 
@@ -185,9 +207,10 @@ class FourierActorCritic:
             ((2, 256), 3, False)
         """
         cfg = self.config
-        return ActorCriticKernelState(self.w, self.theta, self.phi, self.probs, self.streams, self.low,
-                                      self.inv_range, cfg.order, self.half, cfg.actor_lr, cfg.critic_lr, cfg.gamma,
-                                      cfg.normalize_lr, cfg.critic == "action")
+        view = self.numpy_view
+        return ActorCriticKernelState(view("w"), view("theta"), view("phi"), view("probs"), view("streams"), self.low,
+                                      self.inv_range, cfg.order, self.half_dim, cfg.actor_lr, cfg.critic_lr,
+                                      cfg.gamma, cfg.normalize_lr, cfg.critic == "action")
 
     def features(self, observation: torch.Tensor) -> torch.Tensor:
         """``φ(s)`` of a batch of observations ``[N, D]`` (the kernel's features, for inspection)."""
@@ -195,7 +218,7 @@ class FourierActorCritic:
         n = obs.shape[0]
         out = np.empty((n, self.num_features))
         theta = np.zeros((n, 1, self.num_features))
-        _kernels.ac_act(theta, out, np.empty((n, 1)), obs, self.low, self.inv_range, self.config.order, self.half,
+        _kernels.ac_act(theta, out, np.empty((n, 1)), obs, self.low, self.inv_range, self.config.order, self.half_dim,
                         np.zeros((0, 4), np.uint64), np.empty(n, np.int64))
         return torch.from_numpy(out)
 
@@ -204,29 +227,37 @@ class FourierActorCritic:
         if self.config.critic != "action":
             raise ValueError("q_values needs the action-value critic (ActorCriticConfig.critic='action')")
         phi = self.features(observation).numpy()
-        w = self.w.reshape(self.w.shape[0], self.num_actions, self.num_features)
+        w = self.w.cpu().numpy().reshape(self.w.shape[0], self.num_actions, self.num_features)
         return torch.from_numpy(np.einsum("baf,bf->ba", w, phi))
 
     def _obs(self, tensordict: TensorDictBase) -> np.ndarray:
         return tensordict.get(self.observation_key).numpy().astype(np.float64).reshape(self.w.shape[0], -1)
 
     def act(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """Write ``"action"`` ``~ π(·|s)`` for every learner (the first step); keeps ``φ(s)`` and ``π(·|s)``."""
         n = self.w.shape[0]
         action = np.empty(n, np.int64)
-        _kernels.ac_act(self.theta, self.phi, self.probs, self._obs(tensordict), self.low, self.inv_range,
-                        self.config.order, self.half, self.streams, action)
+        view = self.numpy_view
+        _kernels.ac_act(view("theta"), view("phi"), view("probs"), self._obs(tensordict), self.low, self.inv_range,
+                        self.config.order, self.half_dim, view("streams"), action)
         tensordict.set("action", torch.from_numpy(action))
         return tensordict
 
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """Same as :meth:`act`."""
+        return self.act(tensordict)
+
     def step(self, transition: TensorDictBase, next_root: TensorDictBase) -> None:
+        """Learn from ``transition`` and write the next ``"action"`` to ``next_root`` (one fused kernel)."""
         cfg = self.config
+        view = self.numpy_view
         nxt = transition.get("next")
         n = self.w.shape[0]
         action = np.empty(n, np.int64)
         self._step_kernel(
-            self.w, self.theta, self.phi, self.probs, transition.get("action").numpy().reshape(n),
+            view("w"), view("theta"), view("phi"), view("probs"), transition.get("action").numpy().reshape(n),
             nxt.get("reward").numpy().reshape(n), self._obs(nxt), nxt.get("terminated").numpy().reshape(n),
             nxt.get("done").numpy().reshape(n), self._obs(next_root), self.low, self.inv_range,
-            cfg.order, self.half, self.streams, cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr, action,
+            cfg.order, self.half_dim, view("streams"), cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr, action,
         )
         next_root.set("action", torch.from_numpy(action))

@@ -12,6 +12,7 @@ from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
 from torchrl_subgoal import _kernels
+from torchrl_subgoal.agents.module import KernelLearner
 
 __all__ = ["SARSA_PRESETS", "SarsaConfig", "SarsaKernelState", "SoftmaxSarsa"]
 
@@ -66,7 +67,7 @@ class SarsaKernelState(NamedTuple):
     inv_temperature: float  #: ``1 / τ``
 
 
-class SoftmaxSarsa:
+class SoftmaxSarsa(KernelLearner):
     """SARSA(0) with a softmax (Boltzmann) policy for a batch of independent learners.
 
     Learner ``b`` owns ``Q[b]`` of shape ``[num_states, num_actions]``; the env
@@ -77,6 +78,12 @@ class SoftmaxSarsa:
     and draws again). The update is
     ``Q(s,a) ← Q(s,a) + α (r + γ Q(s',a') (1 − terminated) − Q(s,a))`` with
     ``a' ~ π(·|s')``; at truncation it bootstraps from ``Q(s', a')``.
+
+    An ``nn.Module``: the table ``q`` and the random ``streams`` are buffers,
+    so ``state_dict()`` checkpoints a learner (a reloaded one continues as the
+    original would) and ``.to(dtype=...)`` casts the table; it learns on the
+    CPU (see :class:`~torchrl_subgoal.agents.module.KernelLearner`). Calling
+    the module is :meth:`act`.
 
     Args:
         num_learners: learners (env batch size).
@@ -108,7 +115,13 @@ class SoftmaxSarsa:
         >>> records = run_episodes(env, agent, episodes=3)
         >>> records.steps.shape
         torch.Size([8, 3])
+        >>> sorted(agent.state_dict())  # the table and each learner's random stream
+        ['q', 'streams']
     """
+
+    q: torch.Tensor
+    streams: torch.Tensor
+    _rows: torch.Tensor
 
     def __init__(
         self,
@@ -122,16 +135,18 @@ class SoftmaxSarsa:
         abstract_states: int = 1,
         abstract_key: NestedKey = "subgoal_index",
     ) -> None:
+        super().__init__()
         self.config = config
         self.num_actions = num_actions
         self.abstract_states = abstract_states
         self.abstract_key = abstract_key
         self.num_states = num_states * abstract_states
-        self.q = torch.zeros(num_learners, self.num_states, num_actions)
-        self.streams = _kernels.new_streams(_kernels.learner_keys(seed, num_learners), _kernels.AGENT_STREAM)
+        # the kernels update both in place through numpy views (numpy_view)
+        self.register_buffer("q", torch.zeros(num_learners, self.num_states, num_actions))
+        streams = _kernels.new_streams(_kernels.learner_keys(seed, num_learners), _kernels.AGENT_STREAM)
+        self.register_buffer("streams", torch.from_numpy(streams))
         self.observation_key = observation_key
-        self._rows = torch.arange(num_learners)
-        self._q = self.q.numpy()  # the kernels update the table in place through this view
+        self.register_buffer("_rows", torch.arange(num_learners), persistent=False)
 
     def kernel_state(self) -> SarsaKernelState:
         """The table, the random streams and the settings, as a compiled loop reads them (numpy views).
@@ -143,14 +158,15 @@ class SoftmaxSarsa:
             1.0
         """
         cfg = self.config
-        return SarsaKernelState(self.q.numpy(), self.streams, self.abstract_states, cfg.lr, cfg.gamma,
-                                1.0 / cfg.temperature)
+        return SarsaKernelState(self.numpy_view("q"), self.numpy_view("streams"), self.abstract_states, cfg.lr,
+                                cfg.gamma, 1.0 / cfg.temperature)
 
     def sample(self, state: torch.Tensor) -> torch.Tensor:
         """Softmax actions for each learner's table row ``[N]`` (see :meth:`state`)."""
         s = state.numpy().reshape(-1)
         action = torch.empty_like(state)
-        _kernels.softmax_sample(self._q, s, 1.0 / self.config.temperature, self.streams, action.numpy().reshape(-1))
+        _kernels.softmax_sample(self.numpy_view("q"), s, 1.0 / self.config.temperature, self.numpy_view("streams"),
+                                action.numpy().reshape(-1))
         return action
 
     def greedy(self, state: torch.Tensor) -> torch.Tensor:
@@ -165,19 +181,25 @@ class SoftmaxSarsa:
         return s.reshape(-1) * self.abstract_states + tensordict.get(self.abstract_key).reshape(-1)
 
     def act(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """Write a softmax ``"action"`` for every learner of ``tensordict`` (the first step)."""
         shape = tensordict.get(self.observation_key).shape
         tensordict.set("action", self.sample(self.state(tensordict)).reshape(shape))
         return tensordict
 
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """Same as :meth:`act`."""
+        return self.act(tensordict)
+
     def step(self, transition: TensorDictBase, next_root: TensorDictBase) -> None:
+        """Learn from ``transition`` and write the next ``"action"`` to ``next_root`` (one fused kernel)."""
         cfg = self.config
         nxt = transition.get("next")
         n = self.q.shape[0]
         action = torch.empty(n, dtype=torch.long)
         _kernels.sarsa_step(
-            self._q, _flat(self.state(transition)), _flat(transition.get("action")),
+            self.numpy_view("q"), _flat(self.state(transition)), _flat(transition.get("action")),
             _flat(nxt.get("reward")), _flat(self.state(nxt)), _flat(nxt.get("terminated")),
-            _flat(nxt.get("done")), _flat(self.state(next_root)), self.streams, cfg.lr, cfg.gamma,
+            _flat(nxt.get("done")), _flat(self.state(next_root)), self.numpy_view("streams"), cfg.lr, cfg.gamma,
             1.0 / cfg.temperature, action.numpy(),
         )
         next_root.set("action", action.view(transition.get("action").shape))

@@ -1,4 +1,4 @@
-"""The four-rooms domain's registration: env, subgoal check, map, paper table, studio grid.
+"""The four-rooms domain's registration: env, subgoal check, map, paper table, studio grid, learners.
 
 Everything the package knows about four-rooms beyond the env itself, in one
 place; :mod:`torchrl_subgoal.domains` imports this module the first time
@@ -8,14 +8,20 @@ place; :mod:`torchrl_subgoal.domains` imports this module the first time
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from importlib.resources import files
+from typing import TYPE_CHECKING, Any
 
 from torchrl.envs import EnvBase
 
 from torchrl_subgoal import domains
+from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
+from torchrl_subgoal.agents.loop import OnlineAgent
 from torchrl_subgoal.envs import four_rooms
 from torchrl_subgoal.experiments.paper import PaperResults, paper_table
 from torchrl_subgoal.subgoals import Cell, Predicate, State
+
+if TYPE_CHECKING:
+    from torchrl_subgoal.training.domains import A2CDomain
 
 __all__ = ["DOMAIN", "four_rooms_env"]
 
@@ -58,6 +64,31 @@ def _cell_of_state(predicate: Predicate) -> dict[str, Any]:
     return predicate.to_dict()
 
 
+def _sarsa(learners: int, seed: int, max_steps: int | None,
+           map_: str | None) -> tuple[EnvBase, OnlineAgent, Mapping[str, Any]]:
+    """The paper's learner: SARSA with the released settings, over the env's state number."""
+    sarsa = SARSA_PRESETS["released"]
+    env = four_rooms.FourRoomsEnv(num_envs=learners, max_steps=max_steps or 1000)
+    agent = SoftmaxSarsa(learners, env.num_states, 4, sarsa, seed=seed)
+    return env, agent, {"gamma": sarsa.gamma, "value_lr": sarsa.value_lr, "observation_key": "cell"}
+
+
+def _candidates(seed: int) -> list[Predicate]:
+    return [Cell(r, c) for r, c in four_rooms.free_cells() if (r, c) not in (four_rooms.START, four_rooms.GOAL)]
+
+
+def _a2c() -> A2CDomain:
+    from torchrl_subgoal.training.a2c import A2CConfig
+    from torchrl_subgoal.training.domains import A2CDomain
+
+    return A2CDomain(
+        "four_rooms", four_rooms_env, "observation", "cell", "observation",
+        str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml"), eta=1.0, thresholds=(100.0, 50.0),
+        a2c=A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=100_000),
+        aggregation=four_rooms.room_aggregation, candidates=_candidates,
+    )
+
+
 PAPER = PaperResults(
     domain="four_rooms",
     metric="steps",
@@ -83,5 +114,5 @@ DOMAIN = domains.register(domains.Domain(
     draw_map=_draw_map, paper=PAPER, geometry=_geometry,
     limits={"episodes": domains.Limit(300, 1, 2000), "learners": domains.Limit(20, 1, 200),
             "max_steps": domains.Limit(1000, 50, 1000)},
-    recipe="recipes/four_rooms.py", to_page=_cell_of_state,
+    recipe="recipes/four_rooms.py", to_page=_cell_of_state, learner=_sarsa, a2c=_a2c,
 ))

@@ -41,6 +41,7 @@ __all__ = [
     "ReproductionConfig",
     "check_patterns",
     "chunk_patterns",
+    "config_main",
     "fail",
     "method_specs",
     "pattern_config",
@@ -53,6 +54,7 @@ __all__ = [
 
 PatternSets = dict[str, dict[str, SubgoalSeries]]
 C = TypeVar("C", bound="RecipeConfig")
+T = TypeVar("T")
 
 #: What a recipe reports as one line on stderr instead of a traceback (see :func:`fail`).
 RECIPE_ERRORS = (ConfigError, SubgoalFileError, ResultsError, ChunkFailedError)
@@ -361,6 +363,46 @@ class Plan:
     results: str | None = None
 
 
+def config_main(
+    config_cls: type[T],
+    run: Callable[[T], int],
+    argv: Sequence[str] | None = None,
+    *,
+    description: str | None = None,
+    threads: int | None = 1,
+    errors: tuple[type[BaseException], ...] = RECIPE_ERRORS,
+) -> int:
+    """A script's ``main``: parse the flags into ``config_cls`` and ``run`` it; its exit code, or a
+    one-line error on stderr (see :func:`fail`; a bad flag exits with code 2, as argparse does). :func:`recipe_main` is this with a sweep and its report as ``run``;
+    a script that prints something else (``recipes/four_rooms_greedy.py``) uses this directly.
+
+    Args:
+        config_cls: the settings, a dataclass of :func:`~torchrl_subgoal.experiments.cli.setting` fields.
+        run: the settings -> the exit code.
+        argv: the command line (default: ``sys.argv[1:]``).
+        description: the ``--help`` description (default: the settings' docstring's first line).
+        threads: ``torch.set_num_threads`` first (batched small ops run fastest on one thread); ``None``: leave it.
+        errors: what is reported as one line on stderr instead of a traceback.
+
+    Examples:
+        >>> from dataclasses import dataclass
+        >>> @dataclass
+        ... class Settings:
+        ...     episodes: int = setting(3, "episodes")
+        >>> config_main(Settings, lambda cfg: print(cfg.episodes) or 0, ["--episodes", "5"])
+        5
+        0
+        >>> config_main(Settings, lambda cfg: check(cfg.episodes > 5, "episodes", "must be > 5") or 0, [])
+        2
+    """
+    if threads is not None:
+        torch.set_num_threads(threads)
+    try:
+        return run(parse_config(config_cls, argv, description=description))
+    except errors as exc:
+        return fail(exc)
+
+
 def recipe_main(
     config_cls: type[C],
     plan: Callable[[C], Plan],
@@ -376,10 +418,7 @@ def recipe_main(
     Args:
         config_cls: the recipe's settings (a :class:`RecipeConfig`).
         plan: the recipe's settings -> its sweep.
-        argv: the command line (default: ``sys.argv[1:]``).
-        description: the ``--help`` description (default: the settings' docstring's first line).
-        threads: ``torch.set_num_threads`` first (batched small ops run fastest on one thread); ``None``: leave it.
-        errors: what is reported as one line on stderr instead of a traceback.
+        argv: the command line; ``description``, ``threads``, ``errors``: as in :func:`config_main`.
 
     Examples:
         >>> def plan(cfg: RecipeConfig) -> Plan:
@@ -387,13 +426,11 @@ def recipe_main(
         >>> recipe_main(RecipeConfig, plan, [])  # prints "error: --methods: ..." on stderr
         2
     """
-    if threads is not None:
-        torch.set_num_threads(threads)
-    try:
-        cfg = parse_config(config_cls, argv, description=description)
+
+    def run(cfg: C) -> int:
         sweep = plan(cfg)
         return sweep_and_report(sweep.domain, sweep.results or cfg.results, sweep.specs, sweep.run_chunk,
                                 sweep.config, seed=cfg.seed, chunk_size=sweep.chunk_size, episodes=sweep.episodes,
                                 overwrite=cfg.overwrite, backend=cfg.backend, workers=cfg.workers)
-    except errors as exc:
-        return fail(exc)
+
+    return config_main(config_cls, run, argv, description=description, threads=threads, errors=errors)

@@ -1,7 +1,8 @@
 """The studio's "Try it": a short learning with one drawn pattern against the unshaped baseline.
 
 Everything the studio trains goes through :func:`try_pattern`, built from the
-library's pieces: the domain's batched env, the paper's learner (SARSA on
+library's pieces: the domain's batched env and the paper's learner, both from
+its registration (:attr:`torchrl_subgoal.domains.Domain.learner`: SARSA on
 four-rooms, the Fourier actor-critic on PinBall), the HRS shaping transform of
 :func:`torchrl_subgoal.methods.shaping_transform` and
 :func:`torchrl_subgoal.agents.run_episodes` on the fused engine. Both runs use
@@ -19,17 +20,10 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from torchrl.envs import EnvBase, TransformedEnv
+from torchrl.envs import TransformedEnv
 
-from torchrl_subgoal.agents import (
-    AC_PRESETS,
-    SARSA_PRESETS,
-    FourierActorCritic,
-    SoftmaxSarsa,
-    run_episodes,
-)
-from torchrl_subgoal.agents.loop import OnlineAgent
-from torchrl_subgoal.envs import FourRoomsEnv, PinBallEnv
+from torchrl_subgoal import domains
+from torchrl_subgoal.agents import run_episodes
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.subgoals import SubgoalSeries
@@ -119,29 +113,6 @@ class TryResult:
         return asdict(self)
 
 
-def _four_rooms(settings: TrySettings, map_: str | Path | None) -> tuple[EnvBase, OnlineAgent, dict[str, Any]]:
-    sarsa = SARSA_PRESETS["released"]
-    env = FourRoomsEnv(num_envs=settings.learners, max_steps=settings.max_steps or 1000)
-    agent = SoftmaxSarsa(settings.learners, env.num_states, 4, sarsa, seed=settings.seed)
-    return env, agent, {"gamma": sarsa.gamma, "value_lr": sarsa.value_lr, "observation_key": "cell"}
-
-
-def _pinball(settings: TrySettings, map_: str | Path | None) -> tuple[EnvBase, OnlineAgent, dict[str, Any]]:
-    ac = AC_PRESETS["released"]
-    env = PinBallEnv(settings.learners, map_ or "simple", max_steps=settings.max_steps or 10_000,
-                     seed=settings.seed)
-    spec = env.observation_spec["observation"]
-    agent = FourierActorCritic(settings.learners, spec.low[0], spec.high[0], 5, ac, seed=settings.seed)
-    return env, agent, {"gamma": ac.gamma, "value_lr": ac.value_lr, "observation_key": "observation"}
-
-
-#: domain -> a fresh (env, learner, shaping settings) for ``settings`` (and a PinBall map).
-BUILDERS: dict[str, Callable[[TrySettings, str | Path | None], tuple[EnvBase, OnlineAgent, dict[str, Any]]]] = {
-    "four_rooms": _four_rooms,
-    "pinball": _pinball,
-}
-
-
 def try_pattern(
     domain: str,
     series: SubgoalSeries,
@@ -153,7 +124,8 @@ def try_pattern(
     """Learn with ``series`` (HRS) and without shaping, same seeds, on the fused engine.
 
     Args:
-        domain: ``"four_rooms"`` or ``"pinball"`` (a key of :data:`BUILDERS`).
+        domain: a registered domain with a learner (:attr:`~torchrl_subgoal.domains.Domain.learner`):
+            ``"four_rooms"``, ``"pinball"``.
         series: the drawn pattern.
         settings: episodes, learners, seed, episode cap.
         map: the PinBall map (``"simple"``, ``"hard"`` or a file); ignored by four-rooms.
@@ -170,13 +142,17 @@ def try_pattern(
         >>> len(result.shaped.mean), len(result.potential)
         (3, 3)
     """
-    if domain not in BUILDERS:
-        raise ValueError(f"unknown domain {domain!r}; known: {sorted(BUILDERS)}")
+    found = domains.find(domain)
+    if found is None or found.learner is None:
+        problem = "unknown domain" if found is None else "no learner (Domain.learner) for domain"
+        raise ValueError(f"{problem} {domain!r}; known: {domains.having('learner')}")
+    learner = found.learner
     start = time.perf_counter()
     curves: dict[str, Curve] = {}
     transform: SubgoalPotentialTransform | None = None
     for label in ("baseline", "shaped"):
-        env, agent, shaping = BUILDERS[domain](settings, map)
+        env, agent, shaping = learner(settings.learners, settings.seed, settings.max_steps,
+                                      None if map is None else str(map))
         if label == "shaped":
             transform = shaping_transform(
                 HRS, env.batch_size, gamma=shaping["gamma"], value_lr=shaping["value_lr"], patterns=[series],
