@@ -12,6 +12,9 @@ report included) and prints:
 ``--engine`` measures instead the fused engine alone, in one process: CPU time per
 recorded learner-step of one batch (four-rooms: 100 unshaped SARSA learners, 300
 episodes; PinBall: 50 actor-critic learners, 3 episodes capped at 2,000 steps).
+``--engine --shaped`` shapes the four-rooms learners as most of the paper's methods
+do: a three-subgoal series (states 25, 51, 77), each learner with its own
+potential table learnt online (``value_lr`` 0.25, γ 0.99).
 
 ``--against DIR`` also runs the reproductions with the package of another
 checkout (e.g. the commit before a change: ``git worktree add /tmp/before <commit>``),
@@ -24,6 +27,7 @@ Usage::
     python benchmarks/reproduction_speed.py --quick         # 1/10 of the learnings, 1/4 of PinBall's episodes
     python benchmarks/reproduction_speed.py --domains four_rooms --against /tmp/before --repeats 2
     python benchmarks/reproduction_speed.py --engine --against /tmp/before --repeats 3
+    python benchmarks/reproduction_speed.py --engine --shaped --domains four_rooms --against /tmp/before
 """
 
 from __future__ import annotations
@@ -56,11 +60,14 @@ FIGURES = ("wall_s", "sweep_wall_s", "cpu_s", "cores_busy", "learner_steps_per_s
 ENGINE_FIGURES = ("cpu_ns_per_learner_step", "learner_steps")
 
 
-def measure_engine(domain: str, batch_size: int | None = None) -> dict[str, float]:
+def measure_engine(domain: str, batch_size: int | None = None, shaped: bool = False) -> dict[str, float]:
     """CPU time per recorded learner-step of the fused engine on one batch (after a compiling run) of
-    ``batch_size`` learners (default 100 for four-rooms, 50 for PinBall)."""
+    ``batch_size`` learners (default 100 for four-rooms, 50 for PinBall); ``shaped``: four-rooms with
+    a three-subgoal series and a potential table per learner (see the module doc)."""
     import torch
+    from torchrl.envs import TransformedEnv
 
+    from torchrl_subgoal import State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
     from torchrl_subgoal.agents import (
         AC_PRESETS,
         SARSA_PRESETS,
@@ -75,7 +82,12 @@ def measure_engine(domain: str, batch_size: int | None = None) -> dict[str, floa
     def batch(n: int) -> tuple[Any, Any, int]:
         if domain == "four_rooms":
             grid = FourRoomsEnv(n)
-            return grid, SoftmaxSarsa(n, grid.num_states, 4, SARSA_PRESETS["released"], seed=1), 300
+            agent = SoftmaxSarsa(n, grid.num_states, 4, SARSA_PRESETS["released"], seed=1)
+            if not shaped:
+                return grid, agent, 300
+            series = SubgoalSeries([State(25), State(51), State(77)])
+            shaping = SubgoalPotentialTransform(series, TabularPotential(4, [n]), gamma=0.99, value_lr=0.25)
+            return TransformedEnv(grid, shaping), agent, 300
         table = PinBallEnv(n, seed=1, max_steps=2000)
         spec = table.observation_spec["observation"]
         return table, FourierActorCritic(n, spec.low[0], spec.high[0], 5, AC_PRESETS["released"], seed=1), 3
@@ -170,12 +182,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--engine", action="store_true", help="the fused engine's CPU time per learner-step only")
     parser.add_argument("--batch", type=int, metavar="N", help="--engine: learners per batch (default: 100 for "
                         "four-rooms, 50 for PinBall; the recipes' chunks are 100 and 10)")
+    parser.add_argument("--shaped", action="store_true", help="--engine: four-rooms shaped by a three-subgoal "
+                        "series, a potential table per learner (as most of the paper's methods)")
     parser.add_argument("--measure", metavar="DOMAIN", help=argparse.SUPPRESS)  # one run, JSON out (internal)
     parser.add_argument("recipe_args", nargs="*", help=argparse.SUPPRESS)
     opts = parser.parse_args(argv)
     if opts.measure:
         if opts.recipe_args[:1] == ["engine"]:
-            figures = measure_engine(opts.measure, *map(int, opts.recipe_args[1:]))
+            batch_size, shape = opts.recipe_args[1:3]
+            figures = measure_engine(opts.measure, int(batch_size) or None, shape == "shaped")
         else:
             figures = measure(opts.measure, opts.recipe_args)
         print(json.dumps(figures))
@@ -189,8 +204,10 @@ def main(argv: list[str] | None = None) -> None:
     sides: dict[str, str | None] = {"this checkout": None}
     if opts.against is not None:
         sides = {"against": opts.against, "this checkout": None}
+    if opts.shaped and (not opts.engine or domains != ["four_rooms"]):
+        raise SystemExit("error: --shaped measures the engine on four-rooms only: add --engine --domains four_rooms")
     if opts.engine:
-        _engine_table(domains, sides, opts.repeats, opts.batch)
+        _engine_table(domains, sides, opts.repeats, opts.batch, opts.shaped)
         return
     scale = "quick" if opts.quick else "paper"
     print(f"{scale} scale, 2 workers, median of {opts.repeats} run(s) per side; {os.cpu_count()} CPUs\n")
@@ -219,19 +236,24 @@ def _alternate(domain: str, args: list[str], sides: dict[str, str | None], repea
     return {label: {k: median(r[k] for r in rs) for k in figures} for label, rs in runs.items()}
 
 
-def _engine_table(domains: list[str], sides: dict[str, str | None], repeats: int, batch: int | None) -> None:
+def _engine_table(domains: list[str], sides: dict[str, str | None], repeats: int, batch: int | None,
+                  shaped: bool) -> None:
     size = f", batches of {batch} learners" if batch else ""
-    print(f"fused engine, one process, median of {repeats} run(s) per side{size}\n")
+    kind = "shaped (three-subgoal series, a potential table per learner)" if shaped else "unshaped"
+    print(f"fused engine, {kind}, one process, median of {repeats} run(s) per side{size}; "
+          f"load average {os.getloadavg()[0]:.2f}\n")
     print("| engine | CPU ns per learner-step | learner-steps |")
     print("|---|---|---|")
     for domain in domains:
-        medians = _alternate(domain, ["engine", *([str(batch)] if batch else [])], sides, repeats, ENGINE_FIGURES)
+        args = ["engine", str(batch or 0), "shaped" if shaped else "unshaped"]
+        medians = _alternate(domain, args, sides, repeats, ENGINE_FIGURES)
         for label in sides:
             m = medians[label]
             print(f"| {domain} ({label}) | {m['cpu_ns_per_learner_step']:.0f} | {m['learner_steps']:.0f} |", flush=True)
         if len(sides) == 2:
             ratio = medians["this checkout"]["cpu_ns_per_learner_step"] / medians["against"]["cpu_ns_per_learner_step"]
             print(f"| {domain}: this / against | {ratio:.2f}x | |", flush=True)
+    print(f"\nload average at the end {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":

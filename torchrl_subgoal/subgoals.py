@@ -1096,7 +1096,7 @@ def _misfit(pred: Predicate, size: int, one_hot: bool) -> str | None:
 
 
 class RegionTables(NamedTuple):
-    """Regions as the compiled region search reads them (:func:`~torchrl_subgoal._kernels._advance_one`).
+    """Regions as the compiled region search reads them (:func:`~torchrl_subgoal._kernels.region_search`).
 
     Learner ``b`` follows pattern ``pattern[b]`` (pattern 0 for every learner when ``pattern`` is
     empty). From abstract state ``z`` it moves to ``j + offset`` for the first region ``j`` that

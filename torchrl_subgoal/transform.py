@@ -141,8 +141,8 @@ class ShapingKernelState(NamedTuple):
     """The shaping transform for a compiled loop: its abstraction, its potential and every learner's
     abstract state (``[N, 1]`` arrays, updated in place), from :meth:`SubgoalPotentialTransform.kernel_state`.
 
-    A loop advances a learner with :func:`~torchrl_subgoal._kernels.shaping_advance`, shapes its reward
-    with :func:`~torchrl_subgoal._kernels.shaping_step` and carries its state over (or resets it to
+    A loop advances a learner with :func:`~torchrl_subgoal._kernels.region_search` (or ``lookup``),
+    shapes its reward with :func:`~torchrl_subgoal._kernels.shaping_step` and carries its state over (or resets it to
     :func:`~torchrl_subgoal._kernels.shaping_start`'s) with :func:`~torchrl_subgoal._kernels.shaping_carry`.
 
     Examples:

@@ -197,7 +197,9 @@ def _pinball_ac_run(balls, shaping, learner, action, max_steps_run, records):
     candidates = np.empty(balls.edges.shape[0], np.int64)
     owners = np.empty(balls.edges.shape[0], np.int64)
     scratch, phi_next = _kernels._feature_scratch(learner.order, learner.half, 4, learner.theta.shape[2])
-    kind, regions, lookup, potential, learners = shaping
+    kind, regions, lookup, potential, learners = shaping  # unpacked once (see the note above shaping_start)
+    z, achieved, r_h, k, z_start = learners
+    pattern, lo, hi, centre, weight, radius2, succ, offset = regions
     active, n_active = _kernels._active_learners(records.episode, records.steps.shape[1])
     filed_total = 0
     taken = 0
@@ -207,12 +209,12 @@ def _pinball_ac_run(balls, shaping, learner, action, max_steps_run, records):
         for step in range(max_steps_run):
             px, py, vx, vy, reward, terminated, done = ball_step(balls, b, action[b], candidates, owners)
             obs[0, 0], obs[0, 1], obs[0, 2], obs[0, 3] = px, py, vx, vy
-            zb = learners.z[b, 0]
+            zb = z[b, 0]
             znb, shaped, rh_new, k_new = zb, reward, 0.0, 0
             if kind != _kernels.NO_SHAPING:  # the transform's step
-                znb = _kernels.shaping_advance(kind, regions, lookup, b, zb, obs, 0)
-                shaped, rh_new, k_new = _kernels.shaping_step(potential, learners, b, zb, znb, reward, done,
-                                                              terminated)
+                znb = _kernels.region_search(pattern, lo, hi, centre, weight, radius2, succ, offset, b, zb, obs[0])
+                shaped, rh_new, k_new = _kernels.shaping_step(potential, b, zb, znb, achieved[b, 0], r_h[b, 0],
+                                                              k[b, 0], z_start[b, 0], reward, done, terminated)
             for d in range(4):
                 obs_next[d] = obs[0, d]
             if done:  # the env and the transform reset this ball
@@ -223,7 +225,7 @@ def _pinball_ac_run(balls, shaping, learner, action, max_steps_run, records):
             obs_root[0, 3] = np.float32(vy)
             z_reset = _kernels.shaping_start(kind, regions, lookup, b, obs_root, 0) if done else 0
             if kind != _kernels.NO_SHAPING or done:
-                _kernels.shaping_carry(learners, b, done, z_reset, zb, znb, rh_new, k_new)
+                _kernels.shaping_carry(z, achieved, r_h, k, b, done, z_reset, zb, znb, rh_new, k_new)
             action[b] = _kernels.ac_learner_step(learner, b, action[b], shaped, obs_next, terminated, done,
                                                  obs_root[0], scratch, phi_next)
             filed, finished = _kernels._record_and_stop(b, done, terminated, reward, records)
