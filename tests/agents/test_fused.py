@@ -92,6 +92,30 @@ def test_learner_is_independent_of_its_batch(method: str, abstract_states: int) 
     assert torch.unique(whole[2].flatten(1), dim=0).shape[0] > 3  # the learners did differ
 
 
+def test_fused_equals_torchrl_with_a_region_aggregation() -> None:
+    """SARSA-RS over a ``StateAggregation.from_regions`` (two halves of the state index) shapes in
+    the fused engine exactly as in the TorchRL loop (it once ran unshaped there)."""
+    from torchrl_subgoal import Box, StateAggregation
+
+    cfg = SARSA_PRESETS["released"]
+    results = {}
+    for engine in ("torchrl", "fused"):
+        env = FourRoomsEnv(8, max_steps=150)
+        halves = StateAggregation.from_regions([Box((25.5,), (26.0,), (0,)), Box((77.5,), (26.0,), (0,))], 1)
+        shaping = shaping_transform(paper_methods("SARSA")["SARSA-RS"], env.batch_size, gamma=cfg.gamma,
+                                    value_lr=cfg.value_lr, aggregation=halves, observation_key="cell")
+        learning_env = TransformedEnv(env, shaping)
+        agent = SoftmaxSarsa(8, 104, 4, cfg, seed=_kernels.learner_keys(7, 8))
+        records = run_episodes(learning_env, agent, 25, engine=engine)  # type: ignore[arg-type]
+        results[engine] = (records, *_tables(learning_env, agent))
+    (a, qa, va), (b, qb, vb) = results["torchrl"], results["fused"]
+    assert torch.equal(a.steps, b.steps) and torch.equal(a.returns, b.returns)
+    last = int(a.steps.sum(1).argmax())
+    assert va is not None and vb is not None
+    assert torch.equal(qa[last], qb[last]) and torch.equal(va[last], vb[last])
+    assert vb.abs().sum() > 0  # the potential was trained: the fused run was shaped
+
+
 def test_fused_rejects_other_setups() -> None:
     from torchrl.envs import StepCounter
 
