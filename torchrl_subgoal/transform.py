@@ -830,7 +830,7 @@ class SubgoalPotentialTransform(Transform):
         if self._keeps_learner:
             current.setdefault(self.keys.learner, setup.learner)
         if setup.table is not None and (obs is None or obs.device.type == "cpu") and z.device.type == "cpu":
-            if not (setup.regions and reward is env_reward):  # else the kernel checks (and calls this if wrong)
+            if not (setup.regions is not None and reward is env_reward):  # else the kernel checks (and calls this if wrong)
                 _check_finite(reward, obs, self.reward_key, self.observation_key)
             return self._advance_fused(setup, current, obs, reward, env_reward, done, terminated, learn)
         _check_finite(reward, obs, self.reward_key, self.observation_key)
@@ -898,7 +898,7 @@ class SubgoalPotentialTransform(Transform):
         out: dict[str, Any] = {
             keys.index: z_next[0], keys.ret: rh_out[0], keys.steps: k_out[0], self.reward_key: shaped[0],
         }
-        if setup.regions:
+        if setup.regions is not None:
             self._last_outputs = ((z_next[0], z_next[1], z_next[0].data_ptr()), (rh_out[0], rh_out[1], rh_out[0].data_ptr()),
                                   (k_out[0], k_out[1], k_out[0].data_ptr()))
         if reward is env_reward:
@@ -1255,7 +1255,6 @@ def _empty_like(t: torch.Tensor) -> tuple[torch.Tensor, np.ndarray]:
 
 
 _NUMPY_DTYPES = {torch.float32: np.float32, torch.float64: np.float64, torch.int64: np.int64, torch.bool: np.bool_}
-
 
 
 def _transition(
