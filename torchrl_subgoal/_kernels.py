@@ -14,9 +14,12 @@ flattened, per-learner scalars have a trailing singleton.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numba
+import numba.core.types
+import numba.extending
 import numpy as np
 
 # --------------------------------------------------------------------------- random streams
@@ -145,7 +148,7 @@ def region_search(pattern, lo, hi, centre, weight, radius2, succ, offset, b, zb,
     has ``offset`` 1 (``z`` counts the subgoals achieved), a region
     aggregation ``offset`` 0 and every region allowed. A loop unpacks the
     record once, before it (see the note above :func:`shaping_start`).
-    :func:`sarsa_grid_run` writes this search out in its loop body instead:
+    :func:`fused_run` writes this search out in its loop body instead:
     calling it, inlined, with the seven arrays cost a shaped four-rooms
     learner-step ~40 ns (numba counts a reference per array argument).
     """
@@ -316,7 +319,7 @@ def _shape_shared(
 # A fused loop unpacks a ShapingKernelState (torchrl_subgoal.transform) once, before its loop:
 # ``kind, regions, lookup, potential, learners = shaping``, then ``z, achieved, r_h, k, z_start = learners``
 # and ``pattern, …, offset = regions``. Per step, when ``kind != NO_SHAPING``, it advances the learner's
-# abstract state (region_search when ``kind == REGION_SHAPING``, written out in sarsa_grid_run, ``lookup[s]`` when LOOKUP_SHAPING) and
+# abstract state (region_search when ``kind == REGION_SHAPING``, written out in fused_run, ``lookup`` when LOOKUP_SHAPING) and
 # calls shaping_step, then shaping_carry with shaping_start's abstract state where the env reset,
 # whatever the env and the learner. Each helper takes only the arrays or values it reads: numba counts
 # references to every array of a tuple passed to an inlined function or read from it, and that per step
@@ -325,15 +328,15 @@ def _shape_shared(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def shaping_start(kind, regions, lookup, b, observations, s):
-    """Learner ``b``'s abstract state at a reset to ``observations[s]`` (state number ``s``): 0 for a
-    subgoal series or no shaping, the region or lookup of the reset state for an aggregation
-    (``regions``: a :class:`~torchrl_subgoal.subgoals.RegionTables`; called only at resets)."""
+def shaping_start(kind, regions, lookup, b, o):
+    """Learner ``b``'s abstract state at a reset to the observation ``o`` (a 1-D array): 0 for a
+    subgoal series or no shaping, the region or lookup (``lookup[o[0]]``) of the reset state for an
+    aggregation (``regions``: a :class:`~torchrl_subgoal.subgoals.RegionTables`; called only at resets)."""
     if kind == LOOKUP_SHAPING:
-        return lookup[s]
+        return lookup[np.int64(o[0])]
     if kind == REGION_SHAPING and regions.offset == 0:  # a region aggregation
         pattern, lo, hi, centre, weight, radius2, succ, offset = regions
-        return region_search(pattern, lo, hi, centre, weight, radius2, succ, offset, b, 0, observations[s])
+        return region_search(pattern, lo, hi, centre, weight, radius2, succ, offset, b, 0, o)
     return 0
 
 
@@ -534,28 +537,130 @@ def sarsa_learner_step(sarsa, b, s, z, a, reward, s_next, z_next, terminated, do
                           sarsa.gamma, sarsa.inv_temperature, scratch)
 
 
-@numba.njit(cache=True, nogil=True)
-def sarsa_grid_run(grid, observations, shaping, sarsa, action, max_steps_run, records):
-    """Run steps of grid world + shaping + SARSA until every learner has its episodes.
+# --------------------------------------------------------------------------- the fused engine: one loop
+#
+# fused_run steps any env with any learner. It names neither: it calls the generic functions below, and
+# an env's or a learner's record type (the NamedTuple its ``kernel_state()`` returns) joins the engine by
+# implementing them, next to its own kernels, with ``@implements(generic, RecordType)``:
+#
+# - an env: env_scratch, env_observe, env_step, env_reset and env_shaping_observation
+#   (envs/four_rooms.py for GridKernelState, envs/pinball.py for BallKernelState);
+# - a learner: learner_scratch and learner_step (agents/sarsa.py, agents/actor_critic.py).
+#
+# Numba picks the implementation when it compiles the loop for the records' types (``overload``, on the
+# record's class) and inlines it, so a call costs what the written-out step would. An implementation
+# should not pass its whole record to further inlined helpers per step when the record holds many arrays:
+# numba counts a reference per array each time (see the note above shaping_start). Numba's on-disk cache
+# of fused_run is keyed on this file only: after editing an implementation elsewhere, delete this
+# directory's ``__pycache__/_kernels.fused_run-*.nb[ic]``.
 
-    ``grid``, ``shaping`` and ``sarsa`` are the records the env, the shaping
-    transform and the learner give (``kernel_state()``), updated in place;
-    ``observations[s]`` is what the shaping reads in state ``s`` (its cell, or
-    the state number); ``action[b]`` is learner ``b``'s next action; episodes
-    are filed in ``records`` (:class:`~torchrl_subgoal.agents.records.EpisodeArrays`).
+
+def implements(generic: Callable[..., Any], record: type) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Register ``impl`` as the compiled ``generic`` (one of the functions below) for records of type
+    ``record``: the loop calls ``impl`` where ``generic``'s first argument is such a record.
+
+    ``impl`` takes ``generic``'s arguments and is compiled with numba (inlined into :func:`fused_run`).
+
+    Args:
+        generic: the function implemented, e.g. :func:`env_step`.
+        record: the ``NamedTuple`` class the implementation is for (dispatch is on the exact class).
+
+    Examples:
+        >>> from typing import NamedTuple
+        >>> class Counter(NamedTuple):
+        ...     count: np.ndarray
+        >>> @implements(env_observe, Counter)
+        ... def _observe(env, b, scratch):
+        ...     return env.count[b]
+        >>> @numba.njit
+        ... def observe(env):
+        ...     return env_observe(env, 1, ())
+        >>> int(observe(Counter(np.array([3, 5]))))
+        5
+    """
+
+    def register(impl: Callable[..., Any]) -> Callable[..., Any]:
+        def typer(first: Any, *args: Any) -> Callable[..., Any] | None:
+            if isinstance(first, numba.core.types.BaseNamedTuple) and first.instance_class is record:
+                return impl
+            return None
+
+        numba.extending.overload(generic, inline="always", strict=False)(typer)
+        return impl
+
+    return register
+
+
+def _no_implementation(what: str, record: Any) -> TypeError:
+    return TypeError(f"{what} has no compiled implementation for {type(record).__name__}: register one with "
+                     f"_kernels.implements (see docs/adding_a_domain.md)")
+
+
+def env_scratch(env: Any) -> Any:
+    """Scratch the env's steps share, allocated once per call of :func:`fused_run` (any numba value;
+    ``()`` for none)."""
+    raise _no_implementation("env_scratch", env)
+
+
+def env_observe(env: Any, b: int, scratch: Any) -> Any:
+    """Learner ``b``'s observation as its learner reads it (a state number, an array, …), before its step."""
+    raise _no_implementation("env_observe", env)
+
+
+def env_step(env: Any, b: int, a: int, scratch: Any) -> Any:
+    """Learner ``b``'s env step with action ``a`` (``env`` updated in place):
+    ``(observation, reward as float32, terminated, done)``, the observation as :func:`env_observe` gives it."""
+    raise _no_implementation("env_step", env)
+
+
+def env_reset(env: Any, b: int, scratch: Any) -> Any:
+    """Put learner ``b`` back at the start of an episode; returns its observation there."""
+    raise _no_implementation("env_reset", env)
+
+
+def env_shaping_observation(env: Any, o: Any, scratch: Any) -> Any:
+    """What the shaping transform reads of the observation ``o``: a 1-D array that a region aggregation or a
+    subgoal series tests (its first entry is the index of a lookup aggregation)."""
+    raise _no_implementation("env_shaping_observation", env)
+
+
+def learner_scratch(learner: Any) -> Any:
+    """Scratch of the learner's step, allocated once per call of :func:`fused_run`."""
+    raise _no_implementation("learner_scratch", learner)
+
+
+def learner_step(learner: Any, b: int, o: Any, z: int, a: int, reward: float, o_next: Any, z_next: int,
+                 terminated: bool, done: bool, o_root: Any, z_root: int, scratch: Any) -> int:
+    """Learner ``b``'s update for the transition ``(o, z) --a, reward--> (o_next, z_next)``; returns its next
+    action, drawn at ``(o_root, z_root)`` (the reset state where ``done``, else ``(o_next, z_next)``).
+    ``z`` are abstract states (0 unshaped) for a learner whose table has a row per state and abstract state."""
+    raise _no_implementation("learner_step", learner)
+
+
+@numba.njit(cache=True, nogil=True)
+def fused_run(env, shaping, learner, action, max_steps_run, records):
+    """Run steps of env + shaping + learner until every learner has its episodes (the fused engine's loop).
+
+    ``env``, ``shaping`` and ``learner`` are the records the env, the shaping
+    transform and the learner give (``kernel_state()``), updated in place; the
+    env's and the learner's steps are their record types' implementations of
+    the generic functions above. ``action[b]`` is learner ``b``'s next action;
+    episodes are filed in ``records``
+    (:class:`~torchrl_subgoal.agents.records.EpisodeArrays`).
 
     Per learner, the same kernels in the same order with the same random
     numbers as one iteration of :func:`torchrl_subgoal.agents.run_episodes`
-    with a ``TransformedEnv(FourRoomsEnv, SubgoalPotentialTransform)`` and a
-    :class:`~torchrl_subgoal.agents.SoftmaxSarsa`: env step, transform step,
-    reset, SARSA step, records. Learners are independent (own stream, own
-    tables), so each runs its steps of the block in one go (its table stays
-    in the core's cache) and one that has its episodes stops. At most
-    ``max_steps_run`` steps per learner; returns ``(steps of the longest-running
-    learner, episodes filed)``: the steps the TorchRL loop's batch would take.
+    with a ``TransformedEnv(env, SubgoalPotentialTransform)``: env step,
+    transform step, reset, learner step, records. Learners are independent
+    (own streams, own tables), so each runs its steps of the block in one go
+    (its tables stay in the core's cache) and one that has its episodes stops.
+    At most ``max_steps_run`` steps per learner; returns ``(steps of the
+    longest-running learner, episodes filed)``: the steps the TorchRL loop's
+    batch would take for the same block.
     """
-    scratch = np.empty(sarsa.q.shape[2])
-    kind, regions, lookup, potential, learners = shaping
+    env_buffers = env_scratch(env)
+    learner_buffers = learner_scratch(learner)
+    kind, regions, lookup, potential, learners = shaping  # unpacked once (see the note above shaping_start)
     z, achieved, r_h, k, z_start = learners
     pattern, lo, hi, centre, weight, radius2, succ, offset = regions
     active, n_active = _active_learners(records.episode, records.steps.shape[1])
@@ -565,30 +670,30 @@ def sarsa_grid_run(grid, observations, shaping, sarsa, action, max_steps_run, re
         b = active[i]
         steps = max_steps_run
         for step in range(max_steps_run):
-            s_prev, zb = grid.state[b], z[b, 0]
-            s, reward, terminated, done = grid_step_one(grid, b, action[b])
+            o, zb = env_observe(env, b, env_buffers), z[b, 0]
+            o_next, reward, terminated, done = env_step(env, b, action[b], env_buffers)
             znb, shaped, rh_new, k_new = zb, reward, 0.0, 0
             if kind != NO_SHAPING:  # the transform's step
+                seen = env_shaping_observation(env, o_next, env_buffers)
                 if kind == REGION_SHAPING:  # region_search, written out (see its doc)
-                    o = observations[s]
                     p = pattern[b] if pattern.shape[0] > 0 else 0
                     for j in range(lo.shape[1]):
-                        if succ[p, zb, j] and _in_region(o, lo[p, j], hi[p, j], centre[p, j], weight[p, j],
+                        if succ[p, zb, j] and _in_region(seen, lo[p, j], hi[p, j], centre[p, j], weight[p, j],
                                                          radius2[p, j]):
                             znb = j + offset
                             break
                 else:
-                    znb = lookup[s]
+                    znb = lookup[np.int64(seen[0])]
                 shaped, rh_new, k_new = shaping_step(potential, b, zb, znb, achieved[b, 0], r_h[b, 0], k[b, 0],
                                                      z_start[b, 0], reward, done, terminated)
-            z_reset = 0
+            o_root, z_reset = o_next, 0
             if done:  # the env and the transform reset this learner
-                grid_reset_one(grid, b)
-                z_reset = shaping_start(kind, regions, lookup, b, observations, grid.state[b])
+                o_root = env_reset(env, b, env_buffers)
+                z_reset = shaping_start(kind, regions, lookup, b, env_shaping_observation(env, o_root, env_buffers))
             if kind != NO_SHAPING or done:
                 shaping_carry(z, achieved, r_h, k, b, done, z_reset, zb, znb, rh_new, k_new)
-            action[b] = sarsa_learner_step(sarsa, b, s_prev, zb, action[b], shaped, s, znb, terminated, done,
-                                           grid.state[b], z[b, 0], scratch)
+            action[b] = learner_step(learner, b, o, zb, action[b], shaped, o_next, znb, terminated, done, o_root,
+                                     z[b, 0], learner_buffers)
             filed, finished = _record_and_stop(b, done, terminated, reward, records)
             filed_total += filed
             if finished:

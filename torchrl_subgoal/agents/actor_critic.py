@@ -261,3 +261,19 @@ class FourierActorCritic(KernelLearner):
             cfg.order, self.half_dim, view("streams"), cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr, action,
         )
         next_root.set("action", torch.from_numpy(action))
+
+
+# The fused engine's learner step (torchrl_subgoal._kernels.fused_run): features of the observation array.
+
+
+@_kernels.implements(_kernels.learner_scratch, ActorCriticKernelState)
+def _ac_scratch(learner: ActorCriticKernelState) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
+    return _kernels._feature_scratch(learner.order, learner.half, learner.low.shape[0], learner.theta.shape[2])
+
+
+@_kernels.implements(_kernels.learner_step, ActorCriticKernelState)
+def _ac_fused_step(learner: ActorCriticKernelState, b: int, o: np.ndarray, z: int, a: int, reward: float,
+                   o_next: np.ndarray, z_next: int, terminated: bool, done: bool, o_root: np.ndarray, z_root: int,
+                   scratch: tuple[tuple[np.ndarray, ...], np.ndarray]) -> int:
+    features, phi_next = scratch
+    return _kernels.ac_learner_step(learner, b, a, reward, o_next, terminated, done, o_root, features, phi_next)

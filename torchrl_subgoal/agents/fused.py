@@ -37,7 +37,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TypeVar
 
-import numba
 import numpy as np
 import torch
 from tensordict import TensorDictBase
@@ -48,7 +47,7 @@ from torchrl_subgoal.agents.actor_critic import FourierActorCritic
 from torchrl_subgoal.agents.records import EpisodeArrays, EpisodeRecords
 from torchrl_subgoal.agents.sarsa import SoftmaxSarsa
 from torchrl_subgoal.envs.four_rooms import FourRoomsEnv
-from torchrl_subgoal.envs.pinball import PinBallEnv, ball_reset, ball_step
+from torchrl_subgoal.envs.pinball import PinBallEnv
 from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.transform import ShapingKernelState, SubgoalPotentialTransform
 
@@ -157,84 +156,15 @@ def run_four_rooms_fused(
     n = max(1, base.batch_size.numel())
     action = td.get("action").reshape(-1).numpy().copy()
     state = _shaping_state(shaping, td, n)
-    grid = base.kernel_state()
-    observations = np.arange(grid.cells.shape[0]).reshape(-1, 1)  # what the shaping reads: the state number…
-    if shaping is not None:
-        if shaping.observation_key not in ("cell", "observation"):
-            raise TypeError(f"the fused engine reads 'cell' or 'observation', not {shaping.observation_key!r}")
-        if shaping.observation_key == "cell":
-            if state.kind == _kernels.LOOKUP_SHAPING:
-                raise TypeError("a lookup aggregation reads the state number ('observation')")
-            observations = grid.cells  # … or its cell
-    sarsa = agent.kernel_state()
+    key = "observation" if shaping is None else shaping.observation_key
+    if key == "cell" and state.kind == _kernels.LOOKUP_SHAPING:
+        raise TypeError("a lookup aggregation reads the state number ('observation')")
+    grid, sarsa = base.kernel_state(key), agent.kernel_state()  # the shaping reads the state number or its cell
 
     def run_block(records: EpisodeArrays) -> tuple[int, int]:
-        return _kernels.sarsa_grid_run(grid, observations, state, sarsa, action, block, records)
+        return _kernels.fused_run(grid, state, sarsa, action, block, records)
 
     return _run_blocks(n, episodes, run_block, progress)
-
-
-# --------------------------------------------------------------------------- PinBall
-
-
-@numba.njit(cache=True, nogil=True)
-def _pinball_ac_run(balls, shaping, learner, action, max_steps_run, records):
-    """PinBall + shaping + actor-critic, per learner the TorchRL loop's kernels in its order (see module doc).
-
-    ``balls``, ``shaping`` and ``learner`` are the records the env, the shaping
-    transform and the learner give (``kernel_state()``), updated in place;
-    ``action[b]`` is learner ``b``'s next action; episodes are filed in
-    ``records`` (:class:`~torchrl_subgoal.agents.records.EpisodeArrays`).
-    Learners are independent (own streams, own tables), so each runs its
-    steps of the block in one go (its tables stay in the core's cache) and
-    one that has all its episodes stops. At most ``max_steps_run`` steps per
-    learner; returns ``(steps of the longest-running learner, episodes filed)``:
-    the steps the TorchRL loop's batch would take for the same block.
-    """
-    obs = np.empty((1, 4), np.float32)  # one row: the shaping reads observations[0]
-    obs_next = np.empty(4, np.float64)
-    obs_root = np.empty((1, 4), np.float64)
-    candidates = np.empty(balls.edges.shape[0], np.int64)
-    owners = np.empty(balls.edges.shape[0], np.int64)
-    scratch, phi_next = _kernels._feature_scratch(learner.order, learner.half, 4, learner.theta.shape[2])
-    kind, regions, lookup, potential, learners = shaping  # unpacked once (see the note above shaping_start)
-    z, achieved, r_h, k, z_start = learners
-    pattern, lo, hi, centre, weight, radius2, succ, offset = regions
-    active, n_active = _kernels._active_learners(records.episode, records.steps.shape[1])
-    filed_total = 0
-    taken = 0
-    for i in range(n_active):
-        b = active[i]
-        steps = max_steps_run
-        for step in range(max_steps_run):
-            px, py, vx, vy, reward, terminated, done = ball_step(balls, b, action[b], candidates, owners)
-            obs[0, 0], obs[0, 1], obs[0, 2], obs[0, 3] = px, py, vx, vy
-            zb = z[b, 0]
-            znb, shaped, rh_new, k_new = zb, reward, 0.0, 0
-            if kind != _kernels.NO_SHAPING:  # the transform's step
-                znb = _kernels.region_search(pattern, lo, hi, centre, weight, radius2, succ, offset, b, zb, obs[0])
-                shaped, rh_new, k_new = _kernels.shaping_step(potential, b, zb, znb, achieved[b, 0], r_h[b, 0],
-                                                              k[b, 0], z_start[b, 0], reward, done, terminated)
-            for d in range(4):
-                obs_next[d] = obs[0, d]
-            if done:  # the env and the transform reset this ball
-                px, py, vx, vy = ball_reset(balls, b)
-            obs_root[0, 0] = np.float32(px)
-            obs_root[0, 1] = np.float32(py)
-            obs_root[0, 2] = np.float32(vx)
-            obs_root[0, 3] = np.float32(vy)
-            z_reset = _kernels.shaping_start(kind, regions, lookup, b, obs_root, 0) if done else 0
-            if kind != _kernels.NO_SHAPING or done:
-                _kernels.shaping_carry(z, achieved, r_h, k, b, done, z_reset, zb, znb, rh_new, k_new)
-            action[b] = _kernels.ac_learner_step(learner, b, action[b], shaped, obs_next, terminated, done,
-                                                 obs_root[0], scratch, phi_next)
-            filed, finished = _kernels._record_and_stop(b, done, terminated, reward, records)
-            filed_total += filed
-            if finished:
-                steps = step + 1
-                break
-        taken = max(taken, steps)
-    return taken, filed_total
 
 
 def run_pinball_fused(
@@ -269,6 +199,6 @@ def run_pinball_fused(
     balls, learner = base.kernel_state(), agent.kernel_state()
 
     def run_block(records: EpisodeArrays) -> tuple[int, int]:
-        return _pinball_ac_run(balls, state, learner, action, block, records)
+        return _kernels.fused_run(balls, state, learner, action, block, records)
 
     return _run_blocks(n, episodes, run_block, progress)

@@ -208,3 +208,18 @@ class SoftmaxSarsa(KernelLearner):
 def _flat(t: torch.Tensor) -> np.ndarray:
     """A CPU tensor as a 1-D numpy array (a view when contiguous)."""
     return t.numpy().reshape(-1)
+
+
+# The fused engine's learner step (torchrl_subgoal._kernels.fused_run): a row per state and abstract state.
+
+
+@_kernels.implements(_kernels.learner_scratch, SarsaKernelState)
+def _sarsa_scratch(learner: SarsaKernelState) -> np.ndarray:
+    return np.empty(learner.q.shape[2])
+
+
+@_kernels.implements(_kernels.learner_step, SarsaKernelState)
+def _sarsa_fused_step(learner: SarsaKernelState, b: int, o: int, z: int, a: int, reward: float, o_next: int,
+                      z_next: int, terminated: bool, done: bool, o_root: int, z_root: int, scratch: np.ndarray) -> int:
+    return _kernels.sarsa_learner_step(learner, b, o, z, a, reward, o_next, z_next, terminated, done, o_root, z_root,
+                                       scratch)

@@ -124,6 +124,7 @@ class GridKernelState(NamedTuple):
     t: np.ndarray  #: ``[N]`` steps into the episode
     transitions: np.ndarray  #: ``[S, 4]`` next state of every state and action
     cells: np.ndarray  #: ``[S, 2]`` (row, column) of every state
+    observed: np.ndarray  #: ``[S, D]`` what the shaping of a compiled loop reads in every state (see :meth:`FourRoomsEnv.kernel_state`)
     start: int  #: the start state
     goal: int  #: the goal state
     max_steps: int  #: steps before truncation
@@ -210,6 +211,7 @@ class FourRoomsEnv(EnvBase):
         if self.device.type == "cpu":
             self._transitions_np = self.transitions.numpy()
             self._cells_np = self.cells.numpy()
+            self._numbers_np = np.arange(n, dtype=self._cells_np.dtype).reshape(n, 1)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
         reset = tensordict.get("_reset", None) if tensordict is not None else None
@@ -270,16 +272,25 @@ class FourRoomsEnv(EnvBase):
     def _set_seed(self, seed: int | None) -> None:
         """The dynamics are deterministic: nothing to seed."""
 
-    def kernel_state(self) -> GridKernelState:
+    def kernel_state(self, observation_key: str = "observation") -> GridKernelState:
         """The env's state and tables as numpy views (CPU only), for a compiled loop to step in place.
+
+        Args:
+            observation_key: the entry a compiled loop's shaping reads (``observed``): ``"observation"``
+                (the state number) or ``"cell"``.
 
         Examples:
             >>> FourRoomsEnv(num_envs=3).kernel_state().state.shape
             (3,)
+            >>> FourRoomsEnv(num_envs=3).kernel_state("cell").observed.shape
+            (104, 2)
         """
         if self.device.type != "cpu":
             raise TypeError(f"kernel_state needs a CPU env, not {self.device}")
-        return GridKernelState(self._state.numpy(), self._t.numpy(), self._transitions_np, self._cells_np,
+        if observation_key not in ("observation", "cell"):
+            raise TypeError(f"a compiled loop reads 'cell' or 'observation', not {observation_key!r}")
+        observed = self._cells_np if observation_key == "cell" else self._numbers_np
+        return GridKernelState(self._state.numpy(), self._t.numpy(), self._transitions_np, self._cells_np, observed,
                                self.start_state, self.goal_state, self.max_steps, self.goal_reward, self.step_reward)
 
     def shortest_path_length(self) -> int:
@@ -350,3 +361,32 @@ def draw_map(ax: Any, patterns: Mapping[str, SubgoalSeries | Sequence[tuple[int,
     ax.tick_params(labelsize=6)
     ax.set_xlim(-0.5, SIZE[1] - 0.5)
     ax.set_ylim(SIZE[0] - 0.5, -0.5)
+
+
+# The fused engine's env step (torchrl_subgoal._kernels.fused_run): the learner reads the state number.
+
+
+@_kernels.implements(_kernels.env_scratch, GridKernelState)
+def _grid_scratch(env: GridKernelState) -> tuple[()]:
+    return ()
+
+
+@_kernels.implements(_kernels.env_observe, GridKernelState)
+def _grid_observe(env: GridKernelState, b: int, scratch: tuple[()]) -> int:
+    return env.state[b]
+
+
+@_kernels.implements(_kernels.env_step, GridKernelState)
+def _grid_step(env: GridKernelState, b: int, a: int, scratch: tuple[()]) -> tuple[int, np.float32, bool, bool]:
+    return _kernels.grid_step_one(env, b, a)
+
+
+@_kernels.implements(_kernels.env_reset, GridKernelState)
+def _grid_reset(env: GridKernelState, b: int, scratch: tuple[()]) -> int:
+    _kernels.grid_reset_one(env, b)
+    return env.state[b]
+
+
+@_kernels.implements(_kernels.env_shaping_observation, GridKernelState)
+def _grid_shaping_observation(env: GridKernelState, s: int, scratch: tuple[()]) -> np.ndarray:
+    return env.observed[s]

@@ -465,6 +465,46 @@ def ball_reset(balls: BallKernelState, b: int) -> tuple[float, float, float, flo
     return balls.start_x, balls.start_y, 0.0, 0.0
 
 
+# The fused engine's env step (torchrl_subgoal._kernels.fused_run): the learner and the shaping read the
+# observation as PinBallEnv emits it (float32), held in float64 scratch rows: before, after and at a reset.
+
+
+@_kernels.implements(_kernels.env_scratch, BallKernelState)
+def _ball_scratch(env: BallKernelState) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    n = env.edges.shape[0]
+    return np.empty(4), np.empty(4), np.empty(4), np.empty(n, np.int64), np.empty(n, np.int64)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _observation(out: np.ndarray, px: float, py: float, vx: float, vy: float) -> np.ndarray:
+    """``out`` ← the float32 observation ``(x, y, vx, vy)``."""
+    out[0], out[1], out[2], out[3] = np.float32(px), np.float32(py), np.float32(vx), np.float32(vy)
+    return out
+
+
+@_kernels.implements(_kernels.env_observe, BallKernelState)
+def _ball_observe(env: BallKernelState, b: int, scratch: tuple[np.ndarray, ...]) -> np.ndarray:
+    return _observation(scratch[0], env.position[b, 0], env.position[b, 1], env.velocity[b, 0], env.velocity[b, 1])
+
+
+@_kernels.implements(_kernels.env_step, BallKernelState)
+def _ball_env_step(env: BallKernelState, b: int, a: int, scratch: tuple[np.ndarray, ...],
+                   ) -> tuple[np.ndarray, np.float32, bool, bool]:
+    px, py, vx, vy, reward, terminated, done = ball_step(env, b, a, scratch[3], scratch[4])
+    return _observation(scratch[1], px, py, vx, vy), reward, terminated, done
+
+
+@_kernels.implements(_kernels.env_reset, BallKernelState)
+def _ball_env_reset(env: BallKernelState, b: int, scratch: tuple[np.ndarray, ...]) -> np.ndarray:
+    px, py, vx, vy = ball_reset(env, b)
+    return _observation(scratch[2], px, py, vx, vy)
+
+
+@_kernels.implements(_kernels.env_shaping_observation, BallKernelState)
+def _ball_shaping_observation(env: BallKernelState, o: np.ndarray, scratch: tuple[np.ndarray, ...]) -> np.ndarray:
+    return o
+
+
 def _step_balls(
     position: np.ndarray,
     velocity: np.ndarray,
