@@ -580,6 +580,8 @@ def implements(generic: Callable[..., Any], record: type) -> Callable[[Callable[
     """
 
     def register(impl: Callable[..., Any]) -> Callable[..., Any]:
+        _IMPLEMENTED.setdefault(generic.__name__, set()).add(record)
+
         def typer(first: Any, *args: Any) -> Callable[..., Any] | None:
             if isinstance(first, numba.core.types.BaseNamedTuple) and first.instance_class is record:
                 return impl
@@ -589,6 +591,21 @@ def implements(generic: Callable[..., Any], record: type) -> Callable[[Callable[
         return impl
 
     return register
+
+
+_IMPLEMENTED: dict[str, set[type]] = {}  # generic function → the record types that implement it
+
+
+def missing_steps(env: Any, learner: Any) -> list[str]:
+    """The generic functions that ``env``'s or ``learner``'s record type does not implement (``[]``: they can
+    run in :func:`fused_run`).
+
+    Examples:
+        >>> missing_steps((), ())[:2]
+        ['env_scratch', 'env_observe']
+    """
+    wanted = [(name, env) for name in ENV_STEPS] + [(name, learner) for name in LEARNER_STEPS]
+    return [name for name, record in wanted if type(record) not in _IMPLEMENTED.get(name, ())]
 
 
 def _no_implementation(what: str, record: Any) -> TypeError:
@@ -635,6 +652,10 @@ def learner_step(learner: Any, b: int, o: Any, z: int, a: int, reward: float, o_
     action, drawn at ``(o_root, z_root)`` (the reset state where ``done``, else ``(o_next, z_next)``).
     ``z`` are abstract states (0 unshaped) for a learner whose table has a row per state and abstract state."""
     raise _no_implementation("learner_step", learner)
+
+
+ENV_STEPS = ("env_scratch", "env_observe", "env_step", "env_reset", "env_shaping_observation")
+LEARNER_STEPS = ("learner_scratch", "learner_step")
 
 
 @numba.njit(cache=True, nogil=True)
@@ -701,6 +722,11 @@ def fused_run(env, shaping, learner, action, max_steps_run, records):
                 break
         taken = max(taken, steps)
     return taken, filed_total
+
+
+#: :func:`fused_run` without numba's on-disk cache, for record types from outside this package: a cache
+#: index names the record types it holds, and every process that loads it must import their modules.
+fused_run_uncached = numba.njit(nogil=True)(fused_run.py_func)
 
 
 # --------------------------------------------------------------------------- linear actor-critics

@@ -35,9 +35,9 @@ refused here.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Any, Protocol, TypeVar
 
-import numpy as np
+import numba.core.errors
 import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, TransformedEnv
@@ -46,12 +46,12 @@ from torchrl_subgoal import _kernels
 from torchrl_subgoal.agents.actor_critic import FourierActorCritic
 from torchrl_subgoal.agents.records import EpisodeArrays, EpisodeRecords
 from torchrl_subgoal.agents.sarsa import SoftmaxSarsa
-from torchrl_subgoal.envs.four_rooms import FourRoomsEnv
-from torchrl_subgoal.envs.pinball import PinBallEnv
+from torchrl_subgoal.envs.four_rooms import FourRoomsEnv, GridKernelState
+from torchrl_subgoal.envs.pinball import BallKernelState, PinBallEnv
 from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.transform import ShapingKernelState, SubgoalPotentialTransform
 
-__all__ = ["run_episodes_fused", "run_four_rooms_fused", "run_pinball_fused"]
+__all__ = ["FusedLearner", "run_episodes_fused", "run_four_rooms_fused", "run_pinball_fused"]
 
 B = TypeVar("B", bound=EnvBase)
 
@@ -102,14 +102,37 @@ def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase
     return shaping.kernel_state(td)
 
 
+class FusedLearner(Protocol):
+    """What the fused engine asks of a learner: ``act`` (its first actions, as in the TorchRL loop) and
+    ``kernel_state()``, a record whose type implements ``learner_scratch`` and ``learner_step``
+    (:func:`torchrl_subgoal._kernels.implements`; see docs/adding_a_domain.md)."""
+
+    def act(self, tensordict: TensorDictBase) -> TensorDictBase: ...
+
+    def kernel_state(self) -> Any: ...
+
+
 def run_episodes_fused(
     env: EnvBase,
-    agent: SoftmaxSarsa | FourierActorCritic,
+    agent: FusedLearner,
     episodes: int,
     *,
     progress: Callable[[int], None] | None = None,
 ) -> EpisodeRecords:
     """Same as ``run_episodes(env, agent, episodes)`` (see the module doc), compiled.
+
+    Four-rooms with SARSA and PinBall with the actor-critic go through
+    :func:`run_four_rooms_fused` and :func:`run_pinball_fused`; any other env
+    with a ``kernel_state()`` and learner (:class:`FusedLearner`) whose records
+    implement the fused engine's steps runs through the same loop
+    (docs/adding_a_domain.md).
+
+    Args:
+        env: the env (its batch is the learners), alone or in a ``TransformedEnv`` with one
+            :class:`~torchrl_subgoal.SubgoalPotentialTransform`.
+        agent: the learner, one per env of the batch.
+        episodes: episodes every learner runs.
+        progress: called with the number of episodes filed after each compiled block.
 
     Examples:
         >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
@@ -126,10 +149,50 @@ def run_episodes_fused(
         return run_pinball_fused(env, agent, episodes, progress=progress)
     if isinstance(base, FourRoomsEnv) and isinstance(agent, SoftmaxSarsa):
         return run_four_rooms_fused(env, agent, episodes, progress=progress)
-    raise TypeError(
-        "the fused engine runs FourRoomsEnv with SoftmaxSarsa or PinBallEnv with FourierActorCritic, "
-        f"got {type(base).__name__} with {type(agent).__name__}; use engine='torchrl'"
-    )
+    if isinstance(base, (FourRoomsEnv, PinBallEnv)) or not hasattr(base, "kernel_state") or not hasattr(
+            agent, "kernel_state"):
+        raise TypeError(
+            "the fused engine runs FourRoomsEnv with SoftmaxSarsa, PinBallEnv with FourierActorCritic, or an env "
+            "and a learner whose kernel_state() records implement its steps (docs/adding_a_domain.md); "
+            f"got {type(base).__name__} with {type(agent).__name__}; use engine='torchrl'"
+        )
+    base, shaping = _unwrap(env, EnvBase)
+    return _run_fused(env, shaping, agent, episodes, lambda state: base.kernel_state(), progress, 1024)
+
+
+def _run_fused(
+    env: EnvBase,
+    shaping: SubgoalPotentialTransform | None,
+    agent: FusedLearner,
+    episodes: int,
+    env_state: Callable[[ShapingKernelState], Any],
+    progress: Callable[[int], None] | None,
+    block: int,
+) -> EpisodeRecords:
+    """The fused engine's driver: the same start as the TorchRL loop, then :func:`~torchrl_subgoal._kernels.fused_run`
+    in blocks of ``block`` steps; ``env_state(shaping's record)`` is the env's record (and its checks)."""
+    td = agent.act(env.reset())  # the same start as the TorchRL loop, tables compiled
+    n = max(1, env.batch_size.numel())
+    action = td.get("action").reshape(-1).numpy().copy()
+    state = _shaping_state(shaping, td, n)
+    record, learner = env_state(state), agent.kernel_state()
+    missing = _kernels.missing_steps(record, learner)
+    if missing:
+        raise TypeError(f"{type(record).__name__} and {type(learner).__name__} do not implement the fused engine's "
+                        f"{', '.join(missing)} (register them with _kernels.implements; docs/adding_a_domain.md)")
+    packaged = all(type(r).__module__.startswith("torchrl_subgoal.") for r in (record, learner))
+    loop = _kernels.fused_run if packaged else _kernels.fused_run_uncached  # see fused_run_uncached
+
+    def run_block(records: EpisodeArrays) -> tuple[int, int]:
+        try:
+            return loop(record, state, learner, action, block, records)
+        except numba.core.errors.TypingError as error:
+            said = [line for line in str(error).splitlines() if line.strip() and "Failed in" not in line]
+            raise TypeError(f"the fused loop does not compile for {type(record).__name__} with "
+                            f"{type(learner).__name__} (does what env_step returns fit what learner_step reads?): "
+                            f"{said[0] if said else error}") from None
+
+    return _run_blocks(n, episodes, run_block, progress)
 
 
 def run_four_rooms_fused(
@@ -152,19 +215,14 @@ def run_four_rooms_fused(
         (torch.Size([8, 3]), True)
     """
     base, shaping = _unwrap(env, FourRoomsEnv)
-    td = agent.act(env.reset())  # the same start as the TorchRL loop, tables compiled
-    n = max(1, base.batch_size.numel())
-    action = td.get("action").reshape(-1).numpy().copy()
-    state = _shaping_state(shaping, td, n)
     key = "observation" if shaping is None else shaping.observation_key
-    if key == "cell" and state.kind == _kernels.LOOKUP_SHAPING:
-        raise TypeError("a lookup aggregation reads the state number ('observation')")
-    grid, sarsa = base.kernel_state(key), agent.kernel_state()  # the shaping reads the state number or its cell
 
-    def run_block(records: EpisodeArrays) -> tuple[int, int]:
-        return _kernels.fused_run(grid, state, sarsa, action, block, records)
+    def grid(state: ShapingKernelState) -> GridKernelState:  # the shaping reads the state number or its cell
+        if key == "cell" and state.kind == _kernels.LOOKUP_SHAPING:
+            raise TypeError("a lookup aggregation reads the state number ('observation')")
+        return base.kernel_state(key)
 
-    return _run_blocks(n, episodes, run_block, progress)
+    return _run_fused(env, shaping, agent, episodes, grid, progress, block)
 
 
 def run_pinball_fused(
@@ -190,15 +248,10 @@ def run_pinball_fused(
     base, shaping = _unwrap(env, PinBallEnv)
     if base.physics.backend != "numba":
         raise TypeError("the fused engine needs PinBall's numba physics backend")
-    td = agent.act(env.reset())
-    n = base.batch_size.numel()
-    action = td.get("action").reshape(-1).numpy().copy()
-    state = _shaping_state(shaping, td, n)
-    if state.kind == _kernels.LOOKUP_SHAPING:
-        raise TypeError("the fused PinBall engine needs a region aggregation (StateAggregation.from_regions)")
-    balls, learner = base.kernel_state(), agent.kernel_state()
 
-    def run_block(records: EpisodeArrays) -> tuple[int, int]:
-        return _kernels.fused_run(balls, state, learner, action, block, records)
+    def balls(state: ShapingKernelState) -> BallKernelState:
+        if state.kind == _kernels.LOOKUP_SHAPING:
+            raise TypeError("the fused PinBall engine needs a region aggregation (StateAggregation.from_regions)")
+        return base.kernel_state()
 
-    return _run_blocks(n, episodes, run_block, progress)
+    return _run_fused(env, shaping, agent, episodes, balls, progress, block)
