@@ -125,3 +125,29 @@ def test_the_method_runs_on_a_toy_domain_from_a_subgoal_file(corridor: ModuleTyp
     report = write_report(tmp_path / "results", n_boot=20)
     assert (tmp_path / "results" / "patterns.png").read_bytes()[:4] == b"\x89PNG"  # the corridor's draw_map
     assert "no map" not in report.markdown and "skipped" not in report.markdown
+
+
+def test_a_toy_domain_joins_the_fused_engine(corridor: ModuleType, tmp_path: Path) -> None:
+    """The corridor's record and its five env steps are all the fused engine needs: with SARSA, shaped by
+    HRS over the file's subgoals or not, its episodes, Q table and potential equal the TorchRL loop's."""
+    patterns = list(load_patterns(_written(tmp_path / "corridor.yaml", corridor.SUBGOAL_FILE)).values())
+    sarsa, n = SARSA_PRESETS["released"], 6
+    for method in ("HRS", "SARSA"):
+        results = {}
+        for engine in ("torchrl", "fused"):
+            env = corridor.CorridorEnv(n, max_steps=40)
+            shaping = shaping_transform(paper_methods("SARSA")[method], env.batch_size, gamma=sarsa.gamma,
+                                        value_lr=sarsa.value_lr, patterns=patterns,
+                                        pattern_index=torch.zeros(n, dtype=torch.long))
+            agent = SoftmaxSarsa(n, corridor.LENGTH + 1, 2, sarsa, seed=3)
+            records = run_episodes(TransformedEnv(env, shaping) if shaping is not None else env, agent, 8,
+                                   engine=engine)  # type: ignore[arg-type]
+            potential = shaping.potential.table.clone() if shaping is not None else None  # type: ignore[union-attr]
+            results[engine] = (records, agent.q.clone(), potential)
+        (a, qa, va), (b, qb, vb) = results["torchrl"], results["fused"]
+        assert torch.equal(a.steps, b.steps) and torch.equal(a.returns, b.returns)
+        assert (a.steps < 40).any()  # some episodes reached the goal
+        last = int(a.steps.sum(1).argmax())  # the fused engine stops a learner at its last episode
+        assert torch.equal(qa[last], qb[last])
+        if method == "HRS":
+            assert va is not None and vb is not None and torch.equal(va[last], vb[last]) and vb.abs().sum() > 0

@@ -541,7 +541,8 @@ def sarsa_learner_step(sarsa, b, s, z, a, reward, s_next, z_next, terminated, do
 #
 # fused_run steps any env with any learner. It names neither: it calls the generic functions below, and
 # an env's or a learner's record type (the NamedTuple its ``kernel_state()`` returns) joins the engine by
-# implementing them, next to its own kernels, with ``@implements(generic, RecordType)``:
+# implementing them, next to its own kernels, with ``@implements(generic, RecordType)`` (also
+# importable from torchrl_subgoal.agents.fused, with the generic functions):
 #
 # - an env: env_scratch, env_observe, env_step, env_reset and env_shaping_observation
 #   (envs/four_rooms.py for GridKernelState, envs/pinball.py for BallKernelState);
@@ -610,7 +611,7 @@ def missing_steps(env: Any, learner: Any) -> list[str]:
 
 def _no_implementation(what: str, record: Any) -> TypeError:
     return TypeError(f"{what} has no compiled implementation for {type(record).__name__}: register one with "
-                     f"_kernels.implements (see docs/adding_a_domain.md)")
+                     f"torchrl_subgoal.agents.fused.implements (docs/adding_a_domain.md)")
 
 
 def env_scratch(env: Any) -> Any:

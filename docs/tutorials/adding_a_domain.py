@@ -18,15 +18,16 @@ import argparse
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
+import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal import State, domains, load_patterns
-from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
+from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, fused, run_episodes
 from torchrl_subgoal.experiments.plots import plot_pattern_maps
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 from torchrl_subgoal.subgoals import Predicate
@@ -67,6 +68,10 @@ class CorridorEnv(EnvBase):
 
     def _set_seed(self, seed: int | None) -> None:
         pass
+
+    def kernel_state(self) -> CorridorKernelState:
+        """The corridor as the fused engine reads it (optional; see "The fused engine" below)."""
+        return CorridorKernelState(self.position.numpy(), self.t.numpy(), self.length, self.max_steps)
 # --8<-- [end:env]
 
 
@@ -98,6 +103,49 @@ domains.register(domains.Domain(
     "corridor", "Corridor", make_env=CorridorEnv, check_subgoal=check_subgoal, draw_map=draw_map,
 ))
 # --8<-- [end:register]
+
+# --8<-- [start:fused]
+class CorridorKernelState(NamedTuple):
+    """The corridor for compiled loops: numpy views of its tensors (updated in place) and its settings."""
+
+    position: np.ndarray  # [N] cell of every learner
+    t: np.ndarray  # [N] steps into the episode
+    length: int
+    max_steps: int
+
+
+@fused.implements(fused.env_scratch, CorridorKernelState)
+def _scratch(env: CorridorKernelState) -> np.ndarray:
+    return np.empty(1, np.int64)  # the observation the shaping reads: [cell]
+
+
+@fused.implements(fused.env_observe, CorridorKernelState)
+def _observe(env: CorridorKernelState, b: int, scratch: np.ndarray) -> int:
+    return env.position[b]  # SoftmaxSarsa's learner step reads the cell number
+
+
+@fused.implements(fused.env_step, CorridorKernelState)
+def _step(env: CorridorKernelState, b: int, a: int, scratch: np.ndarray) -> tuple[int, np.float32, bool, bool]:
+    cell = min(max(env.position[b] + 2 * a - 1, 0), env.length)
+    env.position[b] = cell
+    env.t[b] += 1
+    terminated = cell == env.length
+    return cell, np.float32(1.0 if terminated else 0.0), terminated, terminated or env.t[b] >= env.max_steps
+
+
+@fused.implements(fused.env_reset, CorridorKernelState)
+def _reset(env: CorridorKernelState, b: int, scratch: np.ndarray) -> int:
+    env.position[b] = 0
+    env.t[b] = 0
+    return env.position[b]
+
+
+@fused.implements(fused.env_shaping_observation, CorridorKernelState)
+def _shaping_observation(env: CorridorKernelState, cell: int, scratch: np.ndarray) -> np.ndarray:
+    scratch[0] = cell
+    return scratch
+# --8<-- [end:fused]
+
 
 # --8<-- [start:file]
 SUBGOAL_FILE = """\

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import pytest
 import torch
@@ -12,6 +14,8 @@ from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import room_aggregation
 from torchrl_subgoal.methods import paper_methods, shaping_transform
+
+from ..line_env import LineEnv
 
 PATTERNS = [SubgoalSeries([Cell(4, 9), Cell(11, 9)]), SubgoalSeries([Cell(1, 11), Cell(11, 1), Cell(10, 6)])]
 
@@ -125,6 +129,22 @@ def test_fused_rejects_other_setups() -> None:
         run_episodes(env, agent, 1, engine="fused")
     with pytest.raises(ValueError, match="engine must be"):
         run_episodes(FourRoomsEnv(2), agent, 1, engine="jax")  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="got LineEnv with SoftmaxSarsa"):  # no kernel_state()
+        run_episodes(LineEnv(2), agent, 1, engine="fused")
+    with pytest.raises(TypeError, match=r"^LineState and SarsaKernelState do not implement the fused engine's "
+                                        r"env_scratch, env_observe, env_step, env_reset, env_shaping_observation "):
+        run_episodes(LineWithRecord(2), agent, 1, engine="fused")
+
+
+class LineState(NamedTuple):
+    position: np.ndarray
+
+
+class LineWithRecord(LineEnv):
+    """A record whose type implements none of the fused engine's steps."""
+
+    def kernel_state(self) -> LineState:
+        return LineState(self.pos.numpy())
 
 
 def pinball_setup(method: str, n: int, max_steps: int, preset: str = "released") -> tuple[object, object]:

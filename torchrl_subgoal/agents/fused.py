@@ -12,11 +12,17 @@ draws from its own stream), so its records are identical to the TorchRL
 loop's (``tests/agents/test_fused.py``) while a learner-step costs tens of
 nanoseconds (four-rooms) or a few microseconds (PinBall).
 
-Supported: :class:`~torchrl_subgoal.envs.FourRoomsEnv` with
+One loop, :func:`torchrl_subgoal._kernels.fused_run`, runs every env and
+learner: it calls an env's and a learner's compiled steps (``env_step``,
+``env_reset``, ``learner_step``, …), which each record type (what the env's
+and the learner's ``kernel_state()`` return) implements next to its own
+kernels with :func:`implements`; the loop names no domain. Built in:
+:class:`~torchrl_subgoal.envs.FourRoomsEnv` with
 :class:`~torchrl_subgoal.agents.SoftmaxSarsa`, and
 :class:`~torchrl_subgoal.envs.PinBallEnv` with
-:class:`~torchrl_subgoal.agents.FourierActorCritic`, each alone or in a
-``TransformedEnv`` whose only transform is a
+:class:`~torchrl_subgoal.agents.FourierActorCritic`; another env or learner
+joins by implementing the steps (docs/adding_a_domain.md). Each runs alone
+or in a ``TransformedEnv`` whose only transform is a
 :class:`~torchrl_subgoal.SubgoalPotentialTransform` with a tabular or naive
 potential (a subgoal series, or a lookup / region aggregation). Anything else
 raises a ``TypeError`` that says so; use the TorchRL engine for it.
@@ -43,6 +49,16 @@ from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal import _kernels
+from torchrl_subgoal._kernels import (
+    env_observe,
+    env_reset,
+    env_scratch,
+    env_shaping_observation,
+    env_step,
+    implements,
+    learner_scratch,
+    learner_step,
+)
 from torchrl_subgoal.agents.actor_critic import FourierActorCritic
 from torchrl_subgoal.agents.records import EpisodeArrays, EpisodeRecords
 from torchrl_subgoal.agents.sarsa import SoftmaxSarsa
@@ -51,7 +67,10 @@ from torchrl_subgoal.envs.pinball import BallKernelState, PinBallEnv
 from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.transform import ShapingKernelState, SubgoalPotentialTransform
 
-__all__ = ["FusedLearner", "run_episodes_fused", "run_four_rooms_fused", "run_pinball_fused"]
+__all__ = [
+    "FusedLearner", "env_observe", "env_reset", "env_scratch", "env_shaping_observation", "env_step", "implements",
+    "learner_scratch", "learner_step", "run_episodes_fused", "run_four_rooms_fused", "run_pinball_fused",
+]
 
 B = TypeVar("B", bound=EnvBase)
 
@@ -105,7 +124,14 @@ def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase
 class FusedLearner(Protocol):
     """What the fused engine asks of a learner: ``act`` (its first actions, as in the TorchRL loop) and
     ``kernel_state()``, a record whose type implements ``learner_scratch`` and ``learner_step``
-    (:func:`torchrl_subgoal._kernels.implements`; see docs/adding_a_domain.md)."""
+    (:func:`implements`; see docs/adding_a_domain.md).
+
+    Examples:
+        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
+        >>> agent: FusedLearner = SoftmaxSarsa(2, 5, 4, SARSA_PRESETS["released"], seed=0)
+        >>> _kernels.missing_steps((), agent.kernel_state())  # a record that is not an env's: its steps are missing
+        ['env_scratch', 'env_observe', 'env_step', 'env_reset', 'env_shaping_observation']
+    """
 
     def act(self, tensordict: TensorDictBase) -> TensorDictBase: ...
 
@@ -143,7 +169,7 @@ def run_episodes_fused(
         torch.Size([8, 3])
     """
     base = env.base_env if isinstance(env, TransformedEnv) else env
-    if base.device.type != "cpu":
+    if base.device is not None and base.device.type != "cpu":
         raise TypeError("the fused engine runs on the CPU")
     if isinstance(base, PinBallEnv) and isinstance(agent, FourierActorCritic):
         return run_pinball_fused(env, agent, episodes, progress=progress)
@@ -156,7 +182,7 @@ def run_episodes_fused(
             "and a learner whose kernel_state() records implement its steps (docs/adding_a_domain.md); "
             f"got {type(base).__name__} with {type(agent).__name__}; use engine='torchrl'"
         )
-    base, shaping = _unwrap(env, EnvBase)
+    base, shaping = _unwrap(env, type(base))
     return _run_fused(env, shaping, agent, episodes, lambda state: base.kernel_state(), progress, 1024)
 
 
@@ -179,7 +205,7 @@ def _run_fused(
     missing = _kernels.missing_steps(record, learner)
     if missing:
         raise TypeError(f"{type(record).__name__} and {type(learner).__name__} do not implement the fused engine's "
-                        f"{', '.join(missing)} (register them with _kernels.implements; docs/adding_a_domain.md)")
+                        f"{', '.join(missing)} (register them with torchrl_subgoal.agents.fused.implements; docs/adding_a_domain.md)")
     packaged = all(type(r).__module__.startswith("torchrl_subgoal.") for r in (record, learner))
     loop = _kernels.fused_run if packaged else _kernels.fused_run_uncached  # see fused_run_uncached
 

@@ -69,7 +69,8 @@ def run_episodes(
         engine: ``"torchrl"`` steps the env with ``step_and_maybe_reset``;
             ``"fused"`` runs the same objects in one compiled loop with
             identical records, much faster (FourRoomsEnv with SoftmaxSarsa,
-            PinBallEnv with FourierActorCritic; see :mod:`torchrl_subgoal.agents.fused`).
+            PinBallEnv with FourierActorCritic, or an env and a learner whose
+            records implement its steps; see :mod:`torchrl_subgoal.agents.fused`).
 
     Returns:
         steps, (unshaped) return and success (terminated) of every episode.
