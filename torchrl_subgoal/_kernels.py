@@ -610,8 +610,8 @@ def missing_steps(env: Any, learner: Any) -> list[str]:
 
 
 def _no_implementation(what: str, record: Any) -> TypeError:
-    return TypeError(f"{what} has no compiled implementation for {type(record).__name__}: register one with "
-                     f"torchrl_subgoal.agents.fused.implements (docs/adding_a_domain.md)")
+    return TypeError(f"{what} runs only compiled, in fused_run, for the record types registered with "
+                     f"torchrl_subgoal.agents.fused.implements; called from Python with {type(record).__name__}")
 
 
 def env_scratch(env: Any) -> Any:
