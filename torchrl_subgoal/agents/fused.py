@@ -40,6 +40,7 @@ refused here.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from typing import Any, Protocol, TypeVar
 
@@ -213,7 +214,8 @@ def _run_fused(
         try:
             return loop(record, state, learner, action, block, records)
         except numba.core.errors.TypingError as error:
-            said = [line for line in str(error).splitlines() if line.strip() and "Failed in" not in line]
+            plain = re.sub(r"\x1b\[[0-9;]*m", "", str(error))  # numba highlights its message
+            said = [line for line in plain.splitlines() if line.strip() and "Failed in" not in line]
             raise TypeError(f"the fused loop does not compile for {type(record).__name__} with "
                             f"{type(learner).__name__} (does what env_step returns fit what learner_step reads?): "
                             f"{said[0] if said else error}") from None
