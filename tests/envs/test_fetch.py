@@ -108,7 +108,8 @@ def test_mujoco_312_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
         fetch.require_fetch()
 
 
-def test_batched_envs_equal_a_serial_env_of_single_envs() -> None:
+@pytest.mark.parametrize("lean", [True, False], ids=["lean-step", "gymnasium-step"])
+def test_batched_envs_equal_a_serial_env_of_single_envs(lean: bool) -> None:
     """``make_fetch_envs`` is the task of ``SerialEnv(make_fetch_env)``: same specs, bitwise the same
     data for the same actions, through time-outs and the collectors' partial resets."""
     from functools import partial
@@ -118,7 +119,8 @@ def test_batched_envs_equal_a_serial_env_of_single_envs() -> None:
     from torchrl_subgoal.training import batched
 
     serial = batched(partial(fetch.make_fetch_env, 5))(3)
-    envs = fetch.make_fetch_envs(5, 3)
+    envs = fetch.make_fetch_envs(5, 3, lean=lean)
+    assert (envs.lean is not None) == lean
     check_env_specs(envs)
     assert envs.full_observation_spec == serial.full_observation_spec
     assert envs.full_done_spec == serial.full_done_spec and envs.action_spec == serial.action_spec
@@ -139,3 +141,51 @@ def test_batched_envs_equal_a_serial_env_of_single_envs() -> None:
     assert b["next", "truncated"].sum() == 6
     serial.close()
     envs.close()
+
+
+@pytest.mark.parametrize("goal_seed", [3, 11])
+def test_lean_step_is_gymnasium_robotics_step_bit_for_bit(goal_seed: int) -> None:
+    """``LeanStep`` against gymnasium's own step on a twin env: random actions (beyond the bounds, so
+    the clip acts) over 4 episodes with resets; the goal moved near the object each episode so both
+    rewards occur. Equal bit for bit: the float64 observation, the float32 one the agent sees, reward,
+    success, the time-out, and MuJoCo's state after every step (so every later step is equal too)."""
+    import numpy as np
+
+    gymnasium = fetch.require_fetch()
+    reference, twin = (gymnasium.make(fetch.ENV_ID, goal_seed=goal_seed) for _ in range(2))
+    lean = fetch.LeanStep(twin)
+    rng = np.random.default_rng(goal_seed)
+    out = np.empty(fetch.OBSERVATION_SIZE)
+    rewards, successes = set(), set()
+    for _ in range(4):
+        first, _ = reference.reset()
+        assert np.array_equal(first, twin.reset()[0])
+        lean.reset()
+        offset = rng.uniform(-0.06, 0.06, 3)  # within 0.05 of the object's start or not
+        for env in (reference, twin):
+            task = env.unwrapped
+            task.goal = task.data.site_xpos[lean.object].copy() + offset
+        for t in range(fetch.MAX_EPISODE_STEPS):
+            action = rng.uniform(-1.5, 1.5, 4).astype(np.float32)
+            obs, reward, terminated, truncated, info = reference.step(action)
+            lean_reward, lean_success, lean_truncated = lean.step(action, out)
+            assert np.array_equal(reference.unwrapped._get_obs()["observation"], out), t
+            assert obs.dtype == np.float32 and np.array_equal(obs, out.astype(np.float32))
+            assert (reward, bool(info["is_success"][0]), truncated) == (lean_reward, lean_success, lean_truncated)
+            assert not terminated and truncated == (t == fetch.MAX_EPISODE_STEPS - 1)
+            a, b = reference.unwrapped.data, twin.unwrapped.data
+            for name in ("time", "qpos", "qvel", "act", "ctrl", "mocap_pos", "mocap_quat", "qacc_warmstart"):
+                assert np.array_equal(getattr(a, name), getattr(b, name)), (t, name)
+            rewards.add(reward)
+            successes.add(lean_success)
+    assert rewards == {-1.0, 0.0} and successes == {True, False}
+    reference.close(), twin.close()
+
+
+def test_lean_step_refuses_what_it_does_not_replicate() -> None:
+    gymnasium = fetch.require_fetch()
+    env = gymnasium.make(fetch.ENV_ID, goal_seed=0)
+    env.unwrapped.block_gripper = True
+    with pytest.raises(ValueError, match=r"FetchPickAndPlace only.*block_gripper"):
+        fetch.LeanStep(env)
+    env.close()

@@ -42,6 +42,7 @@ __all__ = [
     "SUBGOAL_MARGIN",
     "FetchEnvs",
     "FetchUnavailableError",
+    "LeanStep",
     "check_subgoal",
     "component_dims",
     "components_of",
@@ -235,26 +236,29 @@ def make_fetch_env(goal_seed: int, *, device: str | torch.device = "cpu", **kwar
     return env
 
 
-def make_fetch_envs(goal_seed: int, num_envs: int, *, device: str | torch.device = "cpu") -> Any:
+def make_fetch_envs(goal_seed: int, num_envs: int, *, device: str | torch.device = "cpu",
+                    lean: bool = True) -> Any:
     """``num_envs`` single-goal FetchPickAndPlace envs stepped together in this process, one TorchRL env.
 
     The same task as ``num_envs`` copies of :func:`make_fetch_env` in a ``SerialEnv``
     (same keys, specs, goal and object start, 50-step truncation, bitwise the same
     observations for the same actions), without their per-env TorchRL plumbing: one
-    step is one loop over the gymnasium envs and one TensorDict (the collectors'
-    fast path; see docs/pick_and_place.md, "Throughput").
+    step is one loop over the envs and one TensorDict (the collectors' fast path; see
+    docs/pick_and_place.md, "Throughput"). By default each env takes :class:`LeanStep`
+    (gymnasium-robotics' step, bit for bit, without its per-step name look-ups).
 
     Args:
         goal_seed: draws the goal and the object's start (the same for every env and episode).
         num_envs: envs in the batch (``batch_size == [num_envs]``).
         device: where the env's TensorDicts live.
+        lean: step with :class:`LeanStep`; ``False``: through gymnasium's ``env.step``.
 
     Examples:
         >>> env = make_fetch_envs(goal_seed=3, num_envs=2)  # doctest: +SKIP
         >>> env.rollout(5)["next", "is_success"].shape  # doctest: +SKIP
         torch.Size([2, 5, 1])
     """
-    return FetchEnvs(goal_seed, num_envs, device=device)
+    return FetchEnvs(goal_seed, num_envs, device=device, lean=lean)
 
 
 class FetchEnvs(EnvBase):
@@ -264,6 +268,9 @@ class FetchEnvs(EnvBase):
         goal_seed: the seed that fixes the goal and the object's start of every env.
         num_envs: envs stepped together (the batch size).
         device: device of the returned tensors.
+        lean: step every env with :class:`LeanStep` (the default; bitwise gymnasium's step);
+            ``False``: with gymnasium's ``env.step`` through its wrappers. Resets always go
+            through gymnasium.
 
     Examples:
         >>> env = FetchEnvs(goal_seed=3, num_envs=2)  # doctest: +SKIP
@@ -271,7 +278,7 @@ class FetchEnvs(EnvBase):
         torch.Size([2, 3, 25])
     """
 
-    def __init__(self, goal_seed: int, num_envs: int, device: str | torch.device = "cpu") -> None:
+    def __init__(self, goal_seed: int, num_envs: int, device: str | torch.device = "cpu", lean: bool = True) -> None:
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         gymnasium = require_fetch()
         self.goal_seed = int(goal_seed)
@@ -289,6 +296,8 @@ class FetchEnvs(EnvBase):
                                     for key in ("done", "terminated", "truncated")}, shape=n)
         self._observation = np.zeros((num_envs, OBSERVATION_SIZE), dtype=np.float32)
         self._success = np.zeros((num_envs, 1), dtype=bool)
+        self.lean = [LeanStep(env) for env in self.envs] if lean else None
+        self._observation64 = np.zeros((num_envs, OBSERVATION_SIZE), dtype=np.float64)
 
     def _out(self, **extra: torch.Tensor) -> TensorDictBase:
         return TensorDict({"observation": torch.from_numpy(self._observation.copy()),
@@ -301,11 +310,15 @@ class FetchEnvs(EnvBase):
         for i in which:
             self._observation[i], _ = self.envs[i].reset()
             self._success[i] = False
+            if self.lean is not None:
+                self.lean[i].reset()
         false = torch.zeros((*self.batch_size, 1), dtype=torch.bool, device=self.device)
         return self._out(done=false, terminated=false.clone(), truncated=false.clone())
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         actions = tensordict.get("action").detach().cpu().numpy()
+        if self.lean is not None:
+            return self._lean_step(actions)
         n = len(self.envs)
         reward = np.empty((n, 1), dtype=np.float32)
         terminated, truncated = np.empty((n, 1), dtype=bool), np.empty((n, 1), dtype=bool)
@@ -315,6 +328,16 @@ class FetchEnvs(EnvBase):
         term, trunc = torch.from_numpy(terminated), torch.from_numpy(truncated)
         return self._out(reward=torch.from_numpy(reward), done=term | trunc, terminated=term, truncated=trunc)
 
+    def _lean_step(self, actions: np.ndarray) -> TensorDictBase:
+        n = len(self.envs)
+        reward, truncated = np.empty((n, 1), dtype=np.float32), np.empty((n, 1), dtype=bool)
+        for i, lean in enumerate(self.lean or ()):
+            reward[i], self._success[i], truncated[i] = lean.step(actions[i], self._observation64[i])
+        self._observation[:] = self._observation64  # float64 -> float32 as the wrapper's astype rounds
+        trunc = torch.from_numpy(truncated)
+        term = torch.zeros_like(trunc)  # Fetch never terminates
+        return self._out(reward=torch.from_numpy(reward), done=trunc.clone(), terminated=term, truncated=trunc)
+
     def _set_seed(self, seed: int | None) -> None:
         """Nothing to seed: every reset draws the goal and object start of ``goal_seed``."""
 
@@ -322,6 +345,115 @@ class FetchEnvs(EnvBase):
         for env in self.envs:
             env.close()
         super().close(raise_if_closed=raise_if_closed)
+
+
+class LeanStep:
+    """gymnasium-robotics' ``FetchPickAndPlace-v4`` step, bit for bit, without its per-step Python utilities.
+
+    gymnasium-robotics' step looks up every site and joint by name at every step
+    (``robot_get_obs`` alone reads the 15 robot joints' positions and velocities by
+    name, about 40% of a step's Python time) and builds its observation through
+    dictionaries and copies. This step does the same arithmetic on the same MuJoCo
+    ``model`` and ``data`` with the addresses found once: clip the action, set the
+    gripper's position actuators and the mocap (the welded body's pose plus
+    ``0.05 · Δpos`` and the fixed quaternion increment), ``mj_step`` ``n_substeps``
+    times, then the 25-d observation (site positions, ``mat2euler`` of the object,
+    site Jacobians times ``qvel`` times ``dt``, the fingers' joints), the sparse reward
+    and success from the object's distance to the goal, and the time limit's
+    truncation. Reset stays gymnasium's (call :meth:`reset` after it). Bitwise
+    equality with gymnasium's step over random-action rollouts across resets is
+    tested (``tests/envs/test_fetch.py``).
+
+    Args:
+        env: a gymnasium env of :data:`ENV_ID` (``gymnasium.make``); its unwrapped Fetch
+            env provides the model, data, goal and settings.
+
+    Examples:
+        >>> gymnasium = require_fetch()  # doctest: +SKIP
+        >>> env = gymnasium.make(ENV_ID, goal_seed=3)  # doctest: +SKIP
+        >>> _ = env.reset(); lean = LeanStep(env); lean.reset()  # doctest: +SKIP
+        >>> out = np.empty(OBSERVATION_SIZE)  # doctest: +SKIP
+        >>> lean.step(np.zeros(4, dtype=np.float32), out)  # doctest: +SKIP
+        (-1.0, False, False)
+    """
+
+    def __init__(self, env: Any) -> None:
+        import mujoco
+        from gymnasium_robotics.envs.fetch.fetch_env import goal_distance
+        from gymnasium_robotics.utils import rotations
+
+        fetch_env = env.unwrapped
+        model, data = fetch_env.model, fetch_env.data
+        unsupported = {"block_gripper": fetch_env.block_gripper, "has_object": not fetch_env.has_object,
+                       "reward_type": fetch_env.reward_type != "sparse", "render_mode": fetch_env.render_mode,
+                       "nmocap != 1": model.nmocap != 1}
+        if any(unsupported.values()):
+            raise ValueError(f"LeanStep replicates FetchPickAndPlace only; this env differs in "
+                             f"{[k for k, v in unsupported.items() if v]}")
+        self.env, self.fetch_env, self.model, self.data = env, fetch_env, model, data
+        self._mj_step, self._jac_site = mujoco.mj_step, mujoco.mj_jacSite
+        self._mat2euler, self._distance = rotations.mat2euler, goal_distance
+        names = fetch_env._model_names
+        self.grip, self.object = names.site_name2id["robot0:grip"], names.site_name2id["object0"]
+        # robot_get_obs: the robot's joints in id order, of which the observation keeps the last two
+        fingers = [names.joint_name2id[n] for n in names.joint_names if n.startswith("robot")][-2:]
+        slide_or_hinge = (mujoco.mjtJoint.mjJNT_SLIDE, mujoco.mjtJoint.mjJNT_HINGE)
+        if any(model.jnt_type[j] not in slide_or_hinge for j in fingers):
+            raise ValueError("LeanStep expects the gripper's last two robot joints to be one-dimensional")
+        self.finger_qpos = np.array([model.jnt_qposadr[j] for j in fingers])
+        self.finger_dof = np.array([model.jnt_dofadr[j] for j in fingers])
+        # ctrl_set_action: a position actuator (bias) targets its joint's position plus the action
+        self.actuators = [(i, None if model.actuator_biastype[i] == 0
+                           else int(model.jnt_qposadr[model.actuator_trnid[i, 0]])) for i in range(model.nu)]
+        # reset_mocap2body_xpos: every weld puts its mocap at the body welded to it
+        self.welds = []
+        for eq_type, a, b in zip(model.eq_type, model.eq_obj1id, model.eq_obj2id, strict=True):
+            if eq_type == mujoco.mjtEq.mjEQ_WELD:
+                mocap = model.body_mocapid[a]
+                self.welds.append((int(mocap), int(b)) if mocap != -1 else (int(model.body_mocapid[b]), int(a)))
+        self.quat_delta = np.array([[1.0, 0.0, 1.0, 0.0]])  # the fixed end-effector rotation, as in _set_action
+        self.low, self.high = fetch_env.action_space.low, fetch_env.action_space.high
+        self.n_substeps = fetch_env.n_substeps
+        self.dt = fetch_env.n_substeps * model.opt.timestep
+        self.threshold = fetch_env.distance_threshold
+        self.max_steps = env.spec.max_episode_steps
+        self.jacp_grip, self.jacp_object, self.jacr_object = (np.zeros((3, model.nv)) for _ in range(3))
+        self.steps = 0
+
+    def reset(self) -> None:
+        """Call after gymnasium's ``env.reset()``: restart the episode's step count."""
+        self.steps = 0
+
+    def step(self, action: np.ndarray, out: np.ndarray) -> tuple[float, bool, bool]:
+        """One step of ``action`` (float32 ``[4]``): the float64 observation into ``out`` ``[25]``;
+        returns the reward (``-1.0`` or ``0.0``), success and the time limit's truncation."""
+        model, data, dt = self.model, self.data, self.dt
+        action = np.clip(action, self.low, self.high)
+        pos_ctrl = action[:3].copy()
+        pos_ctrl *= 0.05
+        gripper = float(action[3])
+        for i, qpos_address in self.actuators:
+            data.ctrl[i] = gripper if qpos_address is None else data.qpos[qpos_address] + gripper
+        for mocap, body in self.welds:
+            data.mocap_pos[mocap][:] = data.xpos[body]
+            data.mocap_quat[mocap][:] = data.xquat[body]
+        data.mocap_pos[:] = data.mocap_pos + pos_ctrl.astype(np.float64)
+        data.mocap_quat[:] = data.mocap_quat + self.quat_delta
+        self._mj_step(model, data, nstep=self.n_substeps)
+
+        grip_pos, object_pos = data.site_xpos[self.grip], data.site_xpos[self.object]
+        self._jac_site(model, data, self.jacp_grip, None, self.grip)
+        grip_velp = (self.jacp_grip @ data.qvel) * dt
+        self._jac_site(model, data, self.jacp_object, self.jacr_object, self.object)
+        object_velp = (self.jacp_object @ data.qvel) * dt
+        object_velp -= grip_velp
+        object_velr = (self.jacr_object @ data.qvel) * dt
+        object_rot = self._mat2euler(data.site_xmat[self.object].reshape(3, 3))
+        np.concatenate([grip_pos, object_pos, object_pos - grip_pos, data.qpos[self.finger_qpos], object_rot,
+                        object_velp, object_velr, grip_velp, data.qvel[self.finger_dof] * dt], out=out)
+        distance = self._distance(object_pos, self.fetch_env.goal)
+        self.steps += 1
+        return -float(distance > self.threshold) + 0.0, bool(distance < self.threshold), self.steps >= self.max_steps
 
 
 # --------------------------------------------------------------------------- subgoals
