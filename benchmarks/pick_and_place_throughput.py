@@ -11,10 +11,17 @@ Measures, in one run (the machine is shared: compare the ratios, not the absolut
   env each, and of 2 workers of 3 envs each (the paper preset's 6 envs, beside a
   ``Collector`` here over the same 6 envs), each worker
   stepping its envs through the shaping transform with the shared potential
-  (``--collector-workers`` in the recipe); the 1-env, 2 × 1 and 2 × 3 layouts also with the
-  previous stack (a ``SerialEnv`` of ``GymEnv`` s, a step counter and an episode return, TorchRL's
-  exploration modules) beside the recipe's (:func:`~torchrl_subgoal.envs.fetch.make_fetch_envs`,
-  the shaping transform alone, the one-module exploring policy);
+  (``--collector-workers`` in the recipe); the 1-env, 2 × 1 and 2 × 3 layouts with the recipe's
+  stack (:func:`~torchrl_subgoal.envs.fetch.make_fetch_envs` stepping its envs with
+  :class:`~torchrl_subgoal.envs.fetch.LeanStep`, the shaping transform alone, the one-module
+  exploring policy), the same stack with gymnasium's own step (``make_fetch_envs(lean=False)``,
+  what the recipe used before ``LeanStep``), and the stack before that (a ``SerialEnv`` of
+  ``GymEnv`` s, a step counter and an episode return, TorchRL's exploration modules); and 2 workers
+  of 6 envs each (twice the ``paper`` preset's envs: what more envs per worker would give);
+* CPU time per env step (``time.process_time``, so a busy machine inflates it far less than the
+  rates) of a ``Collector`` in this process over 3 envs (one ``paper`` worker's share) with
+  ``LeanStep`` and with gymnasium's step, alternating with the raw env in the same process: on
+  two idle cores, two such workers would step ``2 × raw / worker`` times the raw env's rate;
 * DDPG gradient steps per CPU second (critic + actor, batch 256 and the paper preset's
   1,536, 3 × 256 hidden units, ``torch.set_num_threads(1)`` unless ``--threads``), beside the
   update as it was before (``DDPGLoss.forward`` + a second actor pass for the L2 penalty,
@@ -27,16 +34,17 @@ Measures, in one run (the machine is shared: compare the ratios, not the absolut
   steps, 4×10^5 gradient steps of 256), with 10 test episodes per epoch.
 
 ``--profile`` instead prints where a step of the one-process collector goes (cProfile,
-cumulative time of the policy, the shaping transform, the gymnasium-robotics step and
-MuJoCo's ``mj_step``, as shares of the collector's time).
+cumulative time of the policy, the shaping transform, the env's step (``LeanStep``, then
+gymnasium-robotics' own) and MuJoCo's ``mj_step``, as shares of the collector's time).
 
 Every figure is the best of ``--repeats`` timings. The load average is printed
 before and after: it says how busy the shared cores were.
 
 Usage::
 
-    python benchmarks/pick_and_place_throughput.py            # ~2 minutes on an idle machine
+    python benchmarks/pick_and_place_throughput.py            # ~3 minutes on an idle machine
     python benchmarks/pick_and_place_throughput.py --quick    # fewer steps
+    python benchmarks/pick_and_place_throughput.py --quick --collectors-only   # no DDPG steps, no projection
 """
 
 from __future__ import annotations
@@ -44,6 +52,7 @@ from __future__ import annotations
 import argparse
 import copy
 import cProfile
+import inspect
 import os
 import pstats
 import time
@@ -88,19 +97,27 @@ def raw_rate(steps: int) -> float:
     return rate
 
 
-def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: int, repeats: int,
-                   generic: bool = False) -> float:
-    """Env steps/s of a ``MultiSyncCollector`` of ``collector_workers`` processes (0: a ``Collector`` here)
-    stepping ``envs`` envs each (in ``env_workers`` ParallelEnv processes, 0: in the collecting process).
+#: Collection stacks: the recipe's; the same with gymnasium's step; the recipe's stack before both.
+STACKS = ("lean", "gymnasium step", "previous stack")
 
-    The recipe's stack: :func:`fetch.make_fetch_envs`, the shaping transform alone, the agent's
-    one-module exploring policy. ``generic``: the stack the recipe used before (a ``SerialEnv`` of
-    ``GymEnv`` s, a step counter and an episode return beside the shaping transform, TorchRL's
-    ``AdditiveGaussianModule`` and ``EGreedyModule``), same networks and potential.
+
+def make_collector(collector_workers: int, env_workers: int, envs: int, stack: str = "lean",
+                   ) -> Collector | MultiSyncCollector:
+    """A ``MultiSyncCollector`` of ``collector_workers`` processes (0: a ``Collector`` here) stepping
+    ``envs`` envs each (in ``env_workers`` ParallelEnv processes, 0: in the collecting process), HRS shaping.
+
+    ``stack`` (:data:`STACKS`): ``"lean"``, the recipe's: :func:`fetch.make_fetch_envs` (each env stepped
+    by :class:`fetch.LeanStep`), the shaping transform alone, the agent's one-module exploring policy;
+    ``"gymnasium step"``: the same with ``make_fetch_envs(lean=False)``; ``"previous stack"``: the stack
+    the recipe used before (a ``SerialEnv`` of ``GymEnv`` s, a step counter and an episode return beside
+    the shaping transform, TorchRL's ``AdditiveGaussianModule`` and ``EGreedyModule``), same networks
+    and potential.
     """
+    generic = stack == "previous stack"
     series = fetch.human_patterns()["participants"]
     shaping = Shaping([series], NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, (256, 256, 256))))
-    make_env = batched(partial(fetch.make_fetch_env, 0)) if generic else partial(fetch.make_fetch_envs, 0)
+    make_env = (batched(partial(fetch.make_fetch_env, 0)) if generic
+                else partial(fetch.make_fetch_envs, 0, lean=stack == "lean"))
     factory = EnvFactory(shaped_env, make_env=make_env, num_envs=envs, env_workers=env_workers, shaping=shaping,
                          potential=shaping.potential, gamma=0.98, episode_stats=generic)
     spec = fetch.make_fetch_env(0).action_spec_unbatched
@@ -110,10 +127,16 @@ def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: i
         AdditiveGaussianModule(spec, sigma_init=0.2, sigma_end=0.2, annealing_num_steps=1),
         EGreedyModule(spec, eps_init=0.3, eps_end=0.3, annealing_num_steps=1))
     frames = 50 * envs * max(collector_workers, 1)
-    collector = (Collector(factory(), policy, frames_per_batch=frames, total_frames=-1,
-                           auto_register_policy_transforms=False) if collector_workers == 0 else
-                 MultiSyncCollector([factory] * collector_workers, policy, frames_per_batch=frames,
-                                    total_frames=-1, cat_results="stack", auto_register_policy_transforms=False))
+    return (Collector(factory(), policy, frames_per_batch=frames, total_frames=-1,
+                      auto_register_policy_transforms=False) if collector_workers == 0 else
+            MultiSyncCollector([factory] * collector_workers, policy, frames_per_batch=frames,
+                               total_frames=-1, cat_results="stack", auto_register_policy_transforms=False))
+
+
+def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: int, repeats: int,
+                   stack: str = "lean") -> float:
+    """Env steps/s of :func:`make_collector`'s collector (the best of ``repeats`` timings of ``steps``)."""
+    collector = make_collector(collector_workers, env_workers, envs, stack)
     batches = iter(collector)
     next(batches)  # warm-up: workers started, first reset done
 
@@ -129,11 +152,44 @@ def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: i
     return rate
 
 
-def profile_collector(steps: int) -> None:
-    """Shares of a one-process collector's time (1 env, HRS shaping, exploring policy)."""
+def cpu_per_step(envs: int, steps: int, repeats: int) -> dict[str, float]:
+    """CPU µs per env step of the raw env and of a ``Collector`` here over ``envs`` envs with ``LeanStep``
+    and with gymnasium's step (HRS), the three alternating ``repeats`` times (the least of each is kept)."""
+    gymnasium = fetch.require_fetch()
+    env = gymnasium.make(fetch.BASE_ENV_ID)
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    actions = [env.action_space.sample() for _ in range(64)]
+    collectors = {stack: make_collector(0, 0, envs, stack) for stack in STACKS[:2]}
+    iterators = {stack: iter(collector) for stack, collector in collectors.items()}
+    for batches in iterators.values():
+        next(batches)
+    costs: dict[str, list[float]] = {"raw gymnasium env": [], **{stack: [] for stack in collectors}}
+    for _ in range(repeats):
+        start = time.process_time()
+        for i in range(steps):
+            _, _, terminated, truncated, _ = env.step(actions[i % 64])
+            if terminated or truncated:
+                env.reset()
+        costs["raw gymnasium env"].append((time.process_time() - start) / steps)
+        for stack, batches in iterators.items():
+            start, done = time.process_time(), 0
+            while done < steps:
+                done += next(batches).numel()
+            costs[stack].append((time.process_time() - start) / done)
+    for collector in collectors.values():
+        collector.shutdown()
+    env.close()
+    return {name: 1e6 * min(values) for name, values in costs.items()}
+
+
+def profile_collector(steps: int, lean: bool) -> None:
+    """Shares of a one-process collector's time (1 env, HRS shaping, exploring policy; ``lean``: the env
+    steps with :class:`fetch.LeanStep`, else with gymnasium's step)."""
     series = fetch.human_patterns()["participants"]
     shaping = Shaping([series], NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, (256, 256, 256))))
-    env = shaped_env(partial(fetch.make_fetch_envs, 0), 1, shaping=shaping, gamma=0.98, episode_stats=False)
+    env = shaped_env(partial(fetch.make_fetch_envs, 0, lean=lean), 1, shaping=shaping, gamma=0.98,
+                     episode_stats=False)
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, env.action_spec_unbatched, DDPGConfig(buffer_size=1000))
     explore = agent.policy.forward
 
@@ -153,17 +209,21 @@ def profile_collector(steps: int) -> None:
     collector.shutdown()
     stats = pstats.Stats(profiler).stats  # type: ignore[attr-defined]
     total = sum(tt for (_, _, _), (_, _, tt, _, _) in stats.items())
-    parts = {
-        "policy (actor 3x256 + exploration)": lambda f, n: n == "policy_forward",
-        "shaping transform (+ neural potential)": lambda f, n: n == "_step" and f.endswith("torchrl_subgoal/transform.py"),
-        "batched Fetch env (make_fetch_envs)": lambda f, n: n == "_step" and f.endswith("envs/fetch.py"),
-        "gymnasium-robotics step (incl. MuJoCo)": lambda f, n: n == "step" and f.endswith(
+    lean_line = inspect.getsourcelines(fetch.LeanStep.step)[1]
+    parts: dict[str, Callable[[str, int, str], bool]] = {
+        "policy (actor 3x256 + exploration)": lambda f, line, n: n == "policy_forward",
+        "shaping transform (+ neural potential)": lambda f, line, n: n == "_step" and f.endswith(
+            "torchrl_subgoal/transform.py"),
+        "batched Fetch env (make_fetch_envs)": lambda f, line, n: n == "_step" and f.endswith("envs/fetch.py"),
+        "gymnasium-robotics step (incl. MuJoCo)": lambda f, line, n: n == "step" and f.endswith(
             "gymnasium_robotics/envs/robot_env.py"),
-        "MuJoCo mj_step": lambda f, n: "mj_step" in n,
+        "LeanStep.step (incl. MuJoCo)": lambda f, line, n: line == lean_line and f.endswith("envs/fetch.py"),
+        "MuJoCo mj_step": lambda f, line, n: "mj_step" in n,
     }
-    print(f"profile of {steps} collector steps ({total:.2f} s profiled; cumulative shares):")
+    print(f"profile of {steps} collector steps, {'LeanStep' if lean else 'gymnasium step'} "
+          f"({total:.2f} s profiled; cumulative shares):")
     for label, match in parts.items():
-        cumulative = sum(ct for (f, _, n), (_, _, _, ct, _) in stats.items() if match(f, n))
+        cumulative = sum(ct for (f, line, n), (_, _, _, ct, _) in stats.items() if match(f, line, n))
         print(f"  {label:42s} {100 * cumulative / total:5.1f}%")
 
 
@@ -281,29 +341,45 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="timings per figure (best is kept)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads for the gradient steps")
     parser.add_argument("--profile", action="store_true", help="only profile the one-process collector")
+    parser.add_argument("--collectors-only", action="store_true",
+                        help="env-steps only: no DDPG gradient steps, no projection")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     steps = 1_000 if args.quick else 3_000
     if args.profile:
-        profile_collector(steps)
+        for lean in (True, False):
+            profile_collector(steps, lean)
         return
     print(f"load average before: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     raw = best(lambda: raw_rate(steps), args.repeats)
     print(f"raw gymnasium env, 1 process:        {raw:8.0f} env-steps/s  (1.00x)")
     rates = {}
-    for name, collector_workers, env_workers, envs, generic in (
-        ("Collector, this process, 1 env", 0, 0, 1, False),
-        ("Collector, this process, 1 env, previous stack", 0, 0, 1, True),
-        ("Collector over ParallelEnv(2), shaping here", 0, 2, 2, False),
-        ("MultiSyncCollector, 1 worker x 1 env", 1, 0, 1, False),
-        ("MultiSyncCollector, 2 workers x 1 env", 2, 0, 1, False),
-        ("MultiSyncCollector, 2 workers x 1 env, previous stack", 2, 0, 1, True),
-        ("Collector, this process, 6 envs", 0, 0, 6, False),
-        ("MultiSyncCollector, 2 workers x 3 envs", 2, 0, 3, False),
-        ("MultiSyncCollector, 2 workers x 3 envs, previous stack", 2, 0, 3, True),
+    for name, collector_workers, env_workers, envs, stack in (
+        ("Collector, this process, 1 env", 0, 0, 1, "lean"),
+        ("Collector, this process, 1 env, gymnasium step", 0, 0, 1, "gymnasium step"),
+        ("Collector, this process, 1 env, previous stack", 0, 0, 1, "previous stack"),
+        ("Collector over ParallelEnv(2), shaping here", 0, 2, 2, "lean"),
+        ("MultiSyncCollector, 1 worker x 1 env", 1, 0, 1, "lean"),
+        ("MultiSyncCollector, 1 worker x 3 envs", 1, 0, 3, "lean"),
+        ("MultiSyncCollector, 2 workers x 1 env", 2, 0, 1, "lean"),
+        ("MultiSyncCollector, 2 workers x 1 env, gymnasium step", 2, 0, 1, "gymnasium step"),
+        ("MultiSyncCollector, 2 workers x 1 env, previous stack", 2, 0, 1, "previous stack"),
+        ("Collector, this process, 6 envs", 0, 0, 6, "lean"),
+        ("MultiSyncCollector, 2 workers x 3 envs", 2, 0, 3, "lean"),
+        ("MultiSyncCollector, 2 workers x 3 envs, gymnasium step", 2, 0, 3, "gymnasium step"),
+        ("MultiSyncCollector, 2 workers x 3 envs, previous stack", 2, 0, 3, "previous stack"),
+        ("MultiSyncCollector, 2 workers x 6 envs", 2, 0, 6, "lean"),
     ):
-        rate = rates[name] = collector_rate(collector_workers, env_workers, envs, steps, args.repeats, generic)
+        rate = rates[name] = collector_rate(collector_workers, env_workers, envs, steps, args.repeats, stack)
         print(f"{name + ', HRS shaping:':66s} {rate:8.0f} env-steps/s  ({rate / raw:.2f}x raw)")
+    costs = cpu_per_step(3, steps, max(args.repeats, 2))
+    raw_cpu = costs.pop("raw gymnasium env")
+    print(f"CPU per env step, this process, alternating: raw gymnasium env {raw_cpu:.0f} µs; a Collector over "
+          "3 envs, HRS: " + "; ".join(f"{stack} {cost:.0f} µs ({cost / raw_cpu:.2f}x raw, 2 such workers on "
+                                      f"2 idle cores: {2 * raw_cpu / cost:.2f}x raw)" for stack, cost in costs.items()))
+    if args.collectors_only:
+        print(f"load average after: {os.getloadavg()[0]:.2f}")
+        return
     updates = {}
     for batch in (256, 1536):
         rates_b = update_rates((200 if args.quick else 600) * 256 // batch, args.repeats, batch, args.threads)
