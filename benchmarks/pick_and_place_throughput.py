@@ -154,7 +154,11 @@ def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: i
 
 def cpu_per_step(envs: int, steps: int, repeats: int) -> dict[str, float]:
     """CPU µs per env step of the raw env and of a ``Collector`` here over ``envs`` envs with ``LeanStep``
-    and with gymnasium's step (HRS), the three alternating ``repeats`` times (the least of each is kept)."""
+    and with gymnasium's step (HRS), the three alternating ``repeats`` times (the least of each is kept).
+
+    One torch thread, as in a collector worker (a ``MultiSyncCollector``'s shutdown hands this process its
+    workers' threads back, whose spinning would count as CPU time here)."""
+    torch.set_num_threads(1)
     gymnasium = fetch.require_fetch()
     env = gymnasium.make(fetch.BASE_ENV_ID)
     env.reset(seed=0)
