@@ -70,8 +70,10 @@ RUNS = (
         "env-steps per second with and without the transform's finite-reward check.",
         ("benchmarks/finite_check.py", "--steps", "200", "--repeats", "3")),
     Run("pick_and_place_throughput", "Pick-and-place collection and DDPG steps",
-        "MuJoCo Fetch env-steps per second raw and through shaped collectors (the recipe's stack beside the "
-        "previous one), DDPG gradient steps per CPU second (beside the previous update and a hand-written "
+        "MuJoCo Fetch env-steps per second raw and through shaped collectors (the recipe's stack, whose envs "
+        "step with `fetch.LeanStep`, beside the same with gymnasium's step and the stack before that), CPU "
+        "time per env step beside the raw env's, DDPG gradient steps per CPU second (beside the previous "
+        "update and a hand-written "
         "torch step), the FLOP floor, and the projected time of one paper-scale learning.",
         ("benchmarks/pick_and_place_throughput.py", "--quick", "--repeats", "1")),
     Run("four_rooms_demo", "End to end: the four-rooms reproduction at `make demo` scale",
