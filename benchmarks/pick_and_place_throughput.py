@@ -45,6 +45,7 @@ Usage::
     python benchmarks/pick_and_place_throughput.py            # ~3 minutes on an idle machine
     python benchmarks/pick_and_place_throughput.py --quick    # fewer steps
     python benchmarks/pick_and_place_throughput.py --quick --collectors-only   # no DDPG steps, no projection
+    python benchmarks/pick_and_place_throughput.py --interleaved 3   # the target's layouts, timed in turn
 """
 
 from __future__ import annotations
@@ -150,6 +151,34 @@ def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: i
     rate = best(run, repeats)
     collector.shutdown()
     return rate
+
+
+def interleaved(steps: int, rounds: int) -> None:
+    """The raw env and the ``MultiSyncCollector`` layouts of the target, every one alive at once and timed
+    in turn, ``rounds`` times: on a shared machine each round's ratios to that round's raw rate hold up
+    better than rates timed minutes apart."""
+    layouts = {"MultiSyncCollector, 1 worker x 3 envs": (1, 0, 3, "lean"),
+               "MultiSyncCollector, 2 workers x 3 envs": (2, 0, 3, "lean"),
+               "MultiSyncCollector, 2 workers x 3 envs, gymnasium step": (2, 0, 3, "gymnasium step"),
+               "MultiSyncCollector, 2 workers x 6 envs": (2, 0, 6, "lean")}
+    collectors = {name: make_collector(*layout) for name, layout in layouts.items()}
+    iterators = {name: iter(collector) for name, collector in collectors.items()}
+    for batches in iterators.values():
+        next(batches)
+    rates: dict[str, list[float]] = {"raw gymnasium env, 1 process": [], **{name: [] for name in collectors}}
+    for _ in range(rounds):
+        rates["raw gymnasium env, 1 process"].append(raw_rate(steps))
+        for name, batches in iterators.items():
+            start, done = time.perf_counter(), 0
+            while done < steps:
+                done += next(batches).numel()
+            rates[name].append(done / (time.perf_counter() - start))
+    for collector in collectors.values():
+        collector.shutdown()
+    raw = rates["raw gymnasium env, 1 process"]
+    for name, values in rates.items():
+        print(f"{name + ', HRS shaping:':66s} best {max(values):5.0f} env-steps/s ({max(values) / max(raw):.2f}x the "
+              f"best raw); per round, x that round's raw: " + ", ".join(f"{v / r:.2f}" for v, r in zip(values, raw, strict=True)))
 
 
 def cpu_per_step(envs: int, steps: int, repeats: int) -> dict[str, float]:
@@ -345,6 +374,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="timings per figure (best is kept)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads for the gradient steps")
     parser.add_argument("--profile", action="store_true", help="only profile the one-process collector")
+    parser.add_argument("--interleaved", type=int, default=0, metavar="ROUNDS",
+                        help="only the raw env and the 1 x 3, 2 x 3 and 2 x 6 collectors, timed in turn ROUNDS times")
     parser.add_argument("--collectors-only", action="store_true",
                         help="env-steps only: no DDPG gradient steps, no projection")
     args = parser.parse_args()
@@ -355,6 +386,10 @@ def main() -> None:
             profile_collector(steps, lean)
         return
     print(f"load average before: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+    if args.interleaved:
+        interleaved(steps, args.interleaved)
+        print(f"load average after: {os.getloadavg()[0]:.2f}")
+        return
     raw = best(lambda: raw_rate(steps), args.repeats)
     print(f"raw gymnasium env, 1 process:        {raw:8.0f} env-steps/s  (1.00x)")
     rates = {}
