@@ -177,7 +177,8 @@ def interleaved(steps: int, rounds: int) -> None:
         collector.shutdown()
     raw = rates["raw gymnasium env, 1 process"]
     for name, values in rates.items():
-        print(f"{name + ', HRS shaping:':66s} best {max(values):5.0f} env-steps/s ({max(values) / max(raw):.2f}x the "
+        label = name + (":" if values is raw else ", HRS shaping:")
+        print(f"{label:66s} best {max(values):5.0f} env-steps/s ({max(values) / max(raw):.2f}x the "
               f"best raw); per round, x that round's raw: " + ", ".join(f"{v / r:.2f}" for v, r in zip(values, raw, strict=True)))
 
 
