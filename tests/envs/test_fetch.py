@@ -120,7 +120,7 @@ def test_batched_envs_equal_a_serial_env_of_single_envs(lean: bool) -> None:
 
     serial = batched(partial(fetch.make_fetch_env, 5))(3)
     envs = fetch.make_fetch_envs(5, 3, lean=lean)
-    assert (envs.lean is not None) == lean
+    assert (envs.lean_steps is not None) == lean
     check_env_specs(envs)
     assert envs.full_observation_spec == serial.full_observation_spec
     assert envs.full_done_spec == serial.full_done_spec and envs.action_spec == serial.action_spec

@@ -296,7 +296,7 @@ class FetchEnvs(EnvBase):
                                     for key in ("done", "terminated", "truncated")}, shape=n)
         self._observation = np.zeros((num_envs, OBSERVATION_SIZE), dtype=np.float32)
         self._success = np.zeros((num_envs, 1), dtype=bool)
-        self.lean = [LeanStep(env) for env in self.envs] if lean else None
+        self.lean_steps: list[LeanStep] | None = [LeanStep(env) for env in self.envs] if lean else None
         self._observation64 = np.zeros((num_envs, OBSERVATION_SIZE), dtype=np.float64)
 
     def _out(self, **extra: torch.Tensor) -> TensorDictBase:
@@ -310,14 +310,14 @@ class FetchEnvs(EnvBase):
         for i in which:
             self._observation[i], _ = self.envs[i].reset()
             self._success[i] = False
-            if self.lean is not None:
-                self.lean[i].reset()
+            if self.lean_steps is not None:
+                self.lean_steps[i].reset()
         false = torch.zeros((*self.batch_size, 1), dtype=torch.bool, device=self.device)
         return self._out(done=false, terminated=false.clone(), truncated=false.clone())
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         actions = tensordict.get("action").detach().cpu().numpy()
-        if self.lean is not None:
+        if self.lean_steps is not None:
             return self._lean_step(actions)
         n = len(self.envs)
         reward = np.empty((n, 1), dtype=np.float32)
@@ -331,7 +331,7 @@ class FetchEnvs(EnvBase):
     def _lean_step(self, actions: np.ndarray) -> TensorDictBase:
         n = len(self.envs)
         reward, truncated = np.empty((n, 1), dtype=np.float32), np.empty((n, 1), dtype=bool)
-        for i, lean in enumerate(self.lean or ()):
+        for i, lean in enumerate(self.lean_steps or ()):
             reward[i], self._success[i], truncated[i] = lean.step(actions[i], self._observation64[i])
         self._observation[:] = self._observation64  # float64 -> float32 as the wrapper's astype rounds
         trunc = torch.from_numpy(truncated)
