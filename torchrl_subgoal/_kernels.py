@@ -366,23 +366,37 @@ def shaping_carry(z, achieved, r_h, k, b, reset, z_reset, zb, znb, rh_new, k_new
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _softmax_choice(q_row, inv_temperature, u, scratch):
-    """Index drawn from softmax(q_row / τ) by inverse CDF with the uniform ``u``."""
-    n_actions = q_row.shape[0]
-    top = q_row[0]
-    for i in range(1, n_actions):
-        top = max(top, q_row[i])
+def _exp_shifted(values, top, scale, out):
+    """``out[i] = exp((values[i] - top) · scale)`` (``values`` may be ``out``); returns their sum: the
+    unnormalised softmax of both learners' policies (SARSA: ``scale = 1/τ``; actor-critic: 1, exact)."""
     total = 0.0
-    for i in range(n_actions):
-        scratch[i] = np.exp((q_row[i] - top) * inv_temperature)
-        total += scratch[i]
-    threshold = u * total
+    for i in range(values.shape[0]):
+        out[i] = np.exp((values[i] - top) * scale)
+        total += out[i]
+    return total
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _inverse_cdf(weights, threshold):
+    """The first index whose running sum of ``weights`` exceeds ``threshold`` (the last index if none of the
+    others does): both learners' action draw, ``threshold = u · Σ weights`` for a uniform ``u``."""
+    n = weights.shape[0]
     acc = 0.0
-    for i in range(n_actions - 1):
-        acc += scratch[i]
+    for i in range(n - 1):
+        acc += weights[i]
         if acc > threshold:
             return i
-    return n_actions - 1
+    return n - 1
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _softmax_choice(q_row, inv_temperature, u, scratch):
+    """Index drawn from softmax(q_row / τ) by inverse CDF with the uniform ``u``."""
+    top = q_row[0]
+    for i in range(1, q_row.shape[0]):
+        top = max(top, q_row[i])
+    total = _exp_shifted(q_row, top, inv_temperature, scratch)
+    return _inverse_cdf(scratch, u * total)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -820,10 +834,7 @@ def _policy(theta_b, phi, probs):
         s = _dot(theta_b[a], phi)
         probs[a] = s
         top = max(top, s)
-    total = 0.0
-    for a in range(n_actions):
-        probs[a] = np.exp(probs[a] - top)
-        total += probs[a]
+    total = _exp_shifted(probs, top, 1.0, probs)
     for a in range(n_actions):
         probs[a] /= total
 
@@ -832,13 +843,7 @@ def _policy(theta_b, phi, probs):
 def _policy_sample(theta_b, phi, u, logits):
     """Draw from softmax(θ φ) with the uniform ``u``; ``logits`` is filled with π."""
     _policy(theta_b, phi, logits)
-    n_actions = theta_b.shape[0]
-    acc = 0.0
-    for a in range(n_actions - 1):
-        acc += logits[a]
-        if acc > u:
-            return a
-    return n_actions - 1
+    return _inverse_cdf(logits, u)
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
