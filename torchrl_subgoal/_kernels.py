@@ -527,16 +527,6 @@ def _record_learner(b, done, terminated, reward, t, ret, episode, steps_out, ret
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _record_and_stop(b, done, terminated, reward, records):
-    """File learner ``b``'s step in ``records`` (an :class:`~torchrl_subgoal.agents.records.EpisodeArrays`):
-    ``(episodes filed, whether it has them all)``, for the fused loops, which run each learner until it
-    has them all."""
-    filed = 1 if _record_learner(b, done, terminated, reward, records.t, records.ret, records.episode,
-                                 records.steps, records.returns, records.success) else 0
-    return filed, records.episode[b] >= records.steps.shape[1]
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
 def _sarsa_row(sarsa, s, z):
     """The table row of state ``s`` in abstract state ``z``: ``s · Z + z`` (``s`` when ``Z = 1``)."""
     return s * sarsa.abstract_states + (z if sarsa.abstract_states > 1 else 0)
@@ -700,6 +690,7 @@ def fused_run(env, shaping, learner, action, max_steps_run, records):
     z, achieved, r_h, k, z_start = learners
     pattern, lo, hi, centre, weight, radius2, succ, offset = regions
     active, n_active = _active_learners(records.episode, records.steps.shape[1])
+    t, ret, episode, steps_out, returns, success = records  # unpacked once (see the note above shaping_start)
     filed_total = 0
     taken = 0
     for i in range(n_active):
@@ -730,7 +721,9 @@ def fused_run(env, shaping, learner, action, max_steps_run, records):
                 shaping_carry(z, achieved, r_h, k, b, done, z_reset, zb, znb, rh_new, k_new)
             action[b] = learner_step(learner, b, o, zb, action[b], shaped, o_next, znb, terminated, done, o_root,
                                      z[b, 0], learner_buffers)
-            filed, finished = _record_and_stop(b, done, terminated, reward, records)
+            filed = 1 if _record_learner(b, done, terminated, reward, t, ret, episode, steps_out, returns,
+                                         success) else 0
+            finished = episode[b] >= steps_out.shape[1]
             filed_total += filed
             if finished:
                 steps = step + 1
