@@ -37,6 +37,11 @@ Measures, in one run (the machine is shared: compare the ratios, not the absolut
 cumulative time of the policy, the shaping transform, the env's step (``LeanStep``, then
 gymnasium-robotics' own) and MuJoCo's ``mj_step``, as shares of the collector's time).
 
+A collector that gives no batch for ``--timeout`` seconds (default 600) ends the run with a
+one-line error naming the layout, every thread's stack, and its worker processes killed (exit
+status 3): a ``MultiSyncCollector`` hung once on a fresh clone without using CPU, and a
+benchmark must not wait forever.
+
 Every figure is the best of ``--repeats`` timings. The load average is printed
 before and after: it says how busy the shared cores were.
 
@@ -53,11 +58,15 @@ from __future__ import annotations
 import argparse
 import copy
 import cProfile
+import faulthandler
 import inspect
+import multiprocessing
 import os
 import pstats
+import sys
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from functools import partial
 
 import torch
@@ -102,6 +111,43 @@ def raw_rate(steps: int) -> float:
 STACKS = ("lean", "gymnasium step", "previous stack")
 
 
+class Watchdog:
+    """Ends the benchmark when no :meth:`beat` came for ``seconds`` (0: never): one line on stderr naming
+    what was awaited, every thread's stack, the worker processes killed, exit status 3."""
+
+    def __init__(self, seconds: float) -> None:
+        self.seconds, self.what, self.last = seconds, "start-up", time.monotonic()
+        if seconds > 0:
+            threading.Thread(target=self._watch, name="watchdog", daemon=True).start()
+
+    def beat(self, what: str) -> None:
+        """Alive; next awaited: ``what``."""
+        self.what, self.last = what, time.monotonic()
+
+    def _watch(self) -> None:
+        while True:
+            time.sleep(min(1.0, self.seconds / 4))
+            if time.monotonic() - self.last > self.seconds:
+                print(f"error: {self.what}: nothing for {self.seconds:.0f} s (--timeout); the stacks follow, "
+                      "then the collectors' worker processes are killed", file=sys.stderr, flush=True)
+                faulthandler.dump_traceback(file=sys.stderr)
+                for child in multiprocessing.active_children():
+                    child.kill()
+                os._exit(3)
+
+
+#: the run's watchdog (``--timeout``); the collectors beat it at every batch
+WATCHDOG = Watchdog(0)
+
+
+def next_batch(batches: Iterator[TensorDict], name: str) -> TensorDict:
+    """The next batch of the collector ``name``, under the watchdog."""
+    WATCHDOG.beat(f"a batch of {name}")
+    batch = next(batches)
+    WATCHDOG.beat(f"after a batch of {name}")
+    return batch
+
+
 def make_collector(collector_workers: int, env_workers: int, envs: int, stack: str = "lean",
                    ) -> Collector | MultiSyncCollector:
     """A ``MultiSyncCollector`` of ``collector_workers`` processes (0: a ``Collector`` here) stepping
@@ -137,15 +183,17 @@ def make_collector(collector_workers: int, env_workers: int, envs: int, stack: s
 def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: int, repeats: int,
                    stack: str = "lean") -> float:
     """Env steps/s of :func:`make_collector`'s collector (the best of ``repeats`` timings of ``steps``)."""
+    name = f"{collector_workers} collector worker(s) x {envs} env(s), {stack}"
+    WATCHDOG.beat(f"starting {name}")
     collector = make_collector(collector_workers, env_workers, envs, stack)
     batches = iter(collector)
-    next(batches)  # warm-up: workers started, first reset done
+    next_batch(batches, name)  # warm-up: workers started, first reset done
 
     def run() -> float:
         start = time.perf_counter()
         done = 0
         while done < steps:
-            done += next(batches).numel()
+            done += next_batch(batches, name).numel()
         return done / (time.perf_counter() - start)
 
     rate = best(run, repeats)
@@ -161,17 +209,19 @@ def interleaved(steps: int, rounds: int) -> None:
                "MultiSyncCollector, 2 workers x 3 envs": (2, 0, 3, "lean"),
                "MultiSyncCollector, 2 workers x 3 envs, gymnasium step": (2, 0, 3, "gymnasium step"),
                "MultiSyncCollector, 2 workers x 6 envs": (2, 0, 6, "lean")}
+    WATCHDOG.beat("starting the collectors")
     collectors = {name: make_collector(*layout) for name, layout in layouts.items()}
     iterators = {name: iter(collector) for name, collector in collectors.items()}
-    for batches in iterators.values():
-        next(batches)
+    for name, batches in iterators.items():
+        next_batch(batches, name)
     rates: dict[str, list[float]] = {"raw gymnasium env, 1 process": [], **{name: [] for name in collectors}}
     for _ in range(rounds):
+        WATCHDOG.beat("the raw env")
         rates["raw gymnasium env, 1 process"].append(raw_rate(steps))
         for name, batches in iterators.items():
             start, done = time.perf_counter(), 0
             while done < steps:
-                done += next(batches).numel()
+                done += next_batch(batches, name).numel()
             rates[name].append(done / (time.perf_counter() - start))
     for collector in collectors.values():
         collector.shutdown()
@@ -194,10 +244,11 @@ def cpu_per_step(envs: int, steps: int, repeats: int) -> dict[str, float]:
     env.reset(seed=0)
     env.action_space.seed(0)
     actions = [env.action_space.sample() for _ in range(64)]
+    WATCHDOG.beat("starting the collectors")
     collectors = {stack: make_collector(0, 0, envs, stack) for stack in STACKS[:2]}
     iterators = {stack: iter(collector) for stack, collector in collectors.items()}
-    for batches in iterators.values():
-        next(batches)
+    for stack, batches in iterators.items():
+        next_batch(batches, stack)
     costs: dict[str, list[float]] = {"raw gymnasium env": [], **{stack: [] for stack in collectors}}
     for _ in range(repeats):
         start = time.process_time()
@@ -209,7 +260,7 @@ def cpu_per_step(envs: int, steps: int, repeats: int) -> dict[str, float]:
         for stack, batches in iterators.items():
             start, done = time.process_time(), 0
             while done < steps:
-                done += next(batches).numel()
+                done += next_batch(batches, stack).numel()
             costs[stack].append((time.process_time() - start) / done)
     for collector in collectors.values():
         collector.shutdown()
@@ -379,7 +430,13 @@ def main() -> None:
                         help="only the raw env and the 1 x 3, 2 x 3 and 2 x 6 collectors, timed in turn ROUNDS times")
     parser.add_argument("--collectors-only", action="store_true",
                         help="env-steps only: no DDPG gradient steps, no projection")
+    parser.add_argument("--timeout", type=float, default=600.0, metavar="SECONDS",
+                        help="end the run when a collector gives no batch for this long (0: wait forever)")
     args = parser.parse_args()
+    if args.timeout < 0:
+        parser.error(f"--timeout: seconds >= 0 (got {args.timeout})")
+    global WATCHDOG
+    WATCHDOG = Watchdog(args.timeout)
     torch.set_num_threads(args.threads)
     steps = 1_000 if args.quick else 3_000
     if args.profile:
@@ -391,6 +448,7 @@ def main() -> None:
         interleaved(steps, args.interleaved)
         print(f"load average after: {os.getloadavg()[0]:.2f}")
         return
+    WATCHDOG.beat("the raw env")
     raw = best(lambda: raw_rate(steps), args.repeats)
     print(f"raw gymnasium env, 1 process:        {raw:8.0f} env-steps/s  (1.00x)")
     rates = {}
@@ -422,6 +480,7 @@ def main() -> None:
         return
     updates = {}
     for batch in (256, 1536):
+        WATCHDOG.beat(f"the DDPG gradient steps of batch {batch}")
         rates_b = update_rates((200 if args.quick else 600) * 256 // batch, args.repeats, batch, args.threads)
         updates[batch] = rates_b["agent.update"]
         flop = update_flops(batch)
