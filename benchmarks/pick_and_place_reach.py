@@ -22,9 +22,14 @@ With ``--replay`` the same counts are read from the stored transitions of those 
 stored reward of each epoch (the shaped reward for a shaped method: while no subgoal is
 reached it is ``−1 − (1 − γ) Φ(z_0)``).
 
+``--tasks SEEDS`` instead lists the tasks of sweep seeds ``0 .. SEEDS-1`` (learnings ``0 ..
+--learnings-1``): the goal's height above the object's start (0: on the table, where pushing
+reaches it), object to goal and gripper to object, to choose the seeds of a run.
+
 Usage::
 
     python benchmarks/pick_and_place_reach.py --episodes 60
+    python benchmarks/pick_and_place_reach.py --tasks 16      # which sweep seeds put both goals on the table
     python benchmarks/pick_and_place_reach.py --checkpoints results/pick_and_place/checkpoints/HRS --replay
 """
 
@@ -173,6 +178,30 @@ def replay_counts(learning_dir: Path, goal: np.ndarray) -> None:
           f"epoch {np.round(rewards, 4).tolist()}", flush=True)
 
 
+def task(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The first observation and the goal of the task of goal seed ``seed``."""
+    gymnasium = fetch.require_fetch()
+    env = gymnasium.make(fetch.ENV_ID, goal_seed=seed)
+    obs, _ = env.reset()
+    goal = env.unwrapped.goal.copy()
+    env.close()
+    return obs, goal
+
+
+def list_tasks(seeds: int, learnings: int) -> None:
+    """One line per sweep seed: each learning's goal height, object-goal and gripper-object distances."""
+    print("sweep seed | " + " | ".join(f"learning {k}: goal height, object-goal, gripper-object (m)"
+                                       for k in range(learnings)))
+    for seed in range(seeds):
+        cells = []
+        for learning in range(learnings):
+            obs, goal = task(goal_seed(seed, learning))
+            height = goal[2] - obs[5]
+            cells.append(f"{'table' if height < 0.005 else 'air  '} {height:.3f}, {np.linalg.norm(goal - obs[3:6]):.3f}, "
+                         f"{np.linalg.norm(obs[6:9]):.3f}")
+        print(f"{seed:10d} | " + " | ".join(cells), flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("--seed", type=int, default=0, help="the sweep's --seed (goal seeds)")
@@ -181,18 +210,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--checkpoints", type=Path, default=None,
                         help="checkpoints/<METHOD> of a results directory: also the trained actors")
     parser.add_argument("--replay", action="store_true", help="also count over the stored transitions")
+    parser.add_argument("--tasks", type=int, default=0, metavar="SEEDS",
+                        help="only list the tasks of sweep seeds 0 .. SEEDS-1")
     args = parser.parse_args(argv)
-    gymnasium = fetch.require_fetch()
+    if args.tasks < 0 or args.learnings < 1:
+        parser.error(f"--tasks: >= 0 (got {args.tasks}); --learnings: >= 1 (got {args.learnings})")
+    if args.tasks:
+        list_tasks(args.tasks, args.learnings)
+        return 0
+    fetch.require_fetch()
     torch.set_num_threads(1)
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
     spec = Bounded(-1.0, 1.0, shape=(4,))
     for learning in range(args.learnings):
         seed = goal_seed(args.seed, learning)
-        env = gymnasium.make(fetch.ENV_ID, goal_seed=seed)
-        obs, _ = env.reset()
-        goal = env.unwrapped.goal.copy()
-        env.close()
+        obs, goal = task(seed)
         gripper, obj = (np.round(obs[part].astype(np.float64), 3).tolist() for part in (slice(0, 3), slice(3, 6)))
         print(f"learning {learning} (goal seed {seed}): gripper {gripper}, object {obj}, goal "
               f"{np.round(goal, 3).tolist()} ({goal[2] - obs[5]:.3f} m above the "
