@@ -111,6 +111,10 @@ class Config(RecipeConfig):
     value_lr: float = setting(1e-3, "Adam learning rate of the neural potential V(o; θ)")
     aggregation_lr: float = setting(0.1, "SGD learning rate of SARSA-RS's table")
     eta: float = setting(0.1, "NRS potential η (the authors' released value)")
+    start_potential: str = setting("zero", "level of HRS's and RRS's neural potential: zero (Phi(z_0) = 0, the "
+                                   "authors' level), nonpositive (the library's default: Phi(z_0) = min(V(z_0), 0), "
+                                   "-50 once V has learnt the failure return), value (Phi = V); "
+                                   "docs/pick_and_place.md", choices=("zero", "nonpositive", "value"))
     shaping: str = setting("{}", "JSON of extra SubgoalPotentialTransform options, e.g. "
                            '\'{"zero_terminal_potential": false}\'')
     clip_return: float = setting(50.0, "critic targets clipped to [-clip_return, 0]; 0: no clipping")
@@ -170,6 +174,8 @@ def make_shaping(method_name: str, series: SubgoalSeries | None, config: Mapping
     if parts is None:
         return None, None
     subgoals, potential, options = parts
+    if method.shaping == "subgoals" and "start_potential" in config:  # HRS, RRS: --start-potential (--shaping wins)
+        options = {**options, "start_potential": config["start_potential"]}
     shaping = Shaping(subgoals, potential, {**options, **config["shaping"]})
     if method.shaping != "subgoals":  # NRS: fixed η; SARSA-RS: its table learns online in the transform
         return shaping, None
@@ -332,7 +338,7 @@ def plan(cfg: Config) -> Plan:
     config = {
         **{k: preset[k] for k in ("cycles", "cycle_steps", "updates", "test_episodes")},
         **{k: getattr(cfg, k) for k in ("envs", "collector_workers", "env_processes", "value_lr", "aggregation_lr",
-                                        "eta", "device", "seed")},
+                                        "eta", "device", "seed", "start_potential")},
         "epochs": epochs, "ddpg": ddpg, "shaped_clip_positive": cfg.clip_positive == "all",
         "shaping": json.loads(cfg.shaping),
         "checkpoints": str((Path(cfg.results) / "checkpoints").resolve()),

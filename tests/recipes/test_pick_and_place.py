@@ -231,3 +231,23 @@ def test_shaped_learner_tells_success_from_failure_only_with_the_top_open(tmp_pa
     assert shaped_targets(clipped) == [0.0, 0.0]  # the authors' clip: success and failure look the same
     default = DDPGAgent(fetch.OBSERVATION_SIZE, spec, pick_and_place.agent_config(small, shaped=True))
     assert shaped_targets(default) == pytest.approx([0.0, 1.0])
+
+
+def test_hrs_and_rrs_start_at_zero_potential_unless_told() -> None:
+    """``--start-potential`` (default ``zero``: Φ(z_0) = 0, the authors' level) sets HRS's and RRS's transform,
+    not NRS's; ``--shaping``'s JSON wins; the stored configuration records it (a resumed run keeps its level)."""
+    pick_and_place = recipe("pick_and_place")
+    series = fetch.human_patterns()["participants"]
+    cfg = parse_config(pick_and_place.Config, ["--preset", "tiny", "--learnings", "1"])
+    config = pick_and_place.plan(cfg).config
+    assert config["start_potential"] == "zero"
+
+    def level(method: str, config: dict) -> str:
+        shaping, _ = pick_and_place.make_shaping(method, series, config, GAMMA)
+        return shaping.transform(shaping.potential, GAMMA, None).start_potential
+
+    assert level("HRS", config) == level("RRS", config) == "zero"
+    assert level("NRS", config) == "nonpositive"  # a NaivePotential: Φ(z_0) = 0 whatever the level
+    chosen = pick_and_place.plan(parse_config(pick_and_place.Config, ["--start-potential", "nonpositive"])).config
+    assert level("HRS", chosen) == "nonpositive"
+    assert level("HRS", {**config, "shaping": {"start_potential": "value"}}) == "value"
