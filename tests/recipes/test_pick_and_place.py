@@ -21,7 +21,7 @@ from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.experiments import load_frame
 from torchrl_subgoal.experiments.cli import parse_config
-from torchrl_subgoal.training import EnvFactory, batched, shaped_env
+from torchrl_subgoal.training import EnvFactory, batched, close_collector, shaped_env
 
 GAMMA = 0.98
 
@@ -113,7 +113,7 @@ def test_collector_workers_shape_with_the_trained_potential_and_act_with_the_tra
         shaped = data["next", "reward"] - data["next", "env_reward"]
         assert torch.allclose(shaped, GAMMA * phi_next - phi, atol=1e-5)
         assert torch.allclose(data["action"], greedy, atol=1e-5)
-    collector.shutdown()
+    close_collector(collector)
 
 
 TINY = ["--preset", "tiny", "--learnings", "1", "--envs", "1", "--collector-workers", "0", "--workers", "0"]

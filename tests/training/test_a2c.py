@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -93,6 +96,40 @@ def test_a2c_with_a_multisync_collector(online: bool) -> None:
     curve = train_a2c(lambda n: LineEnv(n, length=4), config, shaping=shaping, seed=1, episode_cap=100)
     assert len(curve.frames) == 8
     assert curve.episodes[-1] > 0 and bool((potential.table.detach() > 0.5).all())
+
+
+def test_a2c_with_a_multisync_collector_takes_a_sweep_seed() -> None:
+    """Sweep seeds take 63 bits; a worker seeds numpy with the collector's seed, which takes 32."""
+    config = A2CConfig(features="one_hot", hidden=(), total_frames=256, collector_workers=1)
+    curve = train_a2c(lambda n: LineEnv(n, length=4), config, seed=2**62 + 5, episode_cap=100)
+    assert len(curve.frames) == 1
+
+
+_EXITS_AFTER_CLOSE = """
+import functools
+from torchrl_subgoal.envs import FourRoomsEnv
+from torchrl_subgoal.training import A2CConfig, actor_critic, close_collector, make_collector
+
+if __name__ == "__main__":
+    config = A2CConfig(num_envs=2, frames_per_batch=16, total_frames=32, collector_workers=2)
+    actor, _ = actor_critic(FourRoomsEnv(2), features="one_hot")
+    collector = make_collector(functools.partial(FourRoomsEnv, 2), actor, config)
+    print(sum(batch.numel() for batch in collector))
+    close_collector(collector)
+"""
+
+
+def test_a_process_exits_after_close_collector(tmp_path: Path) -> None:
+    """A MultiSyncCollector with a policy leaves weight-sync schemes behind its shutdown; closed with
+    close_collector, the process exits (with collector.shutdown() alone it hung at interpreter exit)."""
+    script = tmp_path / "collect.py"
+    script.write_text(_EXITS_AFTER_CLOSE)
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")]))}
+    # the timeout only ends a hang (the script takes seconds); a hang is the failure
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.split()[-1] == "32"
 
 
 def test_naive_potential_is_not_trained() -> None:

@@ -11,7 +11,7 @@ from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import Cell, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
 from torchrl_subgoal.envs import FourRoomsEnv
-from torchrl_subgoal.training import EnvFactory
+from torchrl_subgoal.training import EnvFactory, close_collector
 
 SERIES = SubgoalSeries([Cell(1, 2), Cell(1, 3)])
 
@@ -54,5 +54,5 @@ def test_multisync_collector_workers_shape_with_the_trained_potential() -> None:
             with torch.no_grad():  # "train": a new table for the next batch
                 potential.table.copy_(torch.tensor([0.0, 1.0 + i, 3.0 * (i + 1)]))
     finally:
-        collector.shutdown()
+        close_collector(collector)
     assert seen_shaping >= 2

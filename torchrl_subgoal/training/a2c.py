@@ -394,7 +394,7 @@ def make_collector(
         >>> collector = make_collector(functools.partial(FourRoomsEnv, 4), actor, config)
         >>> [batch.shape for batch in collector]
         [torch.Size([4, 8]), torch.Size([4, 8])]
-        >>> collector.shutdown()
+        >>> close_collector(collector)
     """
     if config.collector_workers == 0:
         return Collector(env_factory(), policy, frames_per_batch=config.frames_per_batch,
@@ -403,6 +403,20 @@ def make_collector(
         [env_factory] * config.collector_workers, policy, frames_per_batch=config.frames_per_batch,
         total_frames=config.total_frames, cat_results="stack", auto_register_policy_transforms=False,
     )
+
+
+def close_collector(collector: Collector | MultiSyncCollector) -> None:
+    """Shut ``collector`` down with its weight-sync schemes.
+
+    TorchRL 0.14's ``MultiSyncCollector.shutdown`` stops the workers but leaves the schemes that
+    send them the policy's weights to their ``__del__``, which puts a message on a multiprocessing
+    queue; at interpreter exit that starts a feeder thread that never runs, and the process hangs
+    after its last line (measured: a recipe or script with ``collector_workers >= 1`` never exited).
+    Shutting the schemes down here, while the interpreter is alive, leaves ``__del__`` nothing to do.
+    """
+    collector.shutdown()
+    for scheme in (getattr(collector, "_weight_sync_schemes", None) or {}).values():
+        scheme.shutdown()
 
 
 @dataclass
@@ -543,7 +557,8 @@ def train_a2c(
         opt_class = torch.optim.SGD if config.value_optimizer == "sgd" else torch.optim.Adam
         value_optimizer = opt_class(shaping.potential.parameters(), lr=config.value_lr)
     collector = make_collector(factory, actor, config)
-    collector.set_seed(seed)
+    # a MultiSyncCollector's workers seed numpy with the seed, which takes 32 bits (sweep seeds take 63)
+    collector.set_seed(seed % 2**32 if isinstance(collector, MultiSyncCollector) else seed)
     episodes = _EpisodeWindow(config.record_window, cap, config.reward_scale)
     curve = LearningCurve()
     frames = 0
@@ -590,6 +605,6 @@ def train_a2c(
             if progress is not None:
                 progress(1)
     finally:
-        collector.shutdown()
+        close_collector(collector)
     return curve
 
