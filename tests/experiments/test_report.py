@@ -130,6 +130,20 @@ def test_pinball_patterns_reach_the_pinball_hook(tmp_path: Path) -> None:
     assert "![subgoal patterns](patterns.png)" in markdown, markdown
 
 
+def test_a_sweep_named_after_its_recipe_draws_the_map_of_its_config_domain(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """recipes/a2c.py names its sweep a2c_four_rooms and stores ``"domain": "four_rooms"``."""
+    monkeypatch.setattr(domains, "_REGISTRY", dict(domains._REGISTRY))
+    drawn: list[str] = []
+    register(Domain("hooked2", draw_map=lambda ax, patterns, options: drawn.extend(patterns)))
+    config = toy_domain.toy_config(12) | {"domain": "hooked2"}
+    Sweep("a2c_hooked2", tmp_path, toy_domain.toy_methods(1, ("HRS",)), toy_domain.run_chunk,
+          config).run(workers=0, progress=False)
+    markdown = write_report(tmp_path, n_boot=50).markdown
+    assert drawn == ["p1", "p2"] and "![subgoal patterns](patterns.png)" in markdown, markdown
+
+
 def test_report_spec_reads_the_config_section() -> None:
     spec = ReportSpec(thresholds=(3000, 2000), window=10, asymptotic_window=(190, 200))
     assert ReportSpec.from_config({"report": spec.to_dict()}) == spec

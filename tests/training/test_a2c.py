@@ -98,11 +98,16 @@ def test_a2c_with_a_multisync_collector(online: bool) -> None:
     assert curve.episodes[-1] > 0 and bool((potential.table.detach() > 0.5).all())
 
 
-def test_a2c_with_a_multisync_collector_takes_a_sweep_seed() -> None:
-    """Sweep seeds take 63 bits; a worker seeds numpy with the collector's seed, which takes 32."""
-    config = A2CConfig(features="one_hot", hidden=(), total_frames=256, collector_workers=1)
+def test_a2c_with_two_collector_workers_takes_a_sweep_seed() -> None:
+    """Sweep seeds take 63 bits; a worker seeds numpy with the collector's seed, which takes 32. A batch
+    holds frames_per_batch frames of both workers: as many batches as ``iterations`` says."""
+    config = A2CConfig(features="one_hot", hidden=(), num_envs=4, frames_per_batch=64, total_frames=256,
+                       collector_workers=2)
     curve = train_a2c(lambda n: LineEnv(n, length=4), config, seed=2**62 + 5, episode_cap=100)
-    assert len(curve.frames) == 1
+    assert len(curve.frames) == config.iterations == 4
+    assert curve.frames == [64, 128, 192, 256]
+    with pytest.raises(ValueError, match=r"multiple of num_envs x collector_workers \(4 x 3\)"):
+        A2CConfig(num_envs=4, frames_per_batch=64, collector_workers=3)
 
 
 _EXITS_AFTER_CLOSE = """

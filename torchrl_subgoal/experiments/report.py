@@ -487,8 +487,9 @@ def write_report(
         log_scale=log_scale,
         unit=spec.unit,
     )
-    maps = plot_pattern_maps(
-        results.domain, results.config.get("patterns") or {}, out / PATTERNS_FILE, options=spec.map
+    maps = plot_pattern_maps(  # a sweep named after its recipe (a2c_four_rooms) names its map's domain
+        str(results.config.get("domain", results.domain)), results.config.get("patterns") or {},
+        out / PATTERNS_FILE, options=spec.map,
     )
     for caption, figure in (("learning curves", curves), ("subgoal patterns", maps)):
         if figure.path is not None:

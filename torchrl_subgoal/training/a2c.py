@@ -84,7 +84,8 @@ class A2CConfig:
         collector_workers: 0: one :class:`~torchrl.collectors.Collector` in this process;
             ``k ≥ 1``: a :class:`~torchrl.collectors.MultiSyncCollector` of ``k`` processes,
             each with ``num_envs`` envs.
-        frames_per_batch: frames per collected batch (one A2C update).
+        frames_per_batch: frames per collected batch (one A2C update), over all collector
+            workers (each collects ``frames_per_batch / k``).
         total_frames: frames per learner.
         gamma: discount.
         gae_lambda: GAE's λ.
@@ -149,6 +150,10 @@ class A2CConfig:
         if self.frames_per_batch % self.num_envs:
             raise ValueError(f"frames_per_batch ({self.frames_per_batch}) must be a multiple of num_envs "
                              f"({self.num_envs})")
+        if self.frames_per_batch % (self.num_envs * max(1, self.collector_workers)):
+            raise ValueError(f"frames_per_batch ({self.frames_per_batch}) must be a multiple of num_envs x "
+                             f"collector_workers ({self.num_envs} x {self.collector_workers}): each worker "
+                             "collects an equal share with its num_envs envs")
         if self.features not in ("one_hot", "fourier", "mlp"):
             raise ValueError(f"features must be one_hot, fourier or mlp, got {self.features!r}")
         if self.value_optimizer not in ("adam", "sgd"):
@@ -157,9 +162,9 @@ class A2CConfig:
 
     @property
     def iterations(self) -> int:
-        """Collected batches (A2C updates) per learner."""
-        workers = max(1, self.collector_workers)
-        return math.ceil(self.total_frames / (self.frames_per_batch * workers))
+        """Collected batches (A2C updates) per learner (a ``MultiSyncCollector``'s batch holds
+        ``frames_per_batch`` frames of all its workers)."""
+        return math.ceil(self.total_frames / self.frames_per_batch)
 
 
 @dataclass
