@@ -418,6 +418,16 @@ def close_collector(collector: Collector | MultiSyncCollector) -> None:
     queue; at interpreter exit that starts a feeder thread that never runs, and the process hangs
     after its last line (measured: a recipe or script with ``collector_workers >= 1`` never exited).
     Shutting the schemes down here, while the interpreter is alive, leaves ``__del__`` nothing to do.
+
+    Examples:
+        >>> import functools
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> config = A2CConfig(num_envs=2, frames_per_batch=8, total_frames=8)
+        >>> actor, _ = actor_critic(FourRoomsEnv(2), features="one_hot")
+        >>> collector = make_collector(functools.partial(FourRoomsEnv, 2), actor, config)
+        >>> sum(batch.numel() for batch in collector)
+        8
+        >>> close_collector(collector)
     """
     collector.shutdown()
     for scheme in (getattr(collector, "_weight_sync_schemes", None) or {}).values():
