@@ -415,9 +415,10 @@ def close_collector(collector: Collector | MultiSyncCollector) -> None:
 
     TorchRL 0.14's ``MultiSyncCollector.shutdown`` stops the workers but leaves the schemes that
     send them the policy's weights to their ``__del__``, which puts a message on a multiprocessing
-    queue; at interpreter exit that starts a feeder thread that never runs, and the process hangs
-    after its last line (measured: a recipe or script with ``collector_workers >= 1`` never exited).
-    Shutting the schemes down here, while the interpreter is alive, leaves ``__del__`` nothing to do.
+    queue. Where the collector is still alive at interpreter exit (a script's global, or one held by
+    a reference cycle not yet collected), that starts a queue feeder thread that never runs, and the
+    process hangs after its last line (measured: such scripts never exited). Shutting the schemes
+    down here, while the interpreter is alive, leaves ``__del__`` nothing to do.
 
     Examples:
         >>> import functools
