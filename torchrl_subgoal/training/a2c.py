@@ -421,13 +421,10 @@ def close_collector(collector: Collector | MultiSyncCollector) -> None:
     down here, while the interpreter is alive, leaves ``__del__`` nothing to do.
 
     Examples:
-        >>> import functools
         >>> from torchrl_subgoal.envs import FourRoomsEnv
-        >>> config = A2CConfig(num_envs=2, frames_per_batch=8, total_frames=8)
-        >>> actor, _ = actor_critic(FourRoomsEnv(2), features="one_hot")
-        >>> collector = make_collector(functools.partial(FourRoomsEnv, 2), actor, config)
-        >>> sum(batch.numel() for batch in collector)
-        8
+        >>> collector = Collector(FourRoomsEnv(2), None, frames_per_batch=8, total_frames=16)
+        >>> [batch.numel() for batch in collector]
+        [8, 8]
         >>> close_collector(collector)
     """
     collector.shutdown()
