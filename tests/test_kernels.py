@@ -6,7 +6,14 @@ import numba
 import numpy as np
 import pytest
 
-from torchrl_subgoal import _kernels
+from torchrl_subgoal._kernels.random import (
+    AGENT_STREAM,
+    ENV_STREAM,
+    draw_uniforms,
+    learner_keys,
+    new_streams,
+    philox4x32,
+)
 
 # Random123's known-answer vectors for Philox4x32-10 (Salmon et al. 2011): counter, key, output
 KNOWN_ANSWERS = [
@@ -20,7 +27,7 @@ KNOWN_ANSWERS = [
 @numba.njit
 def _philox(c0: np.uint64, c1: np.uint64, c2: np.uint64, c3: np.uint64, k0: np.uint64,
             k1: np.uint64) -> tuple[int, int, int, int]:
-    return _kernels.philox4x32(c0, c1, c2, c3, k0, k1)  # type: ignore[no-any-return]
+    return philox4x32(c0, c1, c2, c3, k0, k1)  # type: ignore[no-any-return]
 
 
 @pytest.mark.parametrize(("counter", "key", "expected"), KNOWN_ANSWERS)
@@ -29,21 +36,21 @@ def test_philox_known_answers(counter: tuple[int, ...], key: tuple[int, ...], ex
 
 
 def test_a_stream_depends_on_its_key_only() -> None:
-    keys = _kernels.learner_keys(3, 5)
+    keys = learner_keys(3, 5)
     assert keys.dtype == np.uint64 and len(set(keys.tolist())) == 5
-    assert _kernels.learner_keys(3, 2).tolist() == keys[:2].tolist()  # learner b of any batch size
+    assert learner_keys(3, 2).tolist() == keys[:2].tolist()  # learner b of any batch size
     together = np.empty((5, 7))
-    _kernels.draw_uniforms(_kernels.new_streams(keys, _kernels.AGENT_STREAM), 7, together)
+    draw_uniforms(new_streams(keys, AGENT_STREAM), 7, together)
     alone = np.empty((1, 7))
-    _kernels.draw_uniforms(_kernels.new_streams(keys[3:4], _kernels.AGENT_STREAM), 7, alone)
+    draw_uniforms(new_streams(keys[3:4], AGENT_STREAM), 7, alone)
     assert np.array_equal(together[3], alone[0])
-    streams = _kernels.new_streams(keys, _kernels.AGENT_STREAM)  # three draws, then four: the same seven
+    streams = new_streams(keys, AGENT_STREAM)  # three draws, then four: the same seven
     first, rest = np.empty((5, 3)), np.empty((5, 4))
-    _kernels.draw_uniforms(streams, 3, first)
-    _kernels.draw_uniforms(streams, 4, rest)
+    draw_uniforms(streams, 3, first)
+    draw_uniforms(streams, 4, rest)
     assert np.array_equal(np.concatenate([first, rest], 1), together)
     env = np.empty((5, 7))  # another purpose, another stream of the same key
-    _kernels.draw_uniforms(_kernels.new_streams(keys, _kernels.ENV_STREAM), 7, env)
+    draw_uniforms(new_streams(keys, ENV_STREAM), 7, env)
     assert not np.isin(env, together).any()
 
 
@@ -51,7 +58,7 @@ def test_uniforms_look_uniform() -> None:
     from scipy import stats
 
     u = np.empty((4, 50_000))
-    _kernels.draw_uniforms(_kernels.new_streams(_kernels.learner_keys(0, 4), _kernels.AGENT_STREAM), 50_000, u)
+    draw_uniforms(new_streams(learner_keys(0, 4), AGENT_STREAM), 50_000, u)
     assert u.min() >= 0.0 and u.max() < 1.0
     for row in u:
         assert stats.kstest(row, "uniform").pvalue > 1e-4
@@ -61,7 +68,7 @@ def test_uniforms_look_uniform() -> None:
 
 def test_seeds_are_checked() -> None:
     with pytest.raises(ValueError, match="one non-negative integer per learner"):
-        _kernels.learner_keys([1, 2], 3)
+        learner_keys([1, 2], 3)
     with pytest.raises(ValueError, match="seed must be >= 0"):
-        _kernels.learner_keys(-1, 3)
-    assert _kernels.learner_keys(np.random.default_rng(0), 3).shape == (3,)
+        learner_keys(-1, 3)
+    assert learner_keys(np.random.default_rng(0), 3).shape == (3,)

@@ -42,7 +42,8 @@ import torch
 import yaml
 from tensordict import TensorDictBase
 
-from torchrl_subgoal import _kernels, domains
+from torchrl_subgoal import domains
+from torchrl_subgoal._kernels.regions import advance_regions
 
 __all__ = [
     "Box",
@@ -1096,7 +1097,7 @@ def _misfit(pred: Predicate, size: int, one_hot: bool) -> str | None:
 
 
 class RegionTables(NamedTuple):
-    """Regions as the compiled region search reads them (:func:`~torchrl_subgoal._kernels.region_search`).
+    """Regions as the compiled region search reads them (:func:`~torchrl_subgoal._kernels.regions.region_search`).
 
     Learner ``b`` follows pattern ``pattern[b]`` (pattern 0 for every learner when ``pattern`` is
     empty). From abstract state ``z`` it moves to ``j + offset`` for the first region ``j`` that
@@ -1291,7 +1292,7 @@ class SubgoalTables:
         zf = z.numpy().reshape(n, 1)
         obs = self.rows(observation).numpy()
         out = np.empty((n, 1), dtype=np.int64)
-        _kernels.advance_regions(self._kernel_tables, zf, obs, out)
+        advance_regions(self._kernel_tables, zf, obs, out)
         result = torch.from_numpy(out)
         return result if result.shape == z.shape else result.view(z.shape)
 
@@ -1318,7 +1319,7 @@ class SubgoalTables:
 
 def _in_regions(obs: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor, centre: torch.Tensor,
                 weight: torch.Tensor, radius2: torch.Tensor, circles: bool) -> torch.Tensor:
-    """``_kernels._in_region`` in torch: the same float64 comparisons, summed in the same order,
+    """``_in_region`` in torch: the same float64 comparisons, summed in the same order,
     so both paths agree on every input (NaN is never inside; unread entries never matter)."""
     hit = ((obs >= lo) & (obs <= hi)).all(-1)
     if circles:
@@ -1402,7 +1403,7 @@ class StateAggregation:
         assert self.regions is not None
         n = z.numel()
         out = np.empty((n, 1), dtype=np.int64)
-        _kernels.advance_regions(self.regions, z.numpy().reshape(n, 1), observation.cpu().numpy().reshape(n, -1), out)
+        advance_regions(self.regions, z.numpy().reshape(n, 1), observation.cpu().numpy().reshape(n, -1), out)
         return torch.from_numpy(out).view(z.shape).to(z.device)
 
     def initial(self, observation: torch.Tensor | None, batch_shape: torch.Size) -> torch.Tensor:

@@ -16,7 +16,16 @@ from tensordict.utils import NestedKey
 from torchrl.data import Binary, Bounded, Composite, OneHot, TensorSpec, Unbounded
 from torchrl.envs.transforms import Transform
 
-from torchrl_subgoal import _kernels
+from torchrl_subgoal._kernels.shaping import (
+    LOOKUP_SHAPING,
+    NO_SHAPING,
+    REGION_SHAPING,
+    START_NONPOSITIVE,
+    START_VALUE,
+    START_ZERO,
+    advance_and_shape,
+    shape_step,
+)
 from torchrl_subgoal.loss import SubgoalValueLoss
 from torchrl_subgoal.potentials import NaivePotential, TabularPotential, check_value
 from torchrl_subgoal.subgoals import (
@@ -33,8 +42,8 @@ RETURN = "subgoal_return"
 STEPS = "subgoal_steps"
 
 StartPotential = Literal["value", "zero", "nonpositive"]
-_START_MODES = {"value": _kernels.START_VALUE, "zero": _kernels.START_ZERO,
-                "nonpositive": _kernels.START_NONPOSITIVE}
+_START_MODES = {"value": START_VALUE, "zero": START_ZERO,
+                "nonpositive": START_NONPOSITIVE}
 
 
 @dataclass(frozen=True)
@@ -94,7 +103,7 @@ class SubgoalKeys:
 
 class PotentialKernelState(NamedTuple):
     """A tabular or naive potential and the transform's settings, as the compiled shaping step reads them
-    (:func:`~torchrl_subgoal._kernels._shape_learner`).
+    (:func:`~torchrl_subgoal._kernels.shaping._shape_learner`).
 
     Examples:
         >>> from torchrl_subgoal import NaivePotential, SubgoalPotentialTransform
@@ -113,7 +122,7 @@ class PotentialKernelState(NamedTuple):
     value_gamma: float  #: ``γ_v`` of the SMDP return
     value_lr: float  #: ``α_v`` of the online update (0: none)
     zero_terminal: bool  #: ``Φ = 0`` at a terminal state
-    start_mode: int  #: ``_kernels.START_VALUE``, ``START_ZERO`` or ``START_NONPOSITIVE``
+    start_mode: int  #: ``START_VALUE``, ``START_ZERO`` or ``START_NONPOSITIVE``
 
 
 class AbstractStates(NamedTuple):
@@ -141,17 +150,17 @@ class ShapingKernelState(NamedTuple):
     """The shaping transform for a compiled loop: its abstraction, its potential and every learner's
     abstract state (``[N, 1]`` arrays, updated in place), from :meth:`SubgoalPotentialTransform.kernel_state`.
 
-    A loop advances a learner with :func:`~torchrl_subgoal._kernels.region_search` (or ``lookup``),
-    shapes its reward with :func:`~torchrl_subgoal._kernels.shaping_step` and carries its state over (or resets it to
-    :func:`~torchrl_subgoal._kernels.shaping_start`'s) with :func:`~torchrl_subgoal._kernels.shaping_carry`.
+    A loop advances a learner with :func:`~torchrl_subgoal._kernels.regions.region_search` (or ``lookup``),
+    shapes its reward with :func:`~torchrl_subgoal._kernels.shaping.shaping_step` and carries its state over (or resets it to
+    :func:`~torchrl_subgoal._kernels.shaping.shaping_start`'s) with :func:`~torchrl_subgoal._kernels.shaping.shaping_carry`.
 
     Examples:
         >>> state = ShapingKernelState.unshaped(3)
-        >>> state.kind == _kernels.NO_SHAPING, state.learners.z.shape
+        >>> state.kind == NO_SHAPING, state.learners.z.shape
         (True, (3, 1))
     """
 
-    kind: int  #: ``_kernels.NO_SHAPING``, ``REGION_SHAPING`` (subgoal series, region aggregation) or ``LOOKUP_SHAPING``
+    kind: int  #: ``NO_SHAPING``, ``REGION_SHAPING`` (subgoal series, region aggregation) or ``LOOKUP_SHAPING``
     regions: RegionTables  #: the regions (``REGION_SHAPING``)
     lookup: np.ndarray  #: ``[S]`` abstract state of every state number (``LOOKUP_SHAPING``)
     potential: PotentialKernelState
@@ -163,8 +172,8 @@ class ShapingKernelState(NamedTuple):
         empty3 = np.zeros((1, 1, 1), np.float32)
         regions = RegionTables(np.zeros(0, np.int64), empty3, empty3, empty3, empty3, np.zeros((1, 1), np.float32),
                                np.zeros((1, 1, 1), np.bool_), 1)
-        potential = PotentialKernelState(_NO_TABLE, 0.0, 0.0, 0.0, 0.0, False, _kernels.START_VALUE)
-        return cls(_kernels.NO_SHAPING, regions, np.zeros(1, np.int64), potential, AbstractStates.zeros(n))
+        potential = PotentialKernelState(_NO_TABLE, 0.0, 0.0, 0.0, 0.0, False, START_VALUE)
+        return cls(NO_SHAPING, regions, np.zeros(1, np.int64), potential, AbstractStates.zeros(n))
 
 
 @dataclass
@@ -544,7 +553,7 @@ class SubgoalPotentialTransform(Transform):
             ...                                     gamma=0.9, value_lr=0.1)
             >>> env = TransformedEnv(FourRoomsEnv(num_envs=2), shaping)
             >>> state = shaping.kernel_state(env.reset())
-            >>> state.kind == _kernels.REGION_SHAPING, state.potential.table.shape, state.potential.value_lr
+            >>> state.kind == REGION_SHAPING, state.potential.table.shape, state.potential.value_lr
             (True, (2, 3), 0.1)
         """
         abstraction = self.abstraction
@@ -556,11 +565,11 @@ class SubgoalPotentialTransform(Transform):
         if isinstance(abstraction, SubgoalTables):
             if not abstraction.fusable:
                 raise TypeError("a compiled loop advances subgoal regions, not conditions")
-            kind, regions = _kernels.REGION_SHAPING, abstraction.kernel_state()
+            kind, regions = REGION_SHAPING, abstraction.kernel_state()
         elif isinstance(abstraction.mapping, torch.Tensor):
-            kind, lookup = _kernels.LOOKUP_SHAPING, abstraction.mapping.numpy()
+            kind, lookup = LOOKUP_SHAPING, abstraction.mapping.numpy()
         elif abstraction.regions is not None:
-            kind, regions = _kernels.REGION_SHAPING, abstraction.regions
+            kind, regions = REGION_SHAPING, abstraction.regions
         else:
             raise TypeError("a compiled loop needs a subgoal series, a lookup or a region aggregation, "
                             "not a function aggregation")
@@ -884,14 +893,14 @@ class SubgoalPotentialTransform(Transform):
         )
         if setup.regions is not None:
             rows = setup.abstraction.rows(obs).numpy()  # type: ignore[union-attr]
-            if not _kernels.advance_and_shape(setup.regions, potential, setup.shared, z_col, rows, *shaping,
+            if not advance_and_shape(setup.regions, potential, setup.shared, z_col, rows, *shaping,
                                               z_next[1], rh_out[1], k_out[1], shaped[1], *extra):
                 _check_finite(reward, obs, self.reward_key, self.observation_key)  # raises, naming the entry
                 raise ValueError(f"SubgoalPotentialTransform: {self.reward_key!r} is not finite or "
                                  f"{self.observation_key!r} holds a NaN")
         else:
             z_next = (setup.abstraction.advance(z, obs), np.empty(0))
-            _kernels.shape_step(potential, setup.shared, z_col, _col(z_next[0], n, "z'"), *shaping, rh_out[1],
+            shape_step(potential, setup.shared, z_col, _col(z_next[0], n, "z'"), *shaping, rh_out[1],
                                 k_out[1], shaped[1], *extra)
         if reward is not env_reward:  # a second transform: shape the (already shaped) reward, accumulate r
             shaped[1][:] += _col(reward, n, "reward") - reward_col

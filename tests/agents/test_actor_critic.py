@@ -7,7 +7,7 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from torchrl_subgoal import _kernels
+from torchrl_subgoal._kernels.random import draw_uniforms
 from torchrl_subgoal.agents import AC_PRESETS, ActorCriticConfig, FourierActorCritic, run_episodes
 from torchrl_subgoal.agents.actor_critic import fourier_coefficients
 from torchrl_subgoal.envs import PinBallEnv
@@ -100,7 +100,7 @@ def test_q_actor_critic_update_matches_autograd(normalize: bool) -> None:
     )
     root = TensorDict({"observation": torch.where(terminated | truncated, obs_reset, obs_next)}, [n])
     drawn = np.empty((n, 2))
-    _kernels.draw_uniforms(agent.streams.numpy().copy(), 2, drawn)  # each learner's next two draws
+    draw_uniforms(agent.streams.numpy().copy(), 2, drawn)  # each learner's next two draws
     u = np.concatenate([drawn[:, 0], drawn[:, 1]])  # a' for all, then the reset draws
     agent.step(transition, root)
 

@@ -9,7 +9,8 @@ import pytest
 import torch
 from torchrl.envs import TransformedEnv
 
-from torchrl_subgoal import Cell, SubgoalSeries, _kernels
+from torchrl_subgoal import Cell, SubgoalSeries
+from torchrl_subgoal._kernels.random import learner_keys
 from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import room_aggregation
@@ -37,7 +38,7 @@ def setup(method: str, n: int, abstract_states: int, max_steps: int, step_cost: 
         zero_terminal_potential=zero_terminal,
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
-    seeds = _kernels.learner_keys(7, n)[learners]
+    seeds = learner_keys(7, n)[learners]
     return learning_env, SoftmaxSarsa(m, 104, 4, cfg, seed=seeds, abstract_states=abstract_states)
 
 
@@ -109,7 +110,7 @@ def test_fused_equals_torchrl_with_a_region_aggregation() -> None:
         shaping = shaping_transform(paper_methods("SARSA")["SARSA-RS"], env.batch_size, gamma=cfg.gamma,
                                     value_lr=cfg.value_lr, aggregation=halves, observation_key="cell")
         learning_env = TransformedEnv(env, shaping)
-        agent = SoftmaxSarsa(8, 104, 4, cfg, seed=_kernels.learner_keys(7, 8))
+        agent = SoftmaxSarsa(8, 104, 4, cfg, seed=learner_keys(7, 8))
         records = run_episodes(learning_env, agent, 25, engine=engine)  # type: ignore[arg-type]
         results[engine] = (records, *_tables(learning_env, agent))
     (a, qa, va), (b, qb, vb) = results["torchrl"], results["fused"]

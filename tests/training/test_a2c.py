@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-from torchrl_subgoal import Cell, NaivePotential, State, SubgoalSeries, TabularPotential, _kernels
+from torchrl_subgoal import Cell, NaivePotential, State, SubgoalSeries, TabularPotential
+from torchrl_subgoal._kernels.actor_critic import _feature_scratch, fourier_features
 from torchrl_subgoal.envs import PinBallEnv
 from torchrl_subgoal.envs.four_rooms_domain import four_rooms_env
 from torchrl_subgoal.training import (
@@ -35,9 +36,9 @@ def test_fourier_features_equal_the_fused_kernels() -> None:
     basis = FourierFeatures(low, high, order=3)
     obs = torch.rand(5, 4) * (high - low) + low
     ours = basis(obs)
-    scratch, ref = _kernels._feature_scratch(3, 2, 4, 256)
+    scratch, ref = _feature_scratch(3, 2, 4, 256)
     for b in range(5):
-        _kernels.fourier_features(obs[b].double().numpy(), low.double().numpy(), (1 / (high - low)).double().numpy(),
+        fourier_features(obs[b].double().numpy(), low.double().numpy(), (1 / (high - low)).double().numpy(),
                                   3, 2, scratch, ref)
         assert np.allclose(ours[b].numpy(), ref, atol=1e-5)
 

@@ -12,7 +12,15 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
-from torchrl_subgoal import _kernels
+from torchrl_subgoal._kernels.actor_critic import (
+    _feature_scratch,
+    ac_act,
+    ac_learner_step,
+    ac_step,
+    qac_step,
+)
+from torchrl_subgoal._kernels.random import AGENT_STREAM, learner_keys, new_streams
+from torchrl_subgoal._kernels.steps import implements, learner_scratch, learner_step
 from torchrl_subgoal.agents.module import KernelLearner
 
 __all__ = ["AC_PRESETS", "ActorCriticConfig", "ActorCriticKernelState", "FourierActorCritic", "fourier_coefficients"]
@@ -192,10 +200,10 @@ class FourierActorCritic(KernelLearner):
         self.register_buffer("theta", torch.zeros(num_learners, num_actions, self.num_features, dtype=f64))
         self.register_buffer("phi", torch.zeros(num_learners, self.num_features, dtype=f64))  # φ of the current state
         self.register_buffer("probs", torch.full((num_learners, num_actions), 1.0 / num_actions, dtype=f64))  # π(·|s)
-        streams = _kernels.new_streams(_kernels.learner_keys(seed, num_learners), _kernels.AGENT_STREAM)
+        streams = new_streams(learner_keys(seed, num_learners), AGENT_STREAM)
         self.register_buffer("streams", torch.from_numpy(streams))
         self.observation_key = observation_key
-        self._step_kernel = _kernels.qac_step if q_critic else _kernels.ac_step
+        self._step_kernel = qac_step if q_critic else ac_step
 
     def kernel_state(self) -> ActorCriticKernelState:
         """The weights, features, random streams and settings, as a compiled loop reads them (numpy views).
@@ -218,7 +226,7 @@ class FourierActorCritic(KernelLearner):
         n = obs.shape[0]
         out = np.empty((n, self.num_features))
         theta = np.zeros((n, 1, self.num_features))
-        _kernels.ac_act(theta, out, np.empty((n, 1)), obs, self.low, self.inv_range, self.config.order, self.half_dim,
+        ac_act(theta, out, np.empty((n, 1)), obs, self.low, self.inv_range, self.config.order, self.half_dim,
                         np.zeros((0, 4), np.uint64), np.empty(n, np.int64))
         return torch.from_numpy(out)
 
@@ -238,7 +246,7 @@ class FourierActorCritic(KernelLearner):
         n = self.w.shape[0]
         action = np.empty(n, np.int64)
         view = self.numpy_view
-        _kernels.ac_act(view("theta"), view("phi"), view("probs"), self._obs(tensordict), self.low, self.inv_range,
+        ac_act(view("theta"), view("phi"), view("probs"), self._obs(tensordict), self.low, self.inv_range,
                         self.config.order, self.half_dim, view("streams"), action)
         tensordict.set("action", torch.from_numpy(action))
         return tensordict
@@ -263,17 +271,17 @@ class FourierActorCritic(KernelLearner):
         next_root.set("action", torch.from_numpy(action))
 
 
-# The fused engine's learner step (torchrl_subgoal._kernels.fused_run): features of the observation array.
+# The fused engine's learner step (torchrl_subgoal._kernels.engine.fused_run): features of the observation array.
 
 
-@_kernels.implements(_kernels.learner_scratch, ActorCriticKernelState)
+@implements(learner_scratch, ActorCriticKernelState)
 def _ac_scratch(learner: ActorCriticKernelState) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
-    return _kernels._feature_scratch(learner.order, learner.half, learner.low.shape[0], learner.theta.shape[2])
+    return _feature_scratch(learner.order, learner.half, learner.low.shape[0], learner.theta.shape[2])
 
 
-@_kernels.implements(_kernels.learner_step, ActorCriticKernelState)
+@implements(learner_step, ActorCriticKernelState)
 def _ac_fused_step(learner: ActorCriticKernelState, b: int, o: np.ndarray, z: int, a: int, reward: float,
                    o_next: np.ndarray, z_next: int, terminated: bool, done: bool, o_root: np.ndarray, z_root: int,
                    scratch: tuple[tuple[np.ndarray, ...], np.ndarray]) -> int:
     features, phi_next = scratch
-    return _kernels.ac_learner_step(learner, b, a, reward, o_next, terminated, done, o_root, features, phi_next)
+    return ac_learner_step(learner, b, a, reward, o_next, terminated, done, o_root, features, phi_next)

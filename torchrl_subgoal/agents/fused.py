@@ -12,7 +12,7 @@ draws from its own stream), so its records are identical to the TorchRL
 loop's (``tests/agents/test_fused.py``) while a learner-step costs tens of
 nanoseconds (four-rooms) or a few microseconds (PinBall).
 
-One loop, :func:`torchrl_subgoal._kernels.fused_run`, runs every env and
+One loop, :func:`torchrl_subgoal._kernels.engine.fused_run`, runs every env and
 learner: it calls an env's and a learner's compiled steps (``env_step``,
 ``env_reset``, ``learner_step``, …), which each record type (what the env's
 and the learner's ``kernel_state()`` return) implements next to its own
@@ -49,8 +49,9 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, TransformedEnv
 
-from torchrl_subgoal import _kernels
-from torchrl_subgoal._kernels import (
+from torchrl_subgoal._kernels.engine import fused_run, fused_run_uncached
+from torchrl_subgoal._kernels.shaping import LOOKUP_SHAPING
+from torchrl_subgoal._kernels.steps import (
     env_observe,
     env_reset,
     env_scratch,
@@ -59,6 +60,7 @@ from torchrl_subgoal._kernels import (
     implements,
     learner_scratch,
     learner_step,
+    missing_steps,
 )
 from torchrl_subgoal.agents.actor_critic import FourierActorCritic
 from torchrl_subgoal.agents.records import EpisodeArrays, EpisodeRecords
@@ -130,7 +132,7 @@ class FusedLearner(Protocol):
     Examples:
         >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
         >>> agent: FusedLearner = SoftmaxSarsa(2, 5, 4, SARSA_PRESETS["released"], seed=0)
-        >>> _kernels.missing_steps((), agent.kernel_state())  # a record that is not an env's: its steps are missing
+        >>> missing_steps((), agent.kernel_state())  # a record that is not an env's: its steps are missing
         ['env_scratch', 'env_observe', 'env_step', 'env_reset', 'env_shaping_observation']
     """
 
@@ -196,19 +198,19 @@ def _run_fused(
     progress: Callable[[int], None] | None,
     block: int,
 ) -> EpisodeRecords:
-    """The fused engine's driver: the same start as the TorchRL loop, then :func:`~torchrl_subgoal._kernels.fused_run`
+    """The fused engine's driver: the same start as the TorchRL loop, then :func:`~torchrl_subgoal._kernels.engine.fused_run`
     in blocks of ``block`` steps; ``env_state(shaping's record)`` is the env's record (and its checks)."""
     td = agent.act(env.reset())  # the same start as the TorchRL loop, tables compiled
     n = max(1, env.batch_size.numel())
     action = td.get("action").reshape(-1).numpy().copy()
     state = _shaping_state(shaping, td, n)
     record, learner = env_state(state), agent.kernel_state()
-    missing = _kernels.missing_steps(record, learner)
+    missing = missing_steps(record, learner)
     if missing:
         raise TypeError(f"{type(record).__name__} and {type(learner).__name__} do not implement the fused engine's "
                         f"{', '.join(missing)} (register them with torchrl_subgoal.agents.fused.implements; docs/adding_a_domain.md)")
     packaged = all(type(r).__module__.startswith("torchrl_subgoal.") for r in (record, learner))
-    loop = _kernels.fused_run if packaged else _kernels.fused_run_uncached  # see fused_run_uncached
+    loop = fused_run if packaged else fused_run_uncached  # see fused_run_uncached
 
     def run_block(records: EpisodeArrays) -> tuple[int, int]:
         try:
@@ -246,7 +248,7 @@ def run_four_rooms_fused(
     key = "observation" if shaping is None else shaping.observation_key
 
     def grid(state: ShapingKernelState) -> GridKernelState:  # the shaping reads the state number or its cell
-        if key == "cell" and state.kind == _kernels.LOOKUP_SHAPING:
+        if key == "cell" and state.kind == LOOKUP_SHAPING:
             raise TypeError("a lookup aggregation reads the state number ('observation')")
         return base.kernel_state(key)
 
@@ -278,7 +280,7 @@ def run_pinball_fused(
         raise TypeError("the fused engine needs PinBall's numba physics backend")
 
     def balls(state: ShapingKernelState) -> BallKernelState:
-        if state.kind == _kernels.LOOKUP_SHAPING:
+        if state.kind == LOOKUP_SHAPING:
             raise TypeError("the fused PinBall engine needs a region aggregation (StateAggregation.from_regions)")
         return base.kernel_state()
 

@@ -11,7 +11,7 @@ from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal import _kernels
+from torchrl_subgoal._kernels.records import record_episodes
 from torchrl_subgoal.agents.records import EpisodeRecords
 
 __all__ = ["EpisodeRecords", "OnlineAgent", "run_episodes"]
@@ -109,7 +109,7 @@ def run_episodes(
         agent.step(td, root)
         nxt = td.get("next")
         env_steps += 1
-        filed = _kernels.record_episodes(
+        filed = record_episodes(
             _flat(nxt.get("done")), _flat(nxt.get("terminated")), _flat(nxt.get(return_key)),
             t, ret, done_episodes, *outputs,
         )

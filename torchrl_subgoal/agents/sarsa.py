@@ -11,7 +11,9 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
-from torchrl_subgoal import _kernels
+from torchrl_subgoal._kernels.random import AGENT_STREAM, learner_keys, new_streams
+from torchrl_subgoal._kernels.sarsa import sarsa_learner_step, sarsa_step, softmax_sample
+from torchrl_subgoal._kernels.steps import implements, learner_scratch, learner_step
 from torchrl_subgoal.agents.module import KernelLearner
 
 __all__ = ["SARSA_PRESETS", "SarsaConfig", "SarsaKernelState", "SoftmaxSarsa"]
@@ -92,7 +94,7 @@ class SoftmaxSarsa(KernelLearner):
         config: learning rate, discount, temperature.
         seed: one seed per learner (a sequence), or one integer from which
             learner ``b``'s seed is derived (see
-            :func:`~torchrl_subgoal._kernels.learner_keys`), or a numpy
+            :func:`~torchrl_subgoal._kernels.random.learner_keys`), or a numpy
             generator that draws them. Learner ``b`` draws from its own stream.
         observation_key: the discrete observation.
         abstract_states: if > 1, the table is over ``(s, z)`` pairs, with ``z``
@@ -143,7 +145,7 @@ class SoftmaxSarsa(KernelLearner):
         self.num_states = num_states * abstract_states
         # the kernels update both in place through numpy views (numpy_view)
         self.register_buffer("q", torch.zeros(num_learners, self.num_states, num_actions))
-        streams = _kernels.new_streams(_kernels.learner_keys(seed, num_learners), _kernels.AGENT_STREAM)
+        streams = new_streams(learner_keys(seed, num_learners), AGENT_STREAM)
         self.register_buffer("streams", torch.from_numpy(streams))
         self.observation_key = observation_key
         self.register_buffer("_rows", torch.arange(num_learners), persistent=False)
@@ -165,7 +167,7 @@ class SoftmaxSarsa(KernelLearner):
         """Softmax actions for each learner's table row ``[N]`` (see :meth:`state`)."""
         s = state.numpy().reshape(-1)
         action = torch.empty_like(state)
-        _kernels.softmax_sample(self.numpy_view("q"), s, 1.0 / self.config.temperature, self.numpy_view("streams"),
+        softmax_sample(self.numpy_view("q"), s, 1.0 / self.config.temperature, self.numpy_view("streams"),
                                 action.numpy().reshape(-1))
         return action
 
@@ -196,7 +198,7 @@ class SoftmaxSarsa(KernelLearner):
         nxt = transition.get("next")
         n = self.q.shape[0]
         action = torch.empty(n, dtype=torch.long)
-        _kernels.sarsa_step(
+        sarsa_step(
             self.numpy_view("q"), _flat(self.state(transition)), _flat(transition.get("action")),
             _flat(nxt.get("reward")), _flat(self.state(nxt)), _flat(nxt.get("terminated")),
             _flat(nxt.get("done")), _flat(self.state(next_root)), self.numpy_view("streams"), cfg.lr, cfg.gamma,
@@ -210,16 +212,16 @@ def _flat(t: torch.Tensor) -> np.ndarray:
     return t.numpy().reshape(-1)
 
 
-# The fused engine's learner step (torchrl_subgoal._kernels.fused_run): a row per state and abstract state.
+# The fused engine's learner step (torchrl_subgoal._kernels.engine.fused_run): a row per state and abstract state.
 
 
-@_kernels.implements(_kernels.learner_scratch, SarsaKernelState)
+@implements(learner_scratch, SarsaKernelState)
 def _sarsa_scratch(learner: SarsaKernelState) -> np.ndarray:
     return np.empty(learner.q.shape[2])
 
 
-@_kernels.implements(_kernels.learner_step, SarsaKernelState)
+@implements(learner_step, SarsaKernelState)
 def _sarsa_fused_step(learner: SarsaKernelState, b: int, o: int, z: int, a: int, reward: float, o_next: int,
                       z_next: int, terminated: bool, done: bool, o_root: int, z_root: int, scratch: np.ndarray) -> int:
-    return _kernels.sarsa_learner_step(learner, b, o, z, a, reward, o_next, z_next, terminated, done, o_root, z_root,
+    return sarsa_learner_step(learner, b, o, z, a, reward, o_next, z_next, terminated, done, o_root, z_root,
                                        scratch)

@@ -11,7 +11,15 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal import _kernels
+from torchrl_subgoal._kernels.grid import grid_reset, grid_reset_one, grid_step, grid_step_one
+from torchrl_subgoal._kernels.steps import (
+    env_observe,
+    env_reset,
+    env_scratch,
+    env_shaping_observation,
+    env_step,
+    implements,
+)
 from torchrl_subgoal.subgoals import Cell, Predicate, State, StateAggregation, SubgoalSeries
 
 __all__ = ["ACTIONS", "LAYOUT", "FourRoomsEnv", "check_subgoal", "draw_map", "free_cells", "room_aggregation"]
@@ -112,7 +120,7 @@ def check_subgoal(predicate: Predicate) -> str | None:
 
 class GridKernelState(NamedTuple):
     """A :class:`FourRoomsEnv`'s state and tables as numpy views, and its settings, for compiled loops
-    (:func:`~torchrl_subgoal._kernels.grid_step_one` steps one learner in place).
+    (:func:`~torchrl_subgoal._kernels.grid.grid_step_one` steps one learner in place).
 
     Examples:
         >>> state = FourRoomsEnv(num_envs=2).kernel_state()
@@ -220,7 +228,7 @@ class FourRoomsEnv(EnvBase):
         mask = torch.ones(n, dtype=torch.bool, device=self.device) if reset is None else reset.reshape(-1)
         cell = torch.empty((*shape, 2), dtype=torch.long, device=self.device)
         if self.device.type == "cpu":
-            _kernels.grid_reset(self.kernel_state(), mask.numpy(), cell.numpy().reshape(n, 2))
+            grid_reset(self.kernel_state(), mask.numpy(), cell.numpy().reshape(n, 2))
         else:
             self._state.masked_fill_(mask, self.start_state)
             self._t.masked_fill_(mask, 0)
@@ -247,7 +255,7 @@ class FourRoomsEnv(EnvBase):
         truncated = torch.empty((*shape, 1), dtype=torch.bool, device=self.device)
         cell = torch.empty((*shape, 2), dtype=torch.long, device=self.device)
         if self.device.type == "cpu":
-            _kernels.grid_step(self.kernel_state(), action.numpy(), reward.numpy().reshape(n),
+            grid_step(self.kernel_state(), action.numpy(), reward.numpy().reshape(n),
                                terminated.numpy().reshape(n), truncated.numpy().reshape(n), cell.numpy().reshape(n, 2))
         else:
             self._state = self.transitions[self._state, action]
@@ -363,30 +371,30 @@ def draw_map(ax: Any, patterns: Mapping[str, SubgoalSeries | Sequence[tuple[int,
     ax.set_ylim(SIZE[0] - 0.5, -0.5)
 
 
-# The fused engine's env step (torchrl_subgoal._kernels.fused_run): the learner reads the state number.
+# The fused engine's env step (torchrl_subgoal._kernels.engine.fused_run): the learner reads the state number.
 
 
-@_kernels.implements(_kernels.env_scratch, GridKernelState)
+@implements(env_scratch, GridKernelState)
 def _grid_scratch(env: GridKernelState) -> tuple[()]:
     return ()
 
 
-@_kernels.implements(_kernels.env_observe, GridKernelState)
+@implements(env_observe, GridKernelState)
 def _grid_observe(env: GridKernelState, b: int, scratch: tuple[()]) -> int:
     return env.state[b]
 
 
-@_kernels.implements(_kernels.env_step, GridKernelState)
+@implements(env_step, GridKernelState)
 def _grid_step(env: GridKernelState, b: int, a: int, scratch: tuple[()]) -> tuple[int, np.float32, bool, bool]:
-    return _kernels.grid_step_one(env, b, a)
+    return grid_step_one(env, b, a)
 
 
-@_kernels.implements(_kernels.env_reset, GridKernelState)
+@implements(env_reset, GridKernelState)
 def _grid_reset(env: GridKernelState, b: int, scratch: tuple[()]) -> int:
-    _kernels.grid_reset_one(env, b)
+    grid_reset_one(env, b)
     return env.state[b]
 
 
-@_kernels.implements(_kernels.env_shaping_observation, GridKernelState)
+@implements(env_shaping_observation, GridKernelState)
 def _grid_shaping_observation(env: GridKernelState, s: int, scratch: tuple[()]) -> np.ndarray:
     return env.observed[s]

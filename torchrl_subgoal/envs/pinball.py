@@ -53,7 +53,21 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal import _kernels
+from torchrl_subgoal._kernels.random import (
+    ENV_STREAM,
+    _random_action,
+    learner_keys,
+    new_streams,
+    random_actions,
+)
+from torchrl_subgoal._kernels.steps import (
+    env_observe,
+    env_reset,
+    env_scratch,
+    env_shaping_observation,
+    env_step,
+    implements,
+)
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -435,7 +449,7 @@ def ball_step(balls: BallKernelState, b: int, a: int, candidates: np.ndarray, ow
         >>> bool(vx > 0.0), int(balls.steps[0]), bool(done)
         (True, 1, False)
     """
-    executed = _kernels._random_action(a, balls.streams, b, balls.random_prob, _NUM_ACTIONS)
+    executed = _random_action(a, balls.streams, b, balls.random_prob, _NUM_ACTIONS)
     px, py, vx, vy, terminated = step_ball(
         balls.position[b, 0], balls.position[b, 1], balls.velocity[b, 0], balls.velocity[b, 1], executed,
         balls.edges, balls.boxes, balls.first_edge, balls.ball_radius, balls.target_x, balls.target_y,
@@ -465,11 +479,11 @@ def ball_reset(balls: BallKernelState, b: int) -> tuple[float, float, float, flo
     return balls.start_x, balls.start_y, 0.0, 0.0
 
 
-# The fused engine's env step (torchrl_subgoal._kernels.fused_run): the learner and the shaping read the
+# The fused engine's env step (torchrl_subgoal._kernels.engine.fused_run): the learner and the shaping read the
 # observation as PinBallEnv emits it (float32), held in float64 scratch rows: before, after and at a reset.
 
 
-@_kernels.implements(_kernels.env_scratch, BallKernelState)
+@implements(env_scratch, BallKernelState)
 def _ball_scratch(env: BallKernelState) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     n = env.edges.shape[0]
     return np.empty(4), np.empty(4), np.empty(4), np.empty(n, np.int64), np.empty(n, np.int64)
@@ -482,25 +496,25 @@ def _observation(out: np.ndarray, px: float, py: float, vx: float, vy: float) ->
     return out
 
 
-@_kernels.implements(_kernels.env_observe, BallKernelState)
+@implements(env_observe, BallKernelState)
 def _ball_observe(env: BallKernelState, b: int, scratch: tuple[np.ndarray, ...]) -> np.ndarray:
     return _observation(scratch[0], env.position[b, 0], env.position[b, 1], env.velocity[b, 0], env.velocity[b, 1])
 
 
-@_kernels.implements(_kernels.env_step, BallKernelState)
+@implements(env_step, BallKernelState)
 def _ball_env_step(env: BallKernelState, b: int, a: int, scratch: tuple[np.ndarray, ...],
                    ) -> tuple[np.ndarray, np.float32, bool, bool]:
     px, py, vx, vy, reward, terminated, done = ball_step(env, b, a, scratch[3], scratch[4])
     return _observation(scratch[1], px, py, vx, vy), reward, terminated, done
 
 
-@_kernels.implements(_kernels.env_reset, BallKernelState)
+@implements(env_reset, BallKernelState)
 def _ball_env_reset(env: BallKernelState, b: int, scratch: tuple[np.ndarray, ...]) -> np.ndarray:
     px, py, vx, vy = ball_reset(env, b)
     return _observation(scratch[2], px, py, vx, vy)
 
 
-@_kernels.implements(_kernels.env_shaping_observation, BallKernelState)
+@implements(env_shaping_observation, BallKernelState)
 def _ball_shaping_observation(env: BallKernelState, o: np.ndarray, scratch: tuple[np.ndarray, ...]) -> np.ndarray:
     return o
 
@@ -759,7 +773,7 @@ class PinBallEnv(EnvBase):
         thrust_penalty: reward added on a step with a thrust (classic: -5).
         velocity_limit: per-axis velocity clip after the thrust (Java original: 1.0).
         seed: one seed per ball, or one integer they are derived from (see
-            :func:`~torchrl_subgoal._kernels.learner_keys`); ``None`` draws one.
+            :func:`~torchrl_subgoal._kernels.random.learner_keys`); ``None`` draws one.
         device: device of the tensors.
         backend: physics backend, see :class:`PinBallPhysics`.
 
@@ -881,7 +895,7 @@ class PinBallEnv(EnvBase):
         action = tensordict.get("action")
         if self.random_action_prob > 0.0:
             executed = np.empty(action.shape[0], np.int64)
-            _kernels.random_actions(action.cpu().numpy().astype(np.int64), self.streams, self.random_action_prob,
+            random_actions(action.cpu().numpy().astype(np.int64), self.streams, self.random_action_prob,
                                     len(ACTION_NAMES), executed)
             action = torch.from_numpy(executed).to(self.device)
         terminated = self.physics.step(self._position, self._velocity, action).unsqueeze(1)
@@ -904,8 +918,8 @@ class PinBallEnv(EnvBase):
         )
 
     def _set_seed(self, seed: int | Sequence[int] | np.ndarray | None) -> None:
-        keys = _kernels.learner_keys(np.random.default_rng() if seed is None else seed, self.batch_size.numel())
-        self.streams = _kernels.new_streams(keys, _kernels.ENV_STREAM)
+        keys = learner_keys(np.random.default_rng() if seed is None else seed, self.batch_size.numel())
+        self.streams = new_streams(keys, ENV_STREAM)
 
     # -- map helpers -------------------------------------------------------
 

@@ -1,0 +1,21 @@
+"""Compiled CPU kernels (numba), one module per concern.
+
+Each kernel does, in one pass over the learner batch, what the eager torch code
+does with a few dozen small tensor operations; at the batch sizes used here
+(10^2-10^4 learners) the cost of those is dominated by per-operation overhead.
+The torch code stays the reference (and the path for other devices and neural
+potentials); the tests check the two agree.
+
+* :mod:`.random`: every learner's counter-based random stream, and draws from it;
+* :mod:`.steps`: the fused engine's per-record steps (``env_step``, ``learner_step``, …)
+  and :func:`~.steps.implements`, with which an env's or a learner's record joins the engine;
+* :mod:`.regions`: the region search of subgoal predicates and region aggregations;
+* :mod:`.shaping`: the shaping transform's step (the SMDP return, the online update, the shaped reward);
+* :mod:`.grid`, :mod:`.sarsa`, :mod:`.actor_critic`: the four-rooms env and the paper's two learners;
+* :mod:`.records`: filing finished episodes;
+* :mod:`.engine`: :func:`~.engine.fused_run`, the fused engine's loop.
+
+Arrays are numpy views of torch tensors (no copies); batch dimensions are
+flattened, per-learner scalars have a trailing singleton. Import the module you
+need (``from torchrl_subgoal._kernels import shaping``): this package imports none.
+"""
