@@ -25,7 +25,8 @@ from torchrl_subgoal import (
     TabularPotential,
 )
 from torchrl_subgoal.potentials import ACHIEVED, INDEX
-from torchrl_subgoal.subgoals import Predicate, StateAggregation, SubgoalTables, _in_regions
+from torchrl_subgoal.subgoals import Predicate, StateAggregation, SubgoalTables
+from torchrl_subgoal.subgoals.tables import _in_regions
 from torchrl_subgoal.transform import RETURN, STEPS
 
 D = 3  # observation entries

@@ -6,6 +6,7 @@ Aggregation" (IJCNN 2021): a person names a few ordered subgoals, and
 shaping reward for any TorchRL environment.
 """
 
+from torchrl_subgoal import domains  # noqa: F401  (the registry: subgoal files that name a domain are checked)
 from torchrl_subgoal.loss import SubgoalValueLoss
 from torchrl_subgoal.potentials import NaivePotential, NeuralPotential, Potential, TabularPotential
 from torchrl_subgoal.subgoals import (

@@ -21,6 +21,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from torchrl_subgoal.subgoals.files import use_domain_checks
+
 if TYPE_CHECKING:
     from torchrl.envs import EnvBase
 
@@ -249,3 +251,21 @@ def get(name: str) -> Domain:
     if domain is None:
         raise UnknownDomainError(f"unknown domain {name!r}; known: {', '.join(names())}")
     return domain
+
+
+def subgoal_check(name: str) -> Callable[[Predicate], str | None] | None:
+    """The map check of the domain registered as ``name`` (``None``: it has none): what a subgoal file
+    naming that domain is checked with.
+
+    Raises:
+        UnknownDomainError: naming the known domains.
+
+    Examples:
+        >>> from torchrl_subgoal import Cell
+        >>> subgoal_check("four_rooms")(Cell(0, 6))
+        '(0, 6) is a wall'
+    """
+    return get(name).check_subgoal
+
+
+use_domain_checks(subgoal_check)
