@@ -195,7 +195,7 @@ def a2c_iterations(
     keeper, value_loss, value_optimizer = None, None, None
     if shaping is not None and not online:
         keeper = shaping.transform(shaping.potential, config.gamma, None)
-        value_loss = SubgoalValueLoss(shaping.potential, gamma=config.gamma, reduction="mean")
+        value_loss = SubgoalValueLoss(shaping.potential, reduction="mean").make_value_estimator(gamma=config.gamma)
         value_optimizer = torch.optim.Adam(shaping.potential.parameters(), lr=config.value_lr)
     collector = Collector(env, actor, frames_per_batch=config.frames_per_batch, total_frames=-1,
                           auto_register_policy_transforms=False)

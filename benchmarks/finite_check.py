@@ -19,7 +19,7 @@ from importlib.resources import files
 import torch
 from torchrl.envs import TransformedEnv
 
-import torchrl_subgoal.transform as transform_module
+import torchrl_subgoal.transform.compiled as transform_module
 from torchrl_subgoal import SubgoalPotentialTransform, TabularPotential, load_patterns
 from torchrl_subgoal.envs import FourRoomsEnv
 
@@ -33,11 +33,11 @@ def main() -> None:
     torch.set_num_threads(1)
     n = args.envs
     patterns = list(load_patterns(str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")).values())
-    shaping = SubgoalPotentialTransform(patterns, TabularPotential(3, (n,)), gamma=0.99, observation_key="cell",
-                                        pattern_index=torch.arange(n) % len(patterns), value_lr=0.1)
+    shaping = SubgoalPotentialTransform([patterns[i % len(patterns)] for i in range(n)], TabularPotential(3, (n,)),
+                                        gamma=0.99, observation_key="cell", value_update=0.1)
     env = TransformedEnv(FourRoomsEnv(n), shaping)
     td = env.reset()
-    check = transform_module._check_finite
+    check = transform_module.check_finite
 
     def rate() -> float:
         nonlocal td
@@ -50,9 +50,9 @@ def main() -> None:
     rates: dict[str, list[float]] = {"with": [], "without": []}
     for _ in range(args.repeats):
         for name in rates:
-            transform_module._check_finite = check if name == "with" else (lambda *a: None)
+            transform_module.check_finite = check if name == "with" else (lambda *a: None)
             rates[name].append(rate())
-    transform_module._check_finite = check
+    transform_module.check_finite = check
     with_, without = statistics.median(rates["with"]), statistics.median(rates["without"])
     print(f"{n} envs: {with_:.0f} steps/s with the check, {without:.0f} without, ratio {with_ / without:.3f}")
     reward, obs = torch.zeros(n, 1), torch.rand(n, 4)

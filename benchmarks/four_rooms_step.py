@@ -46,8 +46,8 @@ PATTERNS = list(load_patterns(str(files("torchrl_subgoal") / "data" / "four_room
 
 def shaping(n: int, write: bool) -> SubgoalPotentialTransform:
     return SubgoalPotentialTransform(
-        PATTERNS, TabularPotential(3, (n,)), gamma=0.99, observation_key="cell",
-        pattern_index=torch.arange(n) % len(PATTERNS), value_lr=0.25, write_transitions=write,
+        [PATTERNS[i % len(PATTERNS)] for i in range(n)], TabularPotential(3, (n,)), gamma=0.99,
+        observation_key="cell", value_update=0.25, transitions_key="smdp" if write else None,
     )
 
 

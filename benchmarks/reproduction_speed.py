@@ -86,7 +86,7 @@ def measure_engine(domain: str, batch_size: int | None = None, shaped: bool = Fa
             if not shaped:
                 return grid, agent, 300
             series = SubgoalSeries([State(25), State(51), State(77)])
-            shaping = SubgoalPotentialTransform(series, TabularPotential(4, (n,)), gamma=0.99, value_lr=0.25)
+            shaping = SubgoalPotentialTransform(series, TabularPotential(4, (n,)), gamma=0.99, value_update=0.25)
             return TransformedEnv(grid, shaping), agent, 300
         table = PinBallEnv(n, seed=1, max_steps=2000)
         spec = table.observation_spec["observation"]

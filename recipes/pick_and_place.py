@@ -187,7 +187,7 @@ def make_shaping(method_name: str, series: SubgoalSeries | None, config: Mapping
         return shaping, None
     shaping.potential = NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, config["ddpg"]["hidden"]))
     trainer = PotentialTrainer(shaping.transform(shaping.potential, gamma, None),
-                               SubgoalValueLoss(shaping.potential, gamma=gamma, reduction="mean"),
+                               SubgoalValueLoss(shaping.potential, reduction="mean").make_value_estimator(gamma=gamma),
                                torch.optim.Adam(shaping.potential.parameters(), lr=config["value_lr"]))
     return shaping, trainer
 

@@ -50,7 +50,7 @@ def test_sgd_step_is_the_papers_update() -> None:
         target = float(data["next", "reward"][b, 0]) + gamma**k * v_next
         expected[b, z] += lr * (target - float(before[b, z]))
 
-    loss = SubgoalValueLoss(v, gamma=gamma)
+    loss = SubgoalValueLoss(v).make_value_estimator(gamma=gamma)
     opt = torch.optim.SGD(v.parameters(), lr=lr)
     loss(data)["loss_value"].backward()
     opt.step()
@@ -71,7 +71,7 @@ def test_target_equals_torchrl_td0_estimator() -> None:
     with torch.no_grad():
         reference = estimator.value_estimate(data.clone())
     assert (data["steps_to_next_obs"] > 1).any() and not torch.allclose(reference, data["next", "reward"])
-    out = SubgoalValueLoss(v, gamma=0.9)(data)
+    out = SubgoalValueLoss(v).make_value_estimator(gamma=0.9)(data)
     value = v(data["subgoal_index"]).detach()
     assert torch.allclose(out["td_error"] + value, reference, atol=1e-6)
 
@@ -80,16 +80,16 @@ def test_mask_excludes_non_transitions_and_mean_reduction() -> None:
     v = TabularPotential(2, batch_shape=(2,))
     data = transitions(2, 2, seed=2)
     data["mask"] = torch.tensor([[True], [False]])
-    total = SubgoalValueLoss(v, gamma=0.9)(data)
+    total = SubgoalValueLoss(v).make_value_estimator(gamma=0.9)(data)
     assert total["td_error"][1, 0] == 0.0
-    mean = SubgoalValueLoss(v, gamma=0.9, reduction="mean")(data)
+    mean = SubgoalValueLoss(v, reduction="mean").make_value_estimator(gamma=0.9)(data)
     assert torch.isclose(mean["loss_value"], total["loss_value"])  # one transition: sum == mean
 
 
 def test_neural_potential_learns_a_constant_target() -> None:
     torch.manual_seed(0)
     v = NeuralPotential(torch.nn.Sequential(torch.nn.Linear(2, 16), torch.nn.Tanh(), torch.nn.Linear(16, 1)))
-    loss = SubgoalValueLoss(v, gamma=0.9, reduction="mean")
+    loss = SubgoalValueLoss(v, reduction="mean").make_value_estimator(gamma=0.9)
     opt = torch.optim.Adam(v.parameters(), lr=1e-2)
     n = 64
     data = TensorDict(
@@ -116,28 +116,28 @@ def test_configurable_keys_and_reduction_none() -> None:
     data = transitions(6, 3, seed=4)
     renamed = data.rename_key_("mask", "real")
     renamed.rename_key_(("next", "reward"), ("next", "r_h"))
-    loss = SubgoalValueLoss(v, gamma=0.9, reduction="none")
+    loss = SubgoalValueLoss(v, reduction="none").make_value_estimator(gamma=0.9)
     loss.set_keys(mask="real", reward="r_h")
     out = loss(renamed)
     assert out["loss_value"].shape == (6, 1)
     assert torch.equal(out["loss_value"] == 0, ~renamed["real"] | (out["td_error"] == 0))
     with pytest.raises(ValueError, match="reduction"):
-        SubgoalValueLoss(v, gamma=0.9, reduction="max")  # type: ignore[arg-type]
+        SubgoalValueLoss(v, reduction="max")  # type: ignore[arg-type]
 
 
 def test_misuse_gives_clear_errors() -> None:
     v = TabularPotential(3)
     collected = TensorDict({"observation": torch.zeros(4, 1), "next": {"reward": torch.zeros(4, 1)}}, [4])
     with pytest.raises(ValueError, match=r"SubgoalValueLoss reads SMDP transitions .*missing \['subgoal_index'"):
-        SubgoalValueLoss(v, gamma=0.9)(collected)
+        SubgoalValueLoss(v).make_value_estimator(gamma=0.9)(collected)
     with pytest.raises(TypeError, match="TensorDict module"):
-        SubgoalValueLoss(torch.nn.Linear(2, 1), gamma=0.9)  # type: ignore[arg-type]
+        SubgoalValueLoss(torch.nn.Linear(2, 1))  # type: ignore[arg-type]
     wide = NeuralPotential(torch.nn.Linear(2, 3))
     data = TensorDict({"subgoal_anchor": torch.zeros(4, 2), "steps_to_next_obs": torch.ones(4, 1, dtype=torch.long),
                        "next": {"subgoal_anchor": torch.zeros(4, 2), "reward": torch.zeros(4, 1),
                                 "terminated": torch.zeros(4, 1, dtype=torch.bool)}}, [4])
     with pytest.raises(ValueError, match=r"returned values of shape \(4, 3\)"):
-        SubgoalValueLoss(wide, gamma=0.9)(data)
+        SubgoalValueLoss(wide).make_value_estimator(gamma=0.9)(data)
 
 
 def test_any_tensordict_module_with_a_make_value_estimator_hook() -> None:
@@ -148,7 +148,7 @@ def test_any_tensordict_module_with_a_make_value_estimator_hook() -> None:
     data.rename_key_("subgoal_index", "z")
     data.rename_key_(("next", "subgoal_index"), ("next", "z"))
     data["z"], data["next", "z"] = data["z"].squeeze(-1), data["next", "z"].squeeze(-1)
-    loss = SubgoalValueLoss(net, gamma=0.8)
+    loss = SubgoalValueLoss(net).make_value_estimator(gamma=0.8)
     assert loss.tensor_keys.value == "v"
     out = loss(data)
     out["loss_value"].backward()
@@ -157,3 +157,49 @@ def test_any_tensordict_module_with_a_make_value_estimator_hook() -> None:
     assert float(loss.value_estimator.gamma) == 0.5
     with pytest.raises(NotImplementedError, match="TD"):
         loss.make_value_estimator(ValueEstimators.GAE)
+
+
+def test_gamma_goes_through_make_value_estimator() -> None:
+    v = TabularPotential(3)
+    with pytest.raises(TypeError, match=r"make_value_estimator: SubgoalValueLoss\(potential\)\.make_value_estimator\(gamma=0\.9\)"):
+        SubgoalValueLoss(v, gamma=0.9)
+    loss = SubgoalValueLoss(v)  # TorchRL's default discount until one is made
+    assert loss.gamma == pytest.approx(0.99)
+    assert loss.make_value_estimator(gamma=0.5) is loss and loss.gamma == 0.5
+    with pytest.raises(ValueError, match=r"gamma must lie in \[0, 1\], got 1.5"):
+        loss.make_value_estimator(gamma=1.5)
+
+
+def test_a_masked_row_lets_no_nan_through() -> None:
+    """A NaN in a masked row (a padding transition) reaches neither the loss nor the potential's gradient."""
+    v = TabularPotential(3, batch_shape=(4,))
+    data = transitions(4, 3, seed=6)
+    data["mask"] = torch.tensor([[True], [False], [True], [False]])
+    data["next", "reward"][1] = float("nan")
+    data["next", "reward"][3] = float("inf")
+    for reduction in ("sum", "mean", "none"):
+        v.zero_grad()
+        out = SubgoalValueLoss(v, reduction=reduction).make_value_estimator(gamma=0.9)(data)  # type: ignore[arg-type]
+        assert torch.isfinite(out["loss_value"]).all() and torch.isfinite(out["td_error"]).all(), reduction
+        out["loss_value"].sum().backward()
+        assert v.table.grad is not None and torch.isfinite(v.table.grad).all(), reduction
+        assert (v.table.grad[[1, 3]] == 0).all() and (v.table.grad[[0, 2]] != 0).any(), reduction
+
+
+def test_set_keys_value_takes_effect() -> None:
+    """forward reads the value entry named by tensor_keys.value, not the potential's last output."""
+    from tensordict.nn import TensorDictModule
+
+    both = TensorDictModule(lambda z: (z.float(), 10 * z.float()), in_keys=["subgoal_index"], out_keys=["small", "big"])
+    data = transitions(5, 3, seed=7)
+    data["mask"] = torch.ones(5, 1, dtype=torch.bool)
+    loss = SubgoalValueLoss(both).make_value_estimator(gamma=0.9)
+    assert loss.tensor_keys.value == "big"
+    big = loss(data)["td_error"]
+    loss.set_keys(value="small")
+    small = loss(data)["td_error"]
+    z, z2 = data["subgoal_index"].float(), data["next", "subgoal_index"].float()
+    target = data["next", "reward"] + 0.9 ** data["steps_to_next_obs"] * z2 * ~data["next", "terminated"]
+    assert torch.allclose(small, target - z, atol=1e-5)
+    assert torch.allclose(big, data["next", "reward"] + 0.9 ** data["steps_to_next_obs"] * 10 * z2
+                          * ~data["next", "terminated"] - 10 * z, atol=1e-4)

@@ -28,6 +28,7 @@ from torchrl_subgoal.potentials import ACHIEVED, INDEX
 from torchrl_subgoal.subgoals import Predicate, StateAggregation, SubgoalTables
 from torchrl_subgoal.subgoals.tables import _in_regions
 from torchrl_subgoal.transform import RETURN, STEPS
+from torchrl_subgoal.transform.compiled import StepInputs
 
 D = 3  # observation entries
 PROPERTY = settings(max_examples=150, deadline=None, derandomize=True, database=None,
@@ -117,15 +118,24 @@ def test_first_region_agrees_with_torch(case: tuple) -> None:
     inside = _in_regions(flat, stack["lo"], stack["hi"], stack["centre"], stack["weight"], radius2, True)
     first = torch.where(inside.any(-1), inside.long().argmax(-1), z.reshape(-1))
     assert torch.equal(agg.advance(z, obs).reshape(-1), first)
+    assert torch.equal(agg.advance_eager(z, obs).reshape(-1), first)
 
 
 rewards = st.sampled_from([0.0, 1.0, -1.0, 0.5, 1e-3, math.nan, math.inf, -math.inf]) | st.floats(-10, 10)
 
 
+def one_step(t: SubgoalPotentialTransform, current: dict[str, torch.Tensor], obs: torch.Tensor, reward: torch.Tensor,
+             done: torch.Tensor, terminated: torch.Tensor, shape: torch.Size) -> dict:
+    """One step of ``t`` (set up for a batch of ``shape``, learning online) from the entries ``current``."""
+    n = shape.numel()
+    setup = t._batch(shape, torch.arange(n).reshape(*shape, 1), n, obs, online=True)
+    return t._advance(setup, current, StepInputs(obs, reward, reward, done, terminated, None), learn=True)
+
+
 @PROPERTY
 @given(batch(), st.data())
 def test_shaping_paths_agree(case: tuple, data: st.DataObject) -> None:
-    """One transform step through the fused kernel and through the eager torch code:
+    """One transform step through the compiled kernels and through torch operations only:
     the same abstract states, accumulators, shaped rewards and trained tables, or the
     same error for a NaN/inf reward or a NaN observation."""
     series, shape, index, z, obs = case
@@ -139,20 +149,15 @@ def test_shaping_paths_agree(case: tuple, data: st.DataObject) -> None:
     states = max(len(s) for s in series) + 1
     table = torch.randn(*shape, states, generator=torch.Generator().manual_seed(data.draw(st.integers(0, 99))))
     outcomes = []
-    for fused in (True, False):
+    for backend in ("compiled", "torch"):
         potential = TabularPotential(states, batch_shape=shape)
         with torch.no_grad():
             potential.table.copy_(table)
-        t = SubgoalPotentialTransform(series, potential, gamma=0.9, pattern_index=index, value_lr=0.5,
-                                      write_transitions=True)
-        if not fused:
-            t._fused_potential = lambda setup, online: None  # type: ignore[method-assign]
-        tables = SubgoalTables(series, index, D)
-        if not fused:
-            tables.advance = tables.advance_eager  # type: ignore[method-assign]
+        t = SubgoalPotentialTransform([series[int(i)] for i in index.reshape(-1)], potential, gamma=0.9,
+                                      value_update=0.5, transitions_key="smdp", backend=backend)  # type: ignore[arg-type]
         current = {INDEX: z.clone(), RETURN: r_h.clone(), STEPS: k.clone(), ACHIEVED: torch.zeros_like(done)}
         try:
-            out = t.shape(tables, current, obs, r.clone(), done, terminated, shape)
+            out = one_step(t, current, obs, r.clone(), done, terminated, shape)
         except ValueError as exc:
             outcomes.append(("error", str(exc), potential.table.detach().clone()))
             continue
@@ -168,7 +173,7 @@ def test_shaping_paths_agree(case: tuple, data: st.DataObject) -> None:
         return
     assert torch.equal(out_f[INDEX], out_e[INDEX])
     assert torch.equal(out_f[STEPS], out_e[STEPS])
-    assert torch.equal(out_f["smdp"]["mask"], out_e["smdp"]["mask"])
+    assert torch.equal(out_f["transition"]["mask"], out_e["transition"]["mask"])
     for key in (RETURN, "reward"):
         torch.testing.assert_close(out_f[key], out_e[key], rtol=1e-5, atol=1e-5)
     torch.testing.assert_close(table_f, table_e, rtol=1e-5, atol=1e-5)
@@ -184,17 +189,15 @@ def test_nan_is_an_error_on_both_paths(eager: bool, reward: float, obs: float, m
     """A NaN reward would make the table NaN for good; the transform refuses it."""
     series = [SubgoalSeries([Circle((0.5, 0.5), 0.1)])]
     potential = TabularPotential(2, batch_shape=(2,))
-    t = SubgoalPotentialTransform(series, potential, gamma=0.9, value_lr=0.5)
-    if eager:
-        t._fused_potential = lambda setup, online: None  # type: ignore[method-assign]
-    tables = SubgoalTables(series, torch.zeros(2, dtype=torch.long), 2)
+    t = SubgoalPotentialTransform(series, potential, gamma=0.9, value_update=0.5,
+                                  backend="torch" if eager else "compiled")
     observation = torch.tensor([[0.5, 0.5], [0.5, obs]])
     rewards = torch.tensor([[0.0], [reward]])
     current = {INDEX: torch.zeros(2, 1, dtype=torch.long), RETURN: torch.zeros(2, 1),
                STEPS: torch.zeros(2, 1, dtype=torch.long)}
     false = torch.zeros(2, 1, dtype=torch.bool)
     with pytest.raises(ValueError, match=message):
-        t.shape(tables, current, observation, rewards, false, false, torch.Size([2]))
+        one_step(t, current, observation, rewards, false, false, torch.Size([2]))
     assert torch.equal(potential.table.detach(), torch.zeros(2, 2))
 
 

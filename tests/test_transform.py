@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import pytest
 import torch
 from tensordict import TensorDict
@@ -31,14 +29,10 @@ from .line_env import LineEnv, make_four_rooms
 HALLWAYS = SubgoalSeries([Cell(3, 6), Cell(7, 9)], name="hallways")
 
 
-@pytest.fixture(params=["fused", "eager"])
-def path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
-    """Run a test through the fused CPU kernels and through the eager torch code."""
-    if request.param == "eager":
-        monkeypatch.setattr(SubgoalPotentialTransform, "_fused_potential", lambda self, setup, online: None)
-        monkeypatch.setattr("torchrl_subgoal.subgoals.SubgoalTables.advance",
-                            lambda self, z, obs, td=None: self.advance_eager(z, obs, td))
-    yield request.param
+@pytest.fixture(params=["compiled", "torch"])
+def backend(request: pytest.FixtureRequest) -> str:
+    """Run a test through the compiled kernels and through torch operations only."""
+    return request.param
 
 
 def step(env: TransformedEnv, td: TensorDict, action: list[int]) -> tuple[TensorDict, TensorDict]:
@@ -50,7 +44,7 @@ def step(env: TransformedEnv, td: TensorDict, action: list[int]) -> tuple[Tensor
 
 
 @pytest.mark.parametrize("start", ["value", "nonpositive", "zero"])
-def test_smdp_arithmetic_by_hand(path: str, start: str) -> None:
+def test_smdp_arithmetic_by_hand(backend: str, start: str) -> None:
     """Line 0..4, subgoals at 1 then 3, reward 1 per step and 10 at the goal.
 
     γ = γ_v = 0.9, α_v = 0.5, V = [0.1, 0.2, 0.3] before the episode. With
@@ -61,8 +55,8 @@ def test_smdp_arithmetic_by_hand(path: str, start: str) -> None:
     with torch.no_grad():
         v.table.copy_(torch.tensor([0.1, 0.2, 0.3]))
     t = SubgoalPotentialTransform(
-        SubgoalSeries([State(1), State(3)]), v, gamma=0.9, value_lr=0.5, write_transitions=True,
-        start_potential=start,  # type: ignore[arg-type]
+        SubgoalSeries([State(1), State(3)]), v, gamma=0.9, value_update=0.5, transitions_key="smdp",
+        start_potential=start, backend=backend,  # type: ignore[arg-type]
     )
     env = TransformedEnv(LineEnv(1), t)
     td = env.reset()
@@ -89,8 +83,8 @@ def test_smdp_arithmetic_by_hand(path: str, start: str) -> None:
     assert int(td["subgoal_index"]) == 0 and int(td["subgoal_steps"]) == 0
 
 
-def test_accumulators_reset_on_emission(path: str) -> None:
-    t = SubgoalPotentialTransform(SubgoalSeries([State(3)]), TabularPotential(2), gamma=0.5, write_transitions=True)
+def test_accumulators_reset_on_emission(backend: str) -> None:
+    t = SubgoalPotentialTransform(SubgoalSeries([State(3)]), TabularPotential(2), gamma=0.5, transitions_key="smdp", backend=backend)
     env = TransformedEnv(LineEnv(1, length=6), t)
     td = env.reset()
     rewards = []
@@ -104,7 +98,7 @@ def test_accumulators_reset_on_emission(path: str) -> None:
 
 
 def test_truncation_bootstraps_and_termination_does_not() -> None:
-    t = SubgoalPotentialTransform(SubgoalSeries([State(2)]), TabularPotential(2), gamma=0.9, write_transitions=True)
+    t = SubgoalPotentialTransform(SubgoalSeries([State(2)]), TabularPotential(2), gamma=0.9, transitions_key="smdp")
     env = TransformedEnv(LineEnv(2, length=5), StepCounter(max_steps=2))
     env.append_transform(t)
     td = env.reset()
@@ -121,15 +115,15 @@ def test_truncation_bootstraps_and_termination_does_not() -> None:
 
 @pytest.mark.parametrize("start", ["value", "zero", "nonpositive"])
 @pytest.mark.parametrize("zero_terminal", [True, False])
-def test_shaped_reward_is_r_plus_gamma_v_next_minus_v(path: str, zero_terminal: bool, start: str) -> None:
+def test_shaped_reward_is_r_plus_gamma_v_next_minus_v(backend: str, zero_terminal: bool, start: str) -> None:
     n = 8
     patterns = [HALLWAYS, SubgoalSeries([Cell(6, 2), Cell(10, 6)]), SubgoalSeries([Cell(1, 2)])]
     v = TabularPotential(3, batch_shape=(n,))
     with torch.no_grad():
         v.table.copy_(torch.randn(n, 3))
     t = SubgoalPotentialTransform(
-        patterns, v, gamma=0.95, observation_key="cell", pattern_index=torch.arange(n) % 3,
-        zero_terminal_potential=zero_terminal, start_potential=start,  # type: ignore[arg-type]
+        [patterns[i % 3] for i in range(n)], v, gamma=0.95, observation_key="cell",
+        zero_terminal_potential=zero_terminal, start_potential=start, backend=backend,  # type: ignore[arg-type]
     )
     env = TransformedEnv(FourRoomsEnv(n, max_steps=40), t)
     torch.manual_seed(0)
@@ -150,8 +144,8 @@ def test_shaped_reward_is_r_plus_gamma_v_next_minus_v(path: str, zero_terminal: 
     assert torch.equal(t.transitions(data)["next", "subgoal_index"], z_next[emitted].unsqueeze(-1))
 
 
-def test_naive_potential_pulse(path: str) -> None:
-    t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), NaivePotential(10.0), gamma=0.9)
+def test_naive_potential_pulse(backend: str) -> None:
+    t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), NaivePotential(10.0), gamma=0.9, backend=backend)
     env = TransformedEnv(LineEnv(1, length=4, step_reward=0.0, goal_reward=0.0), t)
     td = env.reset()
     shaped = []
@@ -161,33 +155,39 @@ def test_naive_potential_pulse(path: str) -> None:
     assert shaped == pytest.approx([9.0, -10.0, 0.0])  # γη on achieving, then −η, then nothing
 
 
-def test_fused_and_eager_paths_agree(monkeypatch: pytest.MonkeyPatch) -> None:
-    def run(eager: bool) -> tuple[TensorDict, torch.Tensor]:
-        with monkeypatch.context() as m:
-            if eager:
-                m.setattr(SubgoalPotentialTransform, "_fused_potential", lambda self, setup, online: None)
-            n = 16
-            v = TabularPotential(3, batch_shape=(n,))
-            with torch.no_grad():
-                v.table.copy_(torch.randn(n, 3, generator=torch.Generator().manual_seed(3)))
-            start = v.table.detach().clone()
-            t = SubgoalPotentialTransform(
-                [HALLWAYS, SubgoalSeries([Cell(6, 2), Cell(10, 6)])], v, gamma=0.99,
-                observation_key="cell", pattern_index=torch.arange(n) % 2, value_lr=0.3,
-                write_transitions=True,
-            )
-            env = TransformedEnv(FourRoomsEnv(n, max_steps=60), t)
-            torch.manual_seed(1)
-            data = env.rollout(300, break_when_any_done=False)
-            assert not torch.allclose(v.table.detach(), start)  # the potential was trained
-            return data, v.table.detach().clone()
+def test_compiled_and_torch_backends_agree() -> None:
+    def run(backend: str) -> tuple[TensorDict, torch.Tensor]:
+        n = 16
+        v = TabularPotential(3, batch_shape=(n,))
+        with torch.no_grad():
+            v.table.copy_(torch.randn(n, 3, generator=torch.Generator().manual_seed(3)))
+        start = v.table.detach().clone()
+        patterns = [HALLWAYS, SubgoalSeries([Cell(6, 2), Cell(10, 6)])]
+        t = SubgoalPotentialTransform([patterns[i % 2] for i in range(n)], v, gamma=0.99, observation_key="cell",
+                                      value_update=0.3, transitions_key="smdp", backend=backend)  # type: ignore[arg-type]
+        env = TransformedEnv(FourRoomsEnv(n, max_steps=60), t)
+        torch.manual_seed(1)
+        data = env.rollout(300, break_when_any_done=False)
+        assert not torch.allclose(v.table.detach(), start)  # the potential was trained
+        assert t._online is not None and t._online.compiled == (backend == "compiled")
+        return data, v.table.detach().clone()
 
-    fused, v_fused = run(False)
-    eager, v_eager = run(True)
-    assert torch.allclose(v_fused, v_eager, atol=1e-5)
+    compiled, v_compiled = run("compiled")
+    eager, v_eager = run("torch")
+    assert torch.allclose(v_compiled, v_eager, atol=1e-5)
     for key in [("next", "reward"), ("next", "subgoal_index"), ("next", "subgoal_return"),
                 ("next", "subgoal_steps"), ("next", "smdp", "mask"), ("next", "smdp", "next", "reward")]:
-        assert torch.allclose(fused[key].float(), eager[key].float(), atol=1e-5), key
+        assert torch.allclose(compiled[key].float(), eager[key].float(), atol=1e-5), key
+
+
+def test_compiled_backend_refuses_what_it_cannot_shape_in_one_line() -> None:
+    t = SubgoalPotentialTransform(HALLWAYS, NeuralPotential(torch.nn.Linear(2, 1)), gamma=0.9,
+                                  observation_key="cell", backend="compiled")
+    with pytest.raises(TypeError, match=r"backend='compiled'\): it shapes with a TabularPotential or a "
+                                         r"NaivePotential, not NeuralPotential; use backend='torch' or 'auto'"):
+        TransformedEnv(FourRoomsEnv(2), t).reset()
+    with pytest.raises(ValueError, match="backend must be 'auto', 'compiled' or 'torch', got 'numba'"):
+        SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), gamma=0.9, backend="numba")  # type: ignore[arg-type]
 
 
 # ----------------------------------------------------------------- env kinds and specs
@@ -195,7 +195,7 @@ def test_fused_and_eager_paths_agree(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def transform_for(batch: tuple[int, ...], **kwargs) -> SubgoalPotentialTransform:
     v = TabularPotential(3, batch_shape=batch)
-    return SubgoalPotentialTransform(HALLWAYS, v, gamma=0.99, observation_key="cell", value_lr=0.25, **kwargs)
+    return SubgoalPotentialTransform(HALLWAYS, v, gamma=0.99, observation_key="cell", value_update=0.25, **kwargs)
 
 
 def test_single_unbatched_env() -> None:
@@ -207,7 +207,7 @@ def test_single_unbatched_env() -> None:
 
 @pytest.mark.parametrize("write", [True, False])
 def test_batched_env_specs(write: bool) -> None:
-    env = TransformedEnv(FourRoomsEnv(5), transform_for((5,), write_transitions=write))
+    env = TransformedEnv(FourRoomsEnv(5), transform_for((5,), transitions_key="smdp" if write else None))
     check_env_specs(env)
     assert ("smdp" in list(env.observation_spec.keys())) == write
 
@@ -236,8 +236,8 @@ def test_in_a_compose_with_other_transforms() -> None:
     assert torch.allclose(data["next", "episode_reward"][:, 0], data["next", "reward"][:, 0])
 
 
-def test_partial_resets_keep_other_envs_state(path: str) -> None:
-    t = SubgoalPotentialTransform(SubgoalSeries([State(1), State(2)]), TabularPotential(3, (3,)), gamma=0.9)
+def test_partial_resets_keep_other_envs_state(backend: str) -> None:
+    t = SubgoalPotentialTransform(SubgoalSeries([State(1), State(2)]), TabularPotential(3, (3,)), gamma=0.9, backend=backend)
     env = TransformedEnv(LineEnv(3, length=3), t)
     td = env.reset()
     for actions in ([1, 1, 0], [1, 1, 1]):
@@ -258,7 +258,7 @@ def test_on_a_gymnasium_env_that_is_not_ours() -> None:
 
     # CartPole: a subgoal on the cart position (observation entry 0), then on the pole angle
     series = SubgoalSeries([Box((0.02,), (0.01,), (0,)), Box((0.0,), (0.02,), (2,))])
-    t = SubgoalPotentialTransform(series, TabularPotential(3), gamma=0.99, value_lr=0.1)
+    t = SubgoalPotentialTransform(series, TabularPotential(3), gamma=0.99, value_update=0.1)
     env = TransformedEnv(GymEnv("CartPole-v1"), t)
     check_env_specs(env)
     env.set_seed(0)
@@ -282,7 +282,7 @@ def test_one_hot_observation_of_frozen_lake() -> None:
 
 def test_neural_potential_keeps_the_anchor() -> None:
     net = torch.nn.Linear(2, 1)
-    t = SubgoalPotentialTransform(HALLWAYS, NeuralPotential(net), gamma=0.99, observation_key="cell", value_lr=0.01)
+    t = SubgoalPotentialTransform(HALLWAYS, NeuralPotential(net), gamma=0.99, observation_key="cell", value_update=0.01)
     env = TransformedEnv(FourRoomsEnv(4), t)
     check_env_specs(env)
     data = env.rollout(30)
@@ -296,7 +296,7 @@ def test_neural_potential_keeps_the_anchor() -> None:
 
 def test_aggregation_sarsa_rs() -> None:
     agg = room_aggregation()
-    t = SubgoalPotentialTransform(agg, TabularPotential(4, (2,)), gamma=0.99, value_lr=0.25)
+    t = SubgoalPotentialTransform(agg, TabularPotential(4, (2,)), gamma=0.99, value_update=0.25)
     env = TransformedEnv(FourRoomsEnv(2), t)
     check_env_specs(env)
     data = env.rollout(40)
@@ -320,7 +320,7 @@ def test_offline_forward_matches_online() -> None:
 
 
 @pytest.mark.parametrize("start", ["value", "zero", "nonpositive"])
-def test_start_potential_under_a_step_cost(path: str, start: str) -> None:
+def test_start_potential_under_a_step_cost(backend: str, start: str) -> None:
     """V < 0 (a step cost): "nonpositive" shapes as "value" does; "zero" shifts Φ by −V(0).
 
     Line 0..4, subgoals at 1 then 3, −1 per step and 0 at the goal, γ = 0.9,
@@ -330,7 +330,7 @@ def test_start_potential_under_a_step_cost(path: str, start: str) -> None:
     with torch.no_grad():
         v.table.copy_(torch.tensor([-3.0, -2.0, -1.0]))
     t = SubgoalPotentialTransform(SubgoalSeries([State(1), State(3)]), v, gamma=0.9,
-                                  start_potential=start)  # type: ignore[arg-type]
+                                  start_potential=start, backend=backend)  # type: ignore[arg-type]
     env = TransformedEnv(LineEnv(1, step_reward=-1.0, goal_reward=0.0), t)
     td = env.reset()
     raw = [-1 + 0.9 * -2 + 3, -1 + 0.9 * -2 + 2, -1 + 0.9 * -1 + 2, 0 - 0 + 1]  # z: 0→1, 1→1, 1→2, 2→goal
@@ -364,7 +364,7 @@ def test_neural_start_potential_reads_the_reset_observation(start: str) -> None:
 
 
 @pytest.mark.parametrize("start", ["zero", "nonpositive"])
-def test_start_potential_of_an_aggregation_is_that_of_the_reset_state(path: str, start: str) -> None:
+def test_start_potential_of_an_aggregation_is_that_of_the_reset_state(backend: str, start: str) -> None:
     """Line 0..4 with g(0) = 1 and g(s) = 0 elsewhere: episodes start in z = 1, whose potential sets the level."""
     from torchrl_subgoal import StateAggregation
 
@@ -372,7 +372,7 @@ def test_start_potential_of_an_aggregation_is_that_of_the_reset_state(path: str,
     with torch.no_grad():
         v.table.copy_(torch.tensor([[-1.0, 2.0], [-1.0, -3.0]]))
     starts_in_1 = StateAggregation(torch.tensor([1, 0, 0, 0, 0]), num_states=2)
-    t = SubgoalPotentialTransform(starts_in_1, v, gamma=0.9, start_potential=start)  # type: ignore[arg-type]
+    t = SubgoalPotentialTransform(starts_in_1, v, gamma=0.9, start_potential=start, backend=backend)  # type: ignore[arg-type]
     env = TransformedEnv(LineEnv(2, step_reward=0.0), t)
     check_env_specs(env)
     td = env.reset()
@@ -383,7 +383,7 @@ def test_start_potential_of_an_aggregation_is_that_of_the_reset_state(path: str,
     assert torch.allclose(data["next", "reward"].squeeze(-1), expected)
     assert data["next", "subgoal_start"].tolist() == [[1], [1]]  # kept through the episode
     with pytest.raises(ValueError, match="start_potential must be one of"):
-        SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), gamma=0.9, start_potential="max")  # type: ignore[arg-type]
+        SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), gamma=0.9, start_potential="max", backend=backend)  # type: ignore[arg-type]
 
 
 # ----------------------------------------------------------------- bad input
@@ -411,11 +411,11 @@ def test_potential_batch_mismatch() -> None:
 
 def test_wrong_number_of_patterns() -> None:
     t = SubgoalPotentialTransform([HALLWAYS, HALLWAYS], TabularPotential(3), gamma=0.9, observation_key="cell")
-    with pytest.raises(ValueError, match="2 subgoal series for a batch of 3 envs"):
+    with pytest.raises(ValueError, match="2 subgoal series for a batch of 3 envs: give one series for every env, or one per env"):
         TransformedEnv(FourRoomsEnv(3), t).reset()
 
 
-@pytest.mark.parametrize("kwargs", [{"gamma": 1.5}, {"gamma": 0.9, "value_lr": -1.0}, {"gamma": 0.9, "value_gamma": 2.0}])
+@pytest.mark.parametrize("kwargs", [{"gamma": 1.5}, {"gamma": 0.9, "value_update": -1.0}])
 def test_bad_hyper_parameters(kwargs: dict) -> None:
     with pytest.raises(ValueError):
         SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), **kwargs)
@@ -439,9 +439,9 @@ def assert_forward_matches(t: SubgoalPotentialTransform, data: TensorDict) -> No
         assert torch.equal(offline["next", key], data["next", key]), key
 
 
-def test_forward_equals_online_on_categorical_observations(path: str) -> None:
+def test_forward_equals_online_on_categorical_observations(backend: str) -> None:
     t = SubgoalPotentialTransform(SubgoalSeries([State(1), State(3)]), fixed_table(TabularPotential(3, (3,))),
-                                  gamma=0.9)
+                                  gamma=0.9, backend=backend)
     env = TransformedEnv(LineEnv(3, length=4), t)
     torch.manual_seed(0)
     data = env.rollout(60, break_when_any_done=False)
@@ -471,11 +471,11 @@ def test_forward_equals_online_on_one_hot_observations() -> None:
     assert_forward_matches(alone, data)
 
 
-def test_forward_equals_online_on_continuous_observations(path: str) -> None:
+def test_forward_equals_online_on_continuous_observations(backend: str) -> None:
     from torchrl_subgoal.envs import PinBallEnv
 
     series = SubgoalSeries([Circle((0.2, 0.85), 0.06), Circle((0.3, 0.8), 0.06)])
-    t = SubgoalPotentialTransform(series, fixed_table(TabularPotential(3, (4,))), gamma=0.99)
+    t = SubgoalPotentialTransform(series, fixed_table(TabularPotential(3, (4,))), gamma=0.99, backend=backend)
     env = TransformedEnv(PinBallEnv(4, max_steps=40, seed=0), t)
     torch.manual_seed(0)
     data = env.rollout(120, break_when_any_done=False)
@@ -484,13 +484,13 @@ def test_forward_equals_online_on_continuous_observations(path: str) -> None:
 
 
 @pytest.mark.parametrize("batch", [64, 1])
-def test_forward_on_a_replay_sample_of_another_batch_shape(path: str, batch: int) -> None:
+def test_forward_on_a_replay_sample_of_another_batch_shape(backend: str, batch: int) -> None:
     """Regression: a [64, T] (or [1, T]) sample after a 2-env rollout once crashed the interpreter."""
     from torchrl.data import LazyTensorStorage, ReplayBuffer
 
     v = fixed_table(TabularPotential(3, (2,)))
     patterns = [HALLWAYS, SubgoalSeries([Cell(6, 2), Cell(10, 6)])]
-    t = SubgoalPotentialTransform(patterns, v, gamma=0.95, observation_key="cell")
+    t = SubgoalPotentialTransform(patterns, v, gamma=0.95, observation_key="cell", backend=backend)
     env = TransformedEnv(FourRoomsEnv(2, max_steps=80), t)
     torch.manual_seed(3)
     data = env.rollout(200, break_when_any_done=False)
@@ -507,10 +507,10 @@ def test_forward_on_a_replay_sample_of_another_batch_shape(path: str, batch: int
     assert torch.equal(v.table.detach(), before)
 
 
-def test_forward_never_changes_parameters(path: str) -> None:
+def test_forward_never_changes_parameters(backend: str) -> None:
     v = fixed_table(TabularPotential(3, (4,)))
     start = v.table.detach().clone()
-    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.99, observation_key="cell", value_lr=0.5)
+    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.99, observation_key="cell", value_update=0.5, backend=backend)
     env = TransformedEnv(FourRoomsEnv(4, max_steps=50), t)
     data = env.rollout(150, break_when_any_done=False)
     assert not torch.equal(v.table.detach(), start)  # the online pass trained it
@@ -540,9 +540,9 @@ def test_kernel_boundaries_check_shapes() -> None:
         tables.advance(torch.zeros(4, 1, dtype=torch.long), torch.zeros(4, 1))
 
 
-def test_transitions_rebuilt_equal_the_written_ones(path: str) -> None:
+def test_transitions_rebuilt_equal_the_written_ones(backend: str) -> None:
     v = fixed_table(TabularPotential(3, (6,)))
-    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.97, observation_key="cell", write_transitions=True)
+    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.97, observation_key="cell", transitions_key="smdp", backend=backend)
     data = TransformedEnv(FourRoomsEnv(6, max_steps=60), t).rollout(200, break_when_any_done=False)
     written = data["next", "smdp"].reshape(-1)
     written = written[written["mask"].reshape(-1)]
@@ -557,13 +557,13 @@ def test_transitions_rebuilt_equal_the_written_ones(path: str) -> None:
 # ----------------------------------------------------------------- TorchRL pipelines
 
 
-def test_two_transforms_on_one_env(path: str) -> None:
+def test_two_transforms_on_one_env(backend: str) -> None:
     halves = StateAggregation(torch.tensor([0, 0, 1, 1, 2]), num_states=3)
     # Φ = V (start_potential="value") keeps the expected rewards below a plain table look-up
     first = SubgoalPotentialTransform(SubgoalSeries([State(1), State(3)]), fixed_table(TabularPotential(3), 1),
-                                      gamma=0.9, start_potential="value")
+                                      gamma=0.9, start_potential="value", backend=backend)
     second_potential = fixed_table(TabularPotential(3, index_key="half_index"), 2)
-    second = SubgoalPotentialTransform(halves, second_potential, gamma=0.9, prefix="half", start_potential="value")
+    second = SubgoalPotentialTransform(halves, second_potential, gamma=0.9, prefix="half", start_potential="value", backend=backend)
     env = TransformedEnv(LineEnv(3, length=4), Compose(first, second))
     check_env_specs(env)
     torch.manual_seed(0)
@@ -620,7 +620,7 @@ def test_arbitrary_tensordict_module_as_the_potential() -> None:
                             out_keys=["subgoal_value"])
     potential = TensorDictSequential(embed, head)
     before = [p.detach().clone() for p in potential.parameters()]
-    t = SubgoalPotentialTransform(HALLWAYS, potential, gamma=0.9, observation_key="cell", value_lr=0.01)
+    t = SubgoalPotentialTransform(HALLWAYS, potential, gamma=0.9, observation_key="cell", value_update=0.01)
     env = TransformedEnv(FourRoomsEnv(4, max_steps=40), t)
     check_env_specs(env)
     data = env.rollout(100, break_when_any_done=False)
@@ -714,10 +714,10 @@ def test_potential_value_is_reused_only_while_inputs_and_parameters_are_unchange
 def test_value_cache_sees_one_changed_entry_of_a_large_parameter(dtype: torch.dtype) -> None:
     """Large CPU tensors are compared through numpy (others by torch): one changed entry of 8,192, a NaN
     (equal to nothing) and a negative zero (equal to zero) are seen as by ``torch.equal``."""
-    from torchrl_subgoal.transform import _ValueCache
+    from torchrl_subgoal.transform.cache import ValueCache
 
     net = NeuralPotential(torch.nn.Linear(64, 128).to(dtype))
-    cache = _ValueCache()
+    cache = ValueCache()
     cache.check(net)
     inputs = {"x": torch.zeros(2, 1)}
     cache.put("z", inputs, torch.ones(2, 1))

@@ -7,7 +7,7 @@ shaping reward for any TorchRL environment.
 """
 
 from torchrl_subgoal import domains  # noqa: F401  (the registry: subgoal files that name a domain are checked)
-from torchrl_subgoal.loss import SubgoalValueLoss
+from torchrl_subgoal.loss import SubgoalValueLoss, ValueUpdate
 from torchrl_subgoal.potentials import NaivePotential, NeuralPotential, Potential, TabularPotential
 from torchrl_subgoal.subgoals import (
     Box,
@@ -41,6 +41,7 @@ __all__ = [
     "SubgoalSeries",
     "SubgoalValueLoss",
     "TabularPotential",
+    "ValueUpdate",
     "__version__",
     "load_patterns",
     "save_patterns",

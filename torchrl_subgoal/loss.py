@@ -1,4 +1,5 @@
-"""SubgoalValueLoss: trains a potential from the SMDP transitions the transform writes."""
+"""SubgoalValueLoss: trains a potential from the SMDP transitions the transform closes; ValueUpdate: the
+transform's online update with it."""
 
 from __future__ import annotations
 
@@ -10,12 +11,12 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from tensordict.utils import NestedKey
 from torchrl.objectives import LossModule
-from torchrl.objectives.utils import ValueEstimators
+from torchrl.objectives.utils import ValueEstimators, default_value_kwargs
 from torchrl.objectives.value import TD0Estimator, ValueEstimatorBase
 
 from torchrl_subgoal.potentials import check_value
 
-__all__ = ["SubgoalValueLoss"]
+__all__ = ["SubgoalValueLoss", "ValueUpdate"]
 
 Reduction = Literal["sum", "mean", "none"]
 
@@ -23,25 +24,30 @@ Reduction = Literal["sum", "mean", "none"]
 class SubgoalValueLoss(LossModule):
     """Semi-Markov TD(0) loss of a subgoal potential.
 
-    Each SMDP transition ``(z, r_h, k, z', terminated)`` written by
-    :class:`~torchrl_subgoal.SubgoalPotentialTransform` under ``("next",
-    "smdp")`` gives the target ``r_h + γ_v^k V(z')`` (``V(z') = 0`` when the
-    episode terminated). The target is TorchRL's
-    :class:`~torchrl.objectives.value.TD0Estimator` estimate, which raises ``γ``
-    to the ``"steps_to_next_obs"`` entry; the potential is its value network.
-    The loss is ``½ Σ mask · (target − V(z))²`` with the target held fixed.
+    Each SMDP transition ``(z, r_h, k, z', terminated)`` closed by
+    :class:`~torchrl_subgoal.SubgoalPotentialTransform` gives the target
+    ``r_h + γ_v^k V(z')`` (``V(z') = 0`` when the episode terminated). The
+    target is TorchRL's :class:`~torchrl.objectives.value.TD0Estimator`
+    estimate, which raises ``γ_v`` to the ``"steps_to_next_obs"`` entry; the
+    potential is its value network. The loss is ``½ (target − V(z))²`` per
+    real transition, with the target held fixed, reduced by TorchRL's
+    reduction (a masked row contributes nothing, not even a NaN it holds).
+
+    ``γ_v`` is set as for TorchRL's losses, through
+    :meth:`make_value_estimator` (``loss.make_value_estimator(gamma=0.99)``;
+    TorchRL's default ``γ`` until then).
 
     With ``reduction="sum"`` and plain SGD of learning rate ``α_v`` on a
     :class:`~torchrl_subgoal.TabularPotential`, one optimiser step is exactly
     the paper's update ``V(z) ← V(z) + α_v (r_h + γ_v^k V(z') − V(z))`` for every
-    emitted transition (a learner emits at most one per step).
+    transition (a learner closes at most one per step).
 
     The input is any TensorDict of transitions in that layout, of any batch
     shape: the real transitions of collected data
     (``transform.transitions(data)``, or
     :func:`~torchrl_subgoal.training.smdp_transitions`), e.g. sampled from a
-    replay buffer, or every step's ``data["next", "smdp"]`` written with
-    ``write_transitions=True`` (``"mask"`` tells the real ones; without a
+    replay buffer, or every step's entry a transform with a
+    ``transitions_key`` writes (``"mask"`` tells the real ones; without a
     ``"mask"`` entry every row counts).
 
     Args:
@@ -49,17 +55,18 @@ class SubgoalValueLoss(LossModule):
             (any TensorDict module writing one value entry).
 
     Keyword Args:
-        gamma: ``γ_v``, the discount of the abstract value function.
         reduction: ``"sum"`` (default; the tabular update above), ``"mean"``
             over real transitions (for networks with adaptive optimisers) or
             ``"none"`` (per-row losses, zero where masked).
+        gamma: not accepted: ``γ_v`` goes through :meth:`make_value_estimator`
+            (a ``TypeError`` says so).
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl_subgoal import SubgoalValueLoss, TabularPotential
         >>> v = TabularPotential(3)
-        >>> loss = SubgoalValueLoss(v, gamma=0.9)
+        >>> loss = SubgoalValueLoss(v).make_value_estimator(gamma=0.9)
         >>> smdp = TensorDict({
         ...     "subgoal_index": torch.tensor([[0]]),
         ...     "steps_to_next_obs": torch.tensor([[2]]),
@@ -79,7 +86,7 @@ class SubgoalValueLoss(LossModule):
         are read at the root for ``z`` and under ``"next"`` for ``z'``.
 
         Attributes:
-            value: the potential's output entry.
+            value: the potential's output entry (its last ``out_keys`` entry by default).
             reward: ``("next", reward)`` holds the discounted sum ``r_h``.
             done: ``("next", done)``.
             terminated: ``("next", terminated)``; ``V(z') = 0`` when set.
@@ -103,9 +110,12 @@ class SubgoalValueLoss(LossModule):
         self,
         potential: TensorDictModuleBase,
         *,
-        gamma: float,
         reduction: Reduction = "sum",
+        gamma: float | None = None,
     ) -> None:
+        if gamma is not None:
+            raise TypeError(f"SubgoalValueLoss takes gamma through make_value_estimator: "
+                            f"SubgoalValueLoss(potential).make_value_estimator(gamma={gamma})")
         super().__init__()
         if not isinstance(potential, TensorDictModuleBase) or not potential.out_keys:
             raise TypeError(
@@ -114,13 +124,10 @@ class SubgoalValueLoss(LossModule):
             )
         if reduction not in ("sum", "mean", "none"):
             raise ValueError(f"reduction must be 'sum', 'mean' or 'none', got {reduction!r}")
-        if not 0.0 <= gamma <= 1.0:
-            raise ValueError(f"gamma must lie in [0, 1], got {gamma}")
         self.potential = potential
-        self.gamma = float(gamma)
         self.reduction = reduction
+        self._value_estimator: ValueEstimatorBase | None = None
         self.set_keys(value=potential.out_keys[-1])
-        self.make_value_estimator()
 
     @property
     def in_keys(self) -> list[NestedKey]:
@@ -129,8 +136,24 @@ class SubgoalValueLoss(LossModule):
         nxt = [("next", k) for k in (*self.potential.in_keys, keys.reward, keys.done, keys.terminated)]
         return [*self.potential.in_keys, keys.steps_to_next_obs, keys.mask, *nxt]
 
+    @property
+    def gamma(self) -> float:
+        """``γ_v``: the value estimator's discount (see :meth:`make_value_estimator`)."""
+        return float(self.value_estimator.gamma)
+
     def make_value_estimator(self, value_type: ValueEstimators | None = None, **hyperparams) -> SubgoalValueLoss:
-        """The TD(0) estimator over the potential (the SMDP target is one-step; ``gamma`` defaults to ``γ_v``)."""
+        """The TD(0) estimator over the potential (the SMDP target is one-step): ``gamma=γ_v``.
+
+        Args:
+            value_type: ``ValueEstimators.TD0`` (the default), or a
+                :class:`~torchrl.objectives.value.TD0Estimator` to use as it is.
+            **hyperparams: the estimator's settings (``gamma``; TorchRL's defaults otherwise).
+
+        Examples:
+            >>> from torchrl_subgoal import TabularPotential
+            >>> SubgoalValueLoss(TabularPotential(3)).make_value_estimator(gamma=0.9).gamma
+            0.8999999761581421
+        """
         if value_type is None:
             value_type = self.default_value_estimator
         if isinstance(value_type, ValueEstimatorBase):
@@ -138,8 +161,10 @@ class SubgoalValueLoss(LossModule):
                 raise NotImplementedError("the SMDP target is a TD(0) estimate: give a TD0Estimator")
             self._value_estimator = value_type
         elif value_type in (ValueEstimators.TD0, TD0Estimator):
-            hyperparams.setdefault("gamma", self.gamma)
-            self._value_estimator = TD0Estimator(value_network=self.potential, **hyperparams)
+            kwargs = {**default_value_kwargs(ValueEstimators.TD0), **hyperparams}
+            if not 0.0 <= float(kwargs["gamma"]) <= 1.0:
+                raise ValueError(f"gamma must lie in [0, 1], got {kwargs['gamma']}")
+            self._value_estimator = TD0Estimator(value_network=self.potential, **kwargs)
         else:
             raise NotImplementedError(f"the SMDP target is a TD(0) estimate; {value_type} is not supported")
         self.value_type = TD0Estimator
@@ -147,8 +172,9 @@ class SubgoalValueLoss(LossModule):
         return self
 
     def _forward_value_estimator_keys(self, **kwargs) -> None:
-        if getattr(self, "_value_estimator", None) is not None:
-            keys = self.tensor_keys
+        keys = self.tensor_keys
+        self.loss_mask_key = keys.mask  # TorchRL's reduction masks with it
+        if self._value_estimator is not None:
             self._value_estimator.set_keys(
                 value=keys.value, reward=keys.reward, done=keys.done, terminated=keys.terminated,
                 steps_to_next_obs=keys.steps_to_next_obs,
@@ -163,28 +189,28 @@ class SubgoalValueLoss(LossModule):
         if missing:
             have = set(tensordict.keys(True, True))
             raise ValueError(
-                f"SubgoalValueLoss reads SMDP transitions (transform.transitions(data), or data['next', 'smdp'] "
-                f"written with write_transitions=True); missing {missing}, the TensorDict has "
-                f"{sorted(map(str, have))}"
+                f"SubgoalValueLoss reads SMDP transitions (transform.transitions(data), or the entries a transform "
+                f"writes under its transitions_key); missing {missing}, the TensorDict has {sorted(map(str, have))}"
             )
         if tensordict.batch_dims == 0:
             raise ValueError("SubgoalValueLoss needs transitions with a batch dimension, e.g. [N]")
 
+    def _value(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """``V`` of the potential's inputs in ``tensordict``, read from the value entry (``tensor_keys.value``)."""
+        out = self.potential(tensordict.select(*self.potential.in_keys, strict=False))
+        return check_value(out.get(self.tensor_keys.value), tensordict.batch_size, type(self.potential).__name__)
+
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
-        """Loss over the SMDP transitions in ``tensordict`` (e.g. ``data["next", "smdp"]``).
+        """Loss over the SMDP transitions in ``tensordict`` (e.g. ``transform.transitions(data)``).
 
         Returns a TensorDict with ``"loss_value"`` and the masked ``"td_error"`` (``[*B, 1]``).
         """
         self._check(tensordict)
         keys = self.tensor_keys
         batch = tensordict.batch_size
-        in_keys = self.potential.in_keys
-        value_key = self.potential.out_keys[-1]
-        root = tensordict.select(*in_keys, strict=False)
-        value = check_value(self.potential(root).get(value_key), batch, type(self.potential).__name__)
+        value = self._value(tensordict)
         with torch.no_grad():
-            nxt = tensordict.get("next").select(*in_keys, strict=False)
-            next_value = check_value(self.potential(nxt).get(value_key), batch, type(self.potential).__name__)
+            next_value = self._value(tensordict.get("next"))
             terminated = tensordict.get(("next", keys.terminated))
             estimate = TensorDict(
                 {keys.steps_to_next_obs: tensordict.get(keys.steps_to_next_obs),
@@ -193,16 +219,45 @@ class SubgoalValueLoss(LossModule):
                           keys.terminated: terminated}},
                 batch_size=batch,
             )
-            target = self._value_estimator.value_estimate(estimate, next_value=next_value).to(value.dtype)
+            target = self.value_estimator.value_estimate(estimate, next_value=next_value).to(value.dtype)
         mask = tensordict.get(keys.mask, None)
-        weight = torch.ones_like(value) if mask is None else mask.reshape(value.shape).to(value.dtype)
-        td_error = (target - value) * weight
-        losses = 0.5 * td_error.square()
-        loss: torch.Tensor
-        if self.reduction == "none":
-            loss = losses
-        elif self.reduction == "sum":
-            loss = losses.sum()
-        else:
-            loss = losses.sum() / weight.sum().clamp_min(1.0)
+        td_error = target - value
+        if mask is not None:  # selected, not multiplied: a masked row's NaN reaches neither the loss nor a gradient
+            td_error = torch.where(self._expand_loss_mask(mask.bool(), td_error), td_error, torch.zeros_like(td_error))
+        loss = self._reduce_loss(0.5 * td_error.square(), tensordict)
         return TensorDict({"loss_value": loss, "td_error": td_error.detach()}, batch_size=[])
+
+
+@dataclass(frozen=True)
+class ValueUpdate:
+    """How :class:`~torchrl_subgoal.SubgoalPotentialTransform` trains its potential online: at every env
+    step, one SGD step of ``loss`` on the SMDP transitions that step closes, before shaping with the
+    updated potential (the paper's algorithm).
+
+    Give the transform ``value_update=ValueUpdate(lr)``, or the learning rate alone
+    (``value_update=0.25``). The loss's ``γ_v`` also discounts the SMDP return ``r_h`` the
+    transform accumulates.
+
+    Args:
+        lr: ``α_v``, the SGD learning rate.
+        loss: the :class:`SubgoalValueLoss` to step, built on the transform's potential (configure
+            it to change the target). Defaults to ``reduction="sum"`` with ``γ_v`` the transform's
+            ``gamma``: with a :class:`~torchrl_subgoal.TabularPotential` one step is then exactly
+            ``V(z) ← V(z) + α_v δ``, which the compiled path applies in its kernel.
+
+    Examples:
+        >>> from torchrl_subgoal import TabularPotential
+        >>> v = TabularPotential(3)
+        >>> update = ValueUpdate(0.25, SubgoalValueLoss(v).make_value_estimator(gamma=0.95))
+        >>> update.lr, update.loss.gamma
+        (0.25, 0.949999988079071)
+    """
+
+    lr: float
+    loss: SubgoalValueLoss | None = None
+
+    def __post_init__(self) -> None:
+        if not self.lr > 0:
+            raise ValueError(f"ValueUpdate: lr must be positive, got {self.lr}")
+        if self.loss is not None and not isinstance(self.loss, SubgoalValueLoss):
+            raise TypeError(f"ValueUpdate: loss must be a SubgoalValueLoss, got {type(self.loss).__name__}")

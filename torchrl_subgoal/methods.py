@@ -108,6 +108,8 @@ def shaping_parts(
     """What :class:`SubgoalPotentialTransform` needs for ``method``: the subgoals (or aggregation),
     the potential and the other keyword arguments; ``None`` for the unshaped baseline.
 
+    With ``pattern_index`` (the pattern of every env), the subgoals are one series per env.
+
     ``batch_shape`` is the potential's: the env batch for one table per env (one
     learner per env, as the SARSA recipes), ``()`` for one table shared by every
     env (one learner stepping many envs, as A2C).
@@ -119,7 +121,7 @@ def shaping_parts(
         >>> series = SubgoalSeries([Cell(4, 9)], name="alice")
         >>> subgoals, potential, options = shaping_parts(Method("HRS", "subgoals", "human"), (2,), patterns=[series])
         >>> [s.name for s in subgoals], type(potential).__name__, sorted(options)
-        (['alice'], 'TabularPotential', ['observation_key', 'pattern_index', 'start_potential', 'zero_terminal_potential'])
+        (['alice'], 'TabularPotential', ['observation_key', 'start_potential', 'zero_terminal_potential'])
     """
     if method.shaping == "none":
         return None
@@ -131,11 +133,12 @@ def shaping_parts(
             **options, "observation_key": aggregation_key}
     if not patterns:
         raise ValueError(f"{method.name} needs subgoal patterns")
-    options |= {"observation_key": observation_key, "pattern_index": pattern_index}
+    options["observation_key"] = observation_key
+    per_env = list(patterns) if pattern_index is None else [patterns[i] for i in pattern_index.reshape(-1).tolist()]
     if method.shaping == "naive":
-        return list(patterns), NaivePotential(eta), options
+        return per_env, NaivePotential(eta), options
     num_states = max(len(p) for p in patterns) + 1
-    return list(patterns), TabularPotential(num_states, batch_shape), options
+    return per_env, TabularPotential(num_states, batch_shape), options
 
 
 def shaping_transform(
@@ -160,7 +163,7 @@ def shaping_transform(
         batch_shape: the env batch (one learner per env; each gets its own table).
         gamma: the agent's discount.
         value_lr: ``α_v`` of the learned potentials, updated online; ``None`` to train
-            them yourself from the SMDP transitions the transform then writes.
+            them yourself from the SMDP transitions of the collected data.
         patterns: the subgoal series (HRS, RRS, NRS).
         pattern_index: pattern of each learner, shape ``batch_shape``.
         aggregation: ``g(s)`` for SARSA-RS.
@@ -188,4 +191,4 @@ def shaping_transform(
         return None
     subgoals, potential, options = parts
     learned = value_lr if isinstance(potential, TabularPotential) else None
-    return SubgoalPotentialTransform(subgoals, potential, gamma=gamma, value_lr=learned, **options)
+    return SubgoalPotentialTransform(subgoals, potential, gamma=gamma, value_update=learned, **options)

@@ -83,7 +83,7 @@ def main() -> None:
                           auto_register_policy_transforms=False)
 
     buffer = ReplayBuffer(storage=LazyTensorStorage(20_000), batch_size=64)  # SMDP transitions only
-    value_loss = SubgoalValueLoss(potential, gamma=GAMMA, reduction="mean")  # TD(0) on the SMDP target
+    value_loss = SubgoalValueLoss(potential, reduction="mean").make_value_estimator(gamma=GAMMA)  # TD(0) on the SMDP target
     value_optimizer = torch.optim.Adam(potential.parameters(), lr=0.05)
     # --8<-- [end:setup]
 

@@ -31,7 +31,7 @@ def fetch_env(num_envs: int, potential: NeuralPotential, parallel: bool):
     base = ParallelEnv(num_envs, make) if parallel else make()
     series = fetch.human_patterns()["participants"]
     # Φ = V (not the library's default "nonpositive" level), to compare F with V directly
-    return TransformedEnv(base, SubgoalPotentialTransform(series, potential, gamma=GAMMA, write_transitions=True,
+    return TransformedEnv(base, SubgoalPotentialTransform(series, potential, gamma=GAMMA, transitions_key="smdp",
                                                           start_potential="value"))
 
 
@@ -50,7 +50,7 @@ def test_neural_potential_step_matches_the_smdp_target() -> None:
     anchor, next_anchor = emitted["subgoal_anchor"], emitted["next", "subgoal_anchor"]
     delta = emitted["next", "reward"] + GAMMA**50 * (next_anchor @ w.T + b) - (anchor @ w.T + b)
     pick_and_place = recipe("pick_and_place")
-    trainer = pick_and_place.PotentialTrainer(env.transform, SubgoalValueLoss(potential, gamma=GAMMA, reduction="mean"),
+    trainer = pick_and_place.PotentialTrainer(env.transform, SubgoalValueLoss(potential, reduction="mean").make_value_estimator(gamma=GAMMA),
                                               torch.optim.SGD(potential.parameters(), lr=lr))
     trainer.step(data)
     assert torch.allclose(potential.network.weight, w + lr * delta * anchor, atol=1e-6)
@@ -63,7 +63,7 @@ def test_parallel_env_shapes_with_the_potential_the_loss_trains() -> None:
     potential = NeuralPotential(nn.Linear(fetch.OBSERVATION_SIZE, 1))
     env = fetch_env(2, potential, parallel=True)
     transform = env.transform
-    loss = SubgoalValueLoss(transform.potential, gamma=GAMMA, reduction="mean")
+    loss = SubgoalValueLoss(transform.potential, reduction="mean").make_value_estimator(gamma=GAMMA)
     trainer = pick_and_place.PotentialTrainer(transform, loss, torch.optim.Adam(loss.potential.parameters(), lr=0.1))
     collector = Collector(env, None, frames_per_batch=100, total_frames=200, auto_register_policy_transforms=False)
     batches = iter(collector)

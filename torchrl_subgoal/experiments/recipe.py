@@ -141,10 +141,9 @@ def check_patterns(patterns: PatternSets, env: EnvBase, observation_key: str) ->
     series = [s for kind in ("human", "random") for s in patterns[kind].values()]
     if not series:
         return
-    index = torch.zeros(env.batch_size, dtype=torch.long)
-    transform = SubgoalPotentialTransform(series, NaivePotential(1.0), gamma=1.0,
-                                          observation_key=observation_key, pattern_index=index)
-    TransformedEnv(env, transform).reset()
+    for one in series:  # each compiled as the transform compiles it at a reset
+        transform = SubgoalPotentialTransform(one, NaivePotential(1.0), gamma=1.0, observation_key=observation_key)
+        TransformedEnv(env, transform).reset()
 
 
 def method_specs(

@@ -336,19 +336,24 @@ class StateAggregation:
         assert self.mapping is not None
         return self.mapping(observation).long().reshape(batch_shape)
 
-    def _in_regions(self, z: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
-        assert self.regions is not None
+    def _search(self, z: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
+        """The first region containing each row's observation (its ``z`` when none does), in torch: the
+        region search of the kernels (:func:`~torchrl_subgoal._kernels.regions.region_search`)."""
+        regions = self.regions
+        assert regions is not None
         n = z.numel()
-        out = np.empty((n, 1), dtype=np.int64)
-        advance_regions(self.regions, z.numpy().reshape(n, 1), observation.cpu().numpy().reshape(n, -1), out)
-        return torch.from_numpy(out).view(z.shape).to(z.device)
+        table = [torch.from_numpy(a[0]).to(z.device) for a in (regions.lo, regions.hi, regions.centre, regions.weight,
+                                                               regions.radius2)]
+        obs = observation.reshape(n, 1, -1).to(torch.float64)
+        inside = _in_regions(obs, *table, bool(torch.isfinite(table[4]).any()))
+        return torch.where(inside.any(-1), inside.long().argmax(-1), z.reshape(-1)).view(z.shape)
 
     def initial(self, observation: torch.Tensor | None, batch_shape: torch.Size) -> torch.Tensor:
         """Abstract state of the reset observation, ``[*batch_shape, 1]``."""
         if observation is None:
             raise ValueError("a state aggregation needs the observation it reads")
         if self.regions is not None:
-            return self._in_regions(torch.zeros((*batch_shape, 1), dtype=torch.long), observation)
+            return self._search(torch.zeros((*batch_shape, 1), dtype=torch.long, device=observation.device), observation)
         return self._g(observation, batch_shape).unsqueeze(-1)
 
     @property
@@ -359,9 +364,23 @@ class StateAggregation:
     def advance(
         self, z: torch.Tensor, observation: torch.Tensor | None, tensordict: TensorDictBase | None = None
     ) -> torch.Tensor:
-        """``g`` of the new observation (the previous ``z`` matters only outside every region)."""
+        """``g`` of the new observation (the previous ``z`` matters only outside every region); the region
+        search compiled on the CPU."""
+        if observation is None:
+            raise ValueError("a state aggregation needs the observation it reads")
+        if self.regions is not None and z.device.type == "cpu":
+            n = z.numel()
+            out = np.empty((n, 1), dtype=np.int64)
+            advance_regions(self.regions, z.numpy().reshape(n, 1), observation.numpy().reshape(n, -1), out)
+            return torch.from_numpy(out).view(z.shape)
+        return self.advance_eager(z, observation, tensordict)
+
+    def advance_eager(
+        self, z: torch.Tensor, observation: torch.Tensor | None, tensordict: TensorDictBase | None = None
+    ) -> torch.Tensor:
+        """:meth:`advance` with torch operations only (any device; the reference)."""
         if observation is None:
             raise ValueError("a state aggregation needs the observation it reads")
         if self.regions is not None:
-            return self._in_regions(z, observation)
+            return self._search(z, observation)
         return self._g(observation, z.shape[:-1]).unsqueeze(-1)

@@ -172,15 +172,15 @@ class Shaping:
     """The shaping transform of one learner, built in every process that steps its envs.
 
     Args:
-        subgoals: a :class:`~torchrl_subgoal.SubgoalSeries` (or several, with
-            ``pattern_index``) or a :class:`~torchrl_subgoal.StateAggregation`.
+        subgoals: a :class:`~torchrl_subgoal.SubgoalSeries` (or one per env) or a
+            :class:`~torchrl_subgoal.StateAggregation`.
         potential: ``Φ``, shared by every env of the learner (e.g.
             ``TabularPotential(series.num_abstract_states)``); trained unless it is
             a :class:`~torchrl_subgoal.NaivePotential` or frozen.
         options: further keyword arguments of
             :class:`~torchrl_subgoal.SubgoalPotentialTransform` (``observation_key``,
-            ``zero_terminal_potential``…); ``gamma`` and ``value_lr`` come from the
-            :class:`A2CConfig`.
+            ``zero_terminal_potential``…); ``gamma`` and the online update's learning
+            rate come from the :class:`A2CConfig`.
 
     Examples:
         >>> from torchrl_subgoal import Cell, SubgoalSeries, TabularPotential
@@ -203,7 +203,7 @@ class Shaping:
 
     def transform(self, potential: TensorDictModuleBase, gamma: float, value_lr: float | None) -> SubgoalPotentialTransform:
         """The transform over ``potential`` (the process's view of the shared one)."""
-        return SubgoalPotentialTransform(self.subgoals, potential, gamma=gamma, value_lr=value_lr, **self.options)
+        return SubgoalPotentialTransform(self.subgoals, potential, gamma=gamma, value_update=value_lr, **self.options)
 
 
 def batched(make_single: Callable[[], EnvBase]) -> Callable[[int], EnvBase]:
@@ -565,8 +565,8 @@ def train_a2c(
     keeper: SubgoalPotentialTransform | None = None  # reads the transitions out of the collected data
     if shaping is not None and shaping.trained and not online:
         keeper = shaping.transform(shaping.potential, config.gamma, None)
-        value_loss = SubgoalValueLoss(shaping.potential, gamma=config.gamma,
-                                      reduction="sum" if config.value_optimizer == "sgd" else "mean")
+        value_loss = SubgoalValueLoss(shaping.potential, reduction="sum" if config.value_optimizer == "sgd" else "mean")
+        value_loss.make_value_estimator(gamma=config.gamma)
         opt_class = torch.optim.SGD if config.value_optimizer == "sgd" else torch.optim.Adam
         value_optimizer = opt_class(shaping.potential.parameters(), lr=config.value_lr)
     collector = make_collector(factory, actor, config)

@@ -1,0 +1,123 @@
+"""The torch step of the shaping transform: any potential, any device, conditions; the reference the
+compiled step agrees with."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+
+from torchrl_subgoal.potentials import NaivePotential, check_value
+from torchrl_subgoal.transform.cache import ValueCache
+from torchrl_subgoal.transform.compiled import StepInputs, check_finite
+from torchrl_subgoal.transform.setup import BatchSetup, Settings
+from torchrl_subgoal.transform.shaping import (
+    accumulate,
+    closes,
+    restart,
+    shaped_reward,
+    start_level,
+)
+from torchrl_subgoal.transform.transitions import transition
+
+__all__ = ["potential_value", "start_entries", "torch_step"]
+
+
+def potential_value(
+    potential: TensorDictModuleBase, cache: ValueCache, entries: dict[str, torch.Tensor], batch_shape: torch.Size,
+    slot: str,
+) -> torch.Tensor:
+    """``Φ`` of abstract-state entries, ``[*B, 1]``: given back by ``cache`` (under ``slot``) while the
+    entries and the potential are unchanged, else evaluated and remembered.
+
+    Examples:
+        >>> from torchrl_subgoal import TabularPotential
+        >>> v, cache = TabularPotential(3), ValueCache()
+        >>> cache.check(v)
+        >>> potential_value(v, cache, {"subgoal_index": torch.tensor([[2]])}, torch.Size([1]), "z").tolist()
+        [[0.0]]
+    """
+    inputs = {k: entries[k] for k in potential.in_keys if k in entries}
+    cached = cache.get(slot, inputs)
+    if cached is not None:
+        return cached
+    value = potential(TensorDict(inputs, batch_size=batch_shape)).get(potential.out_keys[-1])
+    value = check_value(value, batch_shape, f"the potential {type(potential).__name__}")
+    cache.put(slot, inputs, value)
+    return value
+
+
+def torch_step(
+    setup: BatchSetup,
+    settings: Settings,
+    potential: TensorDictModuleBase,
+    cache: ValueCache,
+    current: dict[str, torch.Tensor],
+    step: StepInputs,
+    update: Callable[[TensorDictBase], None] | None,
+) -> dict[str, Any]:
+    """One step of aggregation and shaping from the abstract-state entries ``current``, in torch.
+
+    With ``update``, the potential is first trained on the transitions this step closes (the online
+    update). Returns the next entries, as :func:`~torchrl_subgoal.transform.compiled.compiled_step`
+    does (``"transition"``: the step's SMDP transition TensorDict).
+    """
+    keys, kept, batch_shape = settings.keys, settings.kept, setup.batch_shape
+    check_finite(step.env_reward, step.obs, "reward", settings.observation_key)
+    z = current[keys.index]
+    advance = setup.abstraction.advance if setup.compiled_search else setup.abstraction.advance_eager
+    z_next = advance(z, step.obs, step.td)
+    achieved = z_next != z
+    r_h, k = accumulate(current[keys.ret], current[keys.steps], step.env_reward, settings.value_gamma)
+    closed = closes(z, z_next, step.done)
+    nxt: dict[str, torch.Tensor] = {keys.index: z_next}
+    if keys.achieved in kept:
+        nxt[keys.achieved] = achieved
+    if keys.anchor in kept:
+        assert step.obs is not None
+        anchor = step.obs.reshape(*batch_shape, -1).to(torch.float32)
+        nxt[keys.anchor] = torch.where(achieved, anchor, current[keys.anchor])
+    for carried in (keys.learner, keys.start):
+        if carried in kept:
+            nxt[carried] = current[carried]
+    smdp = None
+    if update is not None or settings.transitions:
+        smdp = transition(batch_shape, {key: current[key] for key in settings.inputs},
+                          {key: nxt[key] for key in settings.inputs},
+                          r_h, k, closed, step.done, step.terminated)
+    if update is not None and bool(closed.any()):
+        assert smdp is not None
+        update(smdp)
+    with torch.no_grad():
+        # Φ(z) of this step is last step's Φ(z') (unless an env was reset), Φ(z') is Φ(z) until a subgoal is
+        # achieved, and Φ(z_0) holds for the episode: none is evaluated again while the inputs and the
+        # potential are unchanged
+        cache.check(potential)
+        phi = potential_value(potential, cache, current, batch_shape, "z")
+        phi_next = potential_value(potential, cache, nxt, batch_shape, "z")
+        if settings.start != "value" and not isinstance(potential, NaivePotential):
+            level = start_level(potential_value(potential, cache, start_entries(current, settings), batch_shape,
+                                                "start"), settings.start)
+            assert level is not None
+            phi, phi_next = phi - level, phi_next - level
+    shaped = shaped_reward(step.reward, phi, phi_next, step.terminated, settings.gamma, settings.zero_terminal)
+    out: dict[str, Any] = dict(nxt)
+    out[keys.ret], out[keys.steps] = restart(r_h, k, closed)
+    out["reward"] = shaped
+    if settings.transitions:
+        out["transition"] = smdp
+    return out
+
+
+def start_entries(current: dict[str, torch.Tensor], settings: Settings) -> dict[str, torch.Tensor]:
+    """The potential's inputs at the start of the episode: ``z_0`` (0 for a subgoal series) or ``o_0``."""
+    keys = settings.keys
+    start = dict(current)
+    if keys.anchor in settings.kept:
+        start[keys.anchor] = current[keys.start]
+    else:
+        start[keys.index] = current[keys.start] if keys.start in current else torch.zeros_like(current[keys.index])
+    return start

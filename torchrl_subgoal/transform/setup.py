@@ -1,0 +1,201 @@
+"""What shaping a batch needs, set up once per batch shape: the subgoals compiled for its rows, each
+row's learner, and the potential as the compiled path reads it (when it can)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+import torch
+from tensordict.nn import TensorDictModuleBase
+from tensordict.utils import NestedKey
+
+from torchrl_subgoal.loss import SubgoalValueLoss
+from torchrl_subgoal.potentials import NaivePotential, TabularPotential
+from torchrl_subgoal.subgoals import (
+    RegionTables,
+    State,
+    StateAggregation,
+    SubgoalSeries,
+    SubgoalTables,
+)
+from torchrl_subgoal.transform.keys import SubgoalKeys
+from torchrl_subgoal.transform.shaping import START_MODES, StartPotential
+
+__all__ = ["BatchSetup", "PotentialKernelState", "Settings", "Subgoals", "compiled_potential"]
+
+#: ``table`` of a naive potential in the kernels: no table, ``Φ = η · achieved``
+NO_TABLE = np.zeros((0, 1), dtype=np.float32)
+
+
+class Settings(NamedTuple):
+    """What a step reads of its transform, fixed when the transform is made."""
+
+    keys: SubgoalKeys
+    kept: tuple[str, ...]  #: the abstract-state entries kept in the TensorDict
+    gamma: float  #: ``γ`` of the shaping term
+    value_gamma: float  #: ``γ_v`` of the SMDP return
+    zero_terminal: bool  #: ``Φ = 0`` at a terminal state
+    start: StartPotential  #: the level of ``Φ``
+    observation_key: NestedKey  #: what the region predicates read and the anchor snapshots
+    reads_observation: bool  #: whether a region predicate or an aggregation reads it
+    transitions: bool  #: whether every step writes its SMDP transition entry
+    inputs: tuple[NestedKey, ...]  #: the potential's inputs (a transition keeps them at z and z')
+
+
+class Subgoals:
+    """The subgoals of a transform: distinct patterns and each env's (or a hand-given aggregation).
+
+    Args:
+        subgoals: a :class:`SubgoalSeries` for every env, one per env of the batch (flattened batch
+            order; equal series are compiled once), or a :class:`StateAggregation`.
+
+    Examples:
+        >>> from torchrl_subgoal import Cell
+        >>> a, b = SubgoalSeries([Cell(3, 6)]), SubgoalSeries([Cell(7, 9)])
+        >>> subgoals = Subgoals([a, b, a])
+        >>> len(subgoals.patterns), subgoals.pattern_of(3).tolist()
+        (2, [0, 1, 0])
+    """
+
+    def __init__(self, subgoals: SubgoalSeries | Sequence[SubgoalSeries] | StateAggregation) -> None:
+        self.aggregation: StateAggregation | None = None
+        self._index: torch.Tensor | None = None  # each env's pattern; None: one pattern for every env
+        self._given = 1
+        if isinstance(subgoals, StateAggregation):
+            self.aggregation, self.patterns = subgoals, []
+            return
+        series = [subgoals] if isinstance(subgoals, SubgoalSeries) else list(subgoals)
+        if not series or not all(isinstance(s, SubgoalSeries) for s in series):
+            raise TypeError("subgoals must be a SubgoalSeries, a sequence of them (one per env) or a StateAggregation")
+        distinct = list(dict.fromkeys(series))
+        self.patterns = distinct
+        self._given = len(series)  # 1: every env's; else one per env
+        if len(distinct) > 1:
+            self._index = torch.tensor([distinct.index(s) for s in series], dtype=torch.long)
+
+    @property
+    def num_states(self) -> int:
+        """Number of abstract states ``z`` (the terminal one excluded)."""
+        if self.aggregation is not None:
+            return self.aggregation.num_states
+        return max(len(p) for p in self.patterns) + 1
+
+    @property
+    def per_env(self) -> bool:
+        """Whether envs follow different patterns."""
+        return self._index is not None
+
+    @property
+    def envs(self) -> int | None:
+        """The number of envs the patterns were given for, one each (``None``: one pattern for every env)."""
+        return None if self._index is None else self._index.numel()
+
+    @property
+    def reads_observation(self) -> bool:
+        """Whether an aggregation or a region predicate reads the observation."""
+        return self.aggregation is not None or any(pred.compiled for p in self.patterns for pred in p.predicates)
+
+    @property
+    def one_hot_states(self) -> bool:
+        """Whether a :class:`State` predicate is among the subgoals (it reads a one-hot observation too)."""
+        return any(isinstance(pred, State) for p in self.patterns for pred in p.predicates)
+
+    def pattern_of(self, n_learners: int) -> torch.Tensor:
+        """The pattern each of ``n_learners`` learners (flattened env batch) follows."""
+        if self.aggregation is None and self._given not in (1, n_learners):
+            raise ValueError(f"{self._given} subgoal series for a batch of {n_learners} envs: give one series "
+                             "for every env, or one per env")
+        return torch.zeros(n_learners, dtype=torch.long) if self._index is None else self._index
+
+    def compile(self, learner: torch.Tensor, batch_shape: torch.Size, n_learners: int, layout: tuple[int, bool],
+                observation_key: NestedKey) -> SubgoalTables | StateAggregation:
+        """The abstraction for a batch whose rows belong to ``learner`` (``[*B, 1]``), observations of
+        ``layout = (entries, one-hot)``."""
+        if self.aggregation is not None:
+            return self.aggregation
+        patterns = self.pattern_of(n_learners)[learner.reshape(-1)].reshape(batch_shape)
+        size, one_hot = layout
+        return SubgoalTables(self.patterns, patterns, size, one_hot=one_hot, observation_key=str(observation_key))
+
+
+class PotentialKernelState(NamedTuple):
+    """A tabular or naive potential and the transform's settings, as the compiled shaping step reads them
+    (:func:`~torchrl_subgoal._kernels.shaping._shape_learner`).
+
+    Examples:
+        >>> PotentialKernelState(NO_TABLE, 2.0, 0.9, 0.9, 0.0, True, 2).eta
+        2.0
+    """
+
+    table: np.ndarray  #: ``[B or 1, Z]`` float32 view of the potential's table (updated in place); ``[0, 1]``: naive
+    eta: float  #: the naive potential's ``η`` (``Φ = η`` once a subgoal is achieved)
+    gamma: float  #: ``γ`` of the shaping term
+    value_gamma: float  #: ``γ_v`` of the SMDP return
+    value_lr: float  #: ``α_v`` of the online update (0: none)
+    zero_terminal: bool  #: ``Φ = 0`` at a terminal state
+    start_mode: int  #: ``_kernels.shaping.START_VALUE``, ``START_ZERO`` or ``START_NONPOSITIVE``
+
+
+def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss | None) -> str | None:
+    """Why the compiled step cannot shape with ``potential`` (trained online by ``update``), or ``None``."""
+    if isinstance(potential, TabularPotential):
+        if potential.table.device.type != "cpu":
+            return f"it reads the potential's table on the CPU, not {potential.table.device}"
+    elif not isinstance(potential, NaivePotential):
+        return f"it shapes with a TabularPotential or a NaivePotential, not {type(potential).__name__}"
+    if update is not None and (type(update) is not SubgoalValueLoss or update.reduction != "sum"):
+        return "its online update is one SGD step of the default SubgoalValueLoss (reduction 'sum')"
+    return None
+
+
+@dataclass
+class BatchSetup:
+    """What shaping a batch of a given shape needs: the abstraction compiled for its rows, each row's
+    learner, and, for the compiled path, the potential as the kernels read it."""
+
+    batch_shape: torch.Size
+    abstraction: SubgoalTables | StateAggregation
+    learner: torch.Tensor  #: ``[*B, 1]`` long
+    compiled: bool = False  #: whether the compiled step shapes this batch
+    compiled_search: bool = True  #: whether the torch step advances regions with the compiled region search
+    kernel: tuple[PotentialKernelState, PotentialKernelState] | None = None  #: (without, with) the online update
+    shared: bool = False  #: one table for every row
+    regions: RegionTables | None = None  #: the regions the compiled step advances (None: advanced in torch)
+    table: torch.Tensor | None = None  #: the tabular potential's parameter, to see it move
+    table_ptr: int = 0
+    z_start: np.ndarray = field(default_factory=lambda: np.zeros((1, 1), np.int64))
+
+    def use_kernels(self, potential: TensorDictModuleBase, settings: Settings, value_lr: float, online: bool) -> None:
+        """Set the potential up for the compiled step (``online``: the env's batch, whose rows are the
+        learners; else stored rows, each reading its learner's table, copied)."""
+        abstraction = self.abstraction
+        if isinstance(abstraction, SubgoalTables):
+            self.regions = abstraction.kernel_state() if abstraction.fusable else None
+        else:
+            self.regions = abstraction.regions
+        table, eta = NO_TABLE, 0.0
+        if isinstance(potential, NaivePotential):
+            eta = potential.eta
+        else:
+            assert isinstance(potential, TabularPotential)
+            table = potential.table.detach().numpy().reshape(potential.learners, potential.num_states)
+            self.shared = not potential.batch_shape
+            if not self.shared and not online:
+                table = np.ascontiguousarray(table[self.learner.reshape(-1).numpy()])
+            self.table, self.table_ptr = potential.table, potential.table.data_ptr()
+        n = self.batch_shape.numel()
+        if not self.shared and table.shape[0] not in (0, n):
+            raise ValueError(f"the potential has {table.shape[0]} tables for a batch of {n} rows")
+        mode = START_MODES[settings.start]
+        self.kernel = tuple(PotentialKernelState(table, eta, settings.gamma, settings.value_gamma, lr, settings.zero_terminal,
+                                            mode) for lr in (0.0, value_lr))  # type: ignore[assignment]
+        self.z_start = np.zeros((max(1, n), 1), np.int64)  # a subgoal series starts every episode in z = 0
+        self.compiled = True
+
+    @property
+    def moved(self) -> bool:
+        """Whether the tabular potential's table moved since (to shared memory, another device…)."""
+        return self.table is not None and self.table.data_ptr() != self.table_ptr
