@@ -64,3 +64,23 @@ def advance_regions(regions, z, obs, z_out):
     pattern, lo, hi, centre, weight, radius2, succ, offset = regions
     for b in range(z.shape[0]):
         z_out[b, 0] = region_search(pattern, lo, hi, centre, weight, radius2, succ, offset, b, z[b, 0], obs[b])
+
+
+@numba.njit(cache=True, nogil=True)
+def advance_with_conditions(regions, condition, hits, z, obs, z_out):
+    """:func:`advance_regions` for subgoal series with conditions: subgoal ``j`` of pattern ``p`` is the
+    condition ``c = condition[p, j]`` when ``c ≥ 0`` (achieved by learner ``b`` where ``hits[b, c]``),
+    else its region (``obs`` may have no entries when no subgoal is a region)."""
+    pattern, lo, hi, centre, weight, radius2, succ, offset = regions
+    for b in range(z.shape[0]):
+        p = pattern[b] if pattern.shape[0] > 0 else 0
+        zb = z[b, 0]
+        z_out[b, 0] = zb
+        for j in range(lo.shape[1]):
+            if not succ[p, zb, j]:
+                continue
+            c = condition[p, j]
+            if hits[b, c] if c >= 0 else _in_region(obs[b], lo[p, j], hi[p, j], centre[p, j], weight[p, j],
+                                                     radius2[p, j]):
+                z_out[b, 0] = j + offset
+                break

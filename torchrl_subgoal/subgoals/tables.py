@@ -10,9 +10,9 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 
-from torchrl_subgoal._kernels.regions import advance_regions
+from torchrl_subgoal._kernels.regions import advance_regions, advance_with_conditions
 from torchrl_subgoal.subgoals.errors import SubgoalFileError, _where
-from torchrl_subgoal.subgoals.predicates import Predicate
+from torchrl_subgoal.subgoals.predicates import Condition, Predicate
 from torchrl_subgoal.subgoals.series import SubgoalSeries
 
 
@@ -29,6 +29,9 @@ def _misfit(pred: Predicate, size: int, one_hot: bool) -> str | None:
         return f"a {pred.kind} predicate reads entries by position, not a one-hot code,"
     beyond = [d for d in pred.dims() if d >= size]
     return f"reads entry {beyond[0]}" if beyond else None
+
+
+_NO_ENTRIES = np.zeros((0, 0), np.float64)  # the observation of subgoals that are all conditions
 
 
 class RegionTables(NamedTuple):
@@ -100,10 +103,12 @@ class SubgoalTables:
         radius2 = torch.full((P, J), math.inf)
         succ = torch.zeros(P, J + 1, J, dtype=torch.bool)
         slots: dict[Predicate, torch.Tensor] = {}  # condition -> [P, J] where a pattern uses it
+        condition_of = np.full((P, J), -1, np.int64)  # the index of the condition at [p, j], -1: a region
         for p, series in enumerate(patterns):
             for j, pred in enumerate(series.predicates):
                 if not pred.compiled:
                     slots.setdefault(pred, torch.zeros(P, J, dtype=torch.bool))[p, j] = True
+                    condition_of[p, j] = list(slots).index(pred)
                     continue
                 problem = _misfit(pred, D, one_hot)
                 try:
@@ -141,6 +146,9 @@ class SubgoalTables:
         self.uses_circle = bool(torch.isfinite(radius2).any())
         self._rows = torch.arange(flat.numel())
         self.conditions = [(pred, where[flat]) for pred, where in slots.items()]
+        self._condition_of = condition_of
+        self._calls = [pred.fn if isinstance(pred, Condition) else pred for pred in slots]
+        self._n, self._dims = flat.numel(), len(self.batch_shape)
         # the kernels read per-pattern tables and each learner's pattern (small, stays in cache)
         self._kernel_tables = RegionTables(flat.contiguous().numpy(), lo.numpy(), hi.numpy(), centre.numpy(),
                                            weight.numpy(), radius2.numpy(), succ.numpy(), 1)
@@ -219,19 +227,52 @@ class SubgoalTables:
     ) -> torch.Tensor:
         """Next abstract state after observing ``observation`` (and ``tensordict``) in abstract state ``z``.
 
-        On the CPU without conditions this is one fused kernel; else :meth:`advance_eager`.
+        On the CPU this is one compiled region search (the conditions called first, once each);
+        elsewhere :meth:`advance_eager`.
         """
         self._check_z(z)
-        if z.device.type != "cpu" or not self.fusable:
+        if z.device.type != "cpu":
             return self.advance_eager(z, observation, tensordict)
-        assert observation is not None
-        n = self._rows.numel()
-        zf = z.numpy().reshape(n, 1)
-        obs = self.rows(observation).numpy()
-        out = np.empty((n, 1), dtype=np.int64)
-        advance_regions(self._kernel_tables, zf, obs, out)
+        out = np.empty((self._n, 1), dtype=np.int64)
+        self.advance_into(z.numpy().reshape(self._n, 1), observation, tensordict, out)
         result = torch.from_numpy(out)
         return result if result.shape == z.shape else result.view(z.shape)
+
+    def advance_into(
+        self, z: np.ndarray, observation: torch.Tensor | None, tensordict: TensorDictBase | None, out: np.ndarray
+    ) -> None:
+        """:meth:`advance` on ``[B, 1]`` numpy arrays: ``out`` gets the next abstract state of ``z`` (CPU).
+
+        Examples:
+            >>> from torchrl_subgoal import State
+            >>> tables = SubgoalTables([SubgoalSeries([State(1)])], torch.zeros(2, dtype=torch.long), 1)
+            >>> out = np.empty((2, 1), np.int64)
+            >>> tables.advance_into(np.zeros((2, 1), np.int64), torch.tensor([[1.0], [0.0]]), None, out)
+            >>> out.tolist()
+            [[1], [0]]
+        """
+        if self.conditions:
+            obs = self.rows(observation).numpy() if self.uses_regions else _NO_ENTRIES
+            advance_with_conditions(self._kernel_tables, self._condition_of, self._hits(tensordict), z, obs, out)
+        else:
+            advance_regions(self._kernel_tables, z, self.rows(observation).numpy(), out)
+
+    def _hits(self, tensordict: TensorDictBase | None) -> np.ndarray:
+        """``[B, C]``: where each condition holds (each called once, on the step's TensorDict)."""
+        if tensordict is None:
+            raise ValueError(f"condition {self.conditions[0][0]!r} needs the step's TensorDict")
+        n, masks = self._n, list(self._calls)
+        for c, call in enumerate(self._calls):
+            try:
+                mask = call(tensordict)
+            except Exception as exc:
+                raise type(exc)(f"subgoal condition {self.conditions[c][0]!r} failed on the step's TensorDict: "
+                                f"{exc}") from exc
+            if not isinstance(mask, torch.Tensor) or mask.shape[:self._dims] != self.batch_shape \
+                    or mask.numel() != n:
+                self._mask(self.conditions[c][0], tensordict)  # raises, saying what was expected
+            masks[c] = mask.reshape(n) if mask.dtype is torch.bool else mask.reshape(n).bool()
+        return torch.stack(masks, -1).numpy()
 
     def advance_eager(
         self, z: torch.Tensor, observation: torch.Tensor | None, tensordict: TensorDictBase | None = None

@@ -17,6 +17,7 @@ from torchrl_subgoal._kernels.shaping import (
     REGION_SHAPING,
     START_VALUE,
     advance_and_shape,
+    finite_inputs,
     shape_step,
 )
 from torchrl_subgoal.subgoals import RegionTables, SubgoalTables
@@ -26,6 +27,7 @@ from torchrl_subgoal.transform.transitions import transition
 __all__ = ["AbstractStates", "ShapingKernelState", "StepInputs", "check_finite", "compiled_step"]
 
 _NO_TRANSITION = tuple(np.zeros((0, 1), dtype=d) for d in (np.float32, np.int64, np.bool_))
+_NO_ENTRIES = np.zeros((0, 0), np.float32)  # finite_inputs without an observation to check
 
 
 class StepInputs(NamedTuple):
@@ -62,13 +64,10 @@ def check_finite(reward: torch.Tensor, obs: torch.Tensor | None, reward_key: Nes
 
 def _column(t: torch.Tensor, n: int, name: str) -> np.ndarray:
     """A ``[*B, 1]`` CPU tensor as an ``[n, 1]`` numpy view; a clear ``ValueError`` if it does not hold one
-    entry per row (the kernels index it unchecked)."""
-    a = t.numpy()
-    if a.shape == (n, 1):
-        return a
-    if a.size != n:
+    entry per row (the kernels index it unchecked). ``[n, 1]`` tensors do not come here (see below)."""
+    if t.numel() != n:
         raise ValueError(f"{name!r} has shape {tuple(t.shape)}, expected one entry per row of a batch of {n}")
-    return a.reshape(n, 1)
+    return t.numpy().reshape(n, 1)
 
 
 def compiled_step(
@@ -77,36 +76,52 @@ def compiled_step(
     """One step of aggregation and shaping from the abstract-state entries ``current``, compiled.
 
     Returns the next entries (names as in :class:`~torchrl_subgoal.SubgoalKeys`, ``"reward"`` the
-    shaped reward, ``"transition"`` the transition's ``(r_h, k, closed)`` when the settings keep them).
+    shaped reward, ``"transition"`` the step's SMDP transition when the settings write it).
     """
     keys = settings.keys
-    n = setup.batch_shape.numel()
+    n = setup.rows
+    col = (n, 1)
+    # every entry read and written as an [n, 1] numpy view: a batch of one dimension gives those at once (this
+    # runs every step: views taken in line), other shapes are reshaped by _column, which checks them
     z, r_h, k = current[keys.index], current[keys.ret], current[keys.steps]
     reward, env_reward = step.reward, step.env_reward
-    z_col, env_col = _column(z, n, keys.index), _column(env_reward, n, "reward")
-    done_col = _column(step.done, n, "done")
-    ends = done_col if step.terminated is step.done else _column(step.terminated, n, "terminated")
+    z_col, rh_col, k_col, env_col, done_col = z.numpy(), r_h.numpy(), k.numpy(), env_reward.numpy(), step.done.numpy()
+    if not z_col.shape == rh_col.shape == k_col.shape == env_col.shape == done_col.shape == col:
+        z_col, rh_col, k_col, env_col, done_col = (_column(t, n, name) for t, name in (
+            (z, keys.index), (r_h, keys.ret), (k, keys.steps), (env_reward, "reward"), (step.done, "done")))
+    ends = done_col
+    if step.terminated is not step.done and (ends := step.terminated.numpy()).shape != col:
+        ends = _column(step.terminated, n, "terminated")
     start = _column(current[keys.start], n, keys.start) if keys.start in current else setup.z_start
     achieved = _column(current[keys.achieved], n, keys.achieved) if keys.achieved in current else z_col
-    rh_out, k_out, shaped = torch.empty_like(r_h), torch.empty_like(k), torch.empty_like(reward)
+    z_next, rh_out, k_out, shaped = torch.empty_like(z), torch.empty_like(r_h), torch.empty_like(k), \
+        torch.empty_like(reward)
+    outputs = (z_next.numpy(), rh_out.numpy(), k_out.numpy(), shaped.numpy())
+    if z_next.ndim != 2:
+        outputs = tuple(a.reshape(col) for a in outputs)
     extra: tuple[np.ndarray, ...] = _NO_TRANSITION
     if settings.transitions:  # the kernel also fills the transition's r_h, k and mask
         r_acc, k_acc, closed = torch.empty_like(r_h), torch.empty_like(k), torch.empty_like(step.done)
-        extra = (r_acc.numpy().reshape(n, 1), k_acc.numpy().reshape(n, 1), closed.numpy().reshape(n, 1))
-    inputs = (achieved, _column(r_h, n, keys.ret), _column(k, n, keys.steps), env_col, done_col, ends, start)
-    outputs = (rh_out.numpy().reshape(n, 1), k_out.numpy().reshape(n, 1), shaped.numpy().reshape(n, 1))
+        extra = (r_acc.numpy().reshape(col), k_acc.numpy().reshape(col), closed.numpy().reshape(col))
+    inputs = (achieved, rh_col, k_col, env_col, done_col, ends, start)
     potential = setup.kernel[learn]  # type: ignore[index]
     if setup.regions is not None:
-        z_next = torch.empty_like(z)
         if not advance_and_shape(setup.regions, potential, setup.shared, z_col, _rows(step.obs, n, setup), *inputs,
-                                 z_next.numpy().reshape(n, 1), *outputs, *extra):
+                                 *outputs, *extra):
             check_finite(reward, step.obs, "reward", settings.observation_key)  # raises, naming the entry
             raise ValueError(f"SubgoalPotentialTransform: the reward is not finite or {settings.observation_key!r} "
                              "holds a NaN")
-    else:  # conditions or a lookup: advanced in torch, shaped compiled
-        check_finite(env_reward, step.obs, "reward", settings.observation_key)
-        z_next = setup.abstraction.advance(z, step.obs, step.td)
-        shape_step(potential, setup.shared, z_col, _column(z_next, n, "z'"), *inputs, *outputs, *extra)
+    else:  # conditions or a lookup: advanced first (conditions called in Python), then shaped
+        if not finite_inputs(env_col, _NO_ENTRIES):
+            check_finite(env_reward, None, "reward", settings.observation_key)
+        abstraction = setup.abstraction
+        if isinstance(abstraction, SubgoalTables):
+            abstraction.advance_into(z_col, step.obs, step.td, outputs[0])
+        else:
+            z_next = abstraction.advance(z, step.obs, step.td)
+            outputs = (z_next.numpy().reshape(col), *outputs[1:])
+        zn_col = outputs[0]
+        shape_step(potential, setup.shared, z_col, zn_col, *inputs, *outputs[1:], *extra)
     if reward is not env_reward:  # after another shaping transform: shape its reward, accumulate the env's
         shaped += reward - env_reward
     out: dict[str, Any] = {keys.index: z_next, keys.ret: rh_out, keys.steps: k_out, "reward": shaped}

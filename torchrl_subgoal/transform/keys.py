@@ -13,7 +13,8 @@ from tensordict.utils import NestedKey
 from torchrl.data import Binary, Bounded, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase
 
-__all__ = ["EnvKeys", "SubgoalKeys", "at", "read", "write"]
+__all__ = ["EnvKeys", "SubgoalKeys", "add_env_reward", "at", "kept_specs", "observation", "read", "state_specs",
+           "transition_spec", "write"]
 
 RETURN = "subgoal_return"
 STEPS = "subgoal_steps"
@@ -190,3 +191,55 @@ def transition_spec(inputs: dict[str, TensorSpec], shape: torch.Size) -> Composi
                     done=flag.clone(), terminated=flag.clone(), shape=shape)
     return Composite(**{k: s.clone() for k, s in inputs.items()},
                      steps_to_next_obs=Unbounded(shape=col, dtype=torch.long), mask=flag.clone(), next=nxt, shape=shape)
+
+
+def observation(spec: Composite, key: NestedKey, what: str) -> TensorSpec:
+    """The spec of the observation ``key`` (named ``what`` in the error when the env lacks it).
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> observation(FourRoomsEnv(2).full_observation_spec, "cell", "observation_key").shape
+        torch.Size([2, 2])
+    """
+    if key not in spec.keys(True, True):
+        raise KeyError(f"SubgoalPotentialTransform: {what} {key!r} is not an observation of the env; "
+                       f"available: {sorted(map(str, spec.keys(True, True)))}")
+    return spec[key]
+
+
+def kept_specs(parent: EnvBase, env: EnvKeys, keys: SubgoalKeys, kept: tuple[str, ...], num_states: int,
+               observation_key: NestedKey) -> dict[str, TensorSpec]:
+    """The specs of the ``kept`` entries in ``parent``'s group ``env.group`` (names relative to the group).
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> base = FourRoomsEnv(2)
+        >>> specs = kept_specs(base, EnvKeys.resolve(base), SubgoalKeys(), ("subgoal_index",), 3, "cell")
+        >>> specs["subgoal_index"].shape
+        torch.Size([2, 1])
+    """
+    shape = parent.full_done_spec[env.done].shape[:-1]
+    anchor = observation(parent.full_observation_spec, observation_key, "observation_key") \
+        if keys.anchor in kept else None
+    return state_specs(keys, kept, num_states, shape, anchor)
+
+
+def add_env_reward(reward_spec: Composite, parent: EnvBase, env: EnvKeys) -> None:
+    """Declare the unshaped reward beside the reward (unless an earlier shaping did), after checking
+    that the reward has one entry per episode row.
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> base = FourRoomsEnv(2)
+        >>> spec = base.full_reward_spec.clone()
+        >>> add_env_reward(spec, base, EnvKeys.resolve(base))
+        >>> sorted(spec.keys())
+        ['env_reward', 'reward']
+    """
+    done = parent.full_done_spec[env.done]
+    if reward_spec[env.reward].shape != done.shape:
+        raise ValueError(f"SubgoalPotentialTransform: the reward {env.reward!r} has shape "
+                         f"{tuple(reward_spec[env.reward].shape)} but episodes end by {env.done!r} of shape "
+                         f"{tuple(done.shape)}: one reward per episode row is needed (combine the rewards first)")
+    if not env.shaped_before:
+        reward_spec[env.env_reward] = reward_spec[env.reward].clone()

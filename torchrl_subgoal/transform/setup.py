@@ -11,8 +11,9 @@ import numpy as np
 import torch
 from tensordict.nn import TensorDictModuleBase
 from tensordict.utils import NestedKey
+from torchrl.data import OneHot, TensorSpec
 
-from torchrl_subgoal.loss import SubgoalValueLoss
+from torchrl_subgoal.loss import SubgoalValueLoss, ValueUpdate
 from torchrl_subgoal.potentials import NaivePotential, TabularPotential
 from torchrl_subgoal.subgoals import (
     RegionTables,
@@ -24,7 +25,8 @@ from torchrl_subgoal.subgoals import (
 from torchrl_subgoal.transform.keys import SubgoalKeys
 from torchrl_subgoal.transform.shaping import START_MODES, StartPotential
 
-__all__ = ["BatchSetup", "PotentialKernelState", "Settings", "Subgoals", "compiled_potential"]
+__all__ = ["BatchSetup", "PotentialKernelState", "Settings", "Subgoals", "check_potential", "compiled_potential",
+           "initial_state", "kept_entries", "observation_layout", "online_update"]
 
 #: ``table`` of a naive potential in the kernels: no table, ``Φ = η · achieved``
 NO_TABLE = np.zeros((0, 1), dtype=np.float32)
@@ -168,6 +170,9 @@ class BatchSetup:
     table_ptr: int = 0
     z_start: np.ndarray = field(default_factory=lambda: np.zeros((1, 1), np.int64))
 
+    def __post_init__(self) -> None:
+        self.rows = self.batch_shape.numel()  #: rows of the batch
+
     def use_kernels(self, potential: TensorDictModuleBase, settings: Settings, value_lr: float, online: bool) -> None:
         """Set the potential up for the compiled step (``online``: the env's batch, whose rows are the
         learners; else stored rows, each reading its learner's table, copied)."""
@@ -199,3 +204,109 @@ class BatchSetup:
     def moved(self) -> bool:
         """Whether the tabular potential's table moved since (to shared memory, another device…)."""
         return self.table is not None and self.table.data_ptr() != self.table_ptr
+
+
+def check_potential(potential: TensorDictModuleBase, keys: SubgoalKeys) -> None:
+    """Refuse a potential that is not a TensorDict module writing a value, or that reads entries the
+    transform does not keep; the message says what to build instead.
+
+    Examples:
+        >>> check_potential(TabularPotential(3), SubgoalKeys())  # reads subgoal_index: fine
+    """
+    if not isinstance(potential, TensorDictModuleBase) or not potential.out_keys:
+        raise TypeError(
+            "the potential must be a TensorDict module whose (last) output entry is the value (a Potential, or e.g. "
+            f"TensorDictModule(net, in_keys=[{keys.anchor!r}], out_keys=['subgoal_value'])), "
+            f"got {type(potential).__name__}")
+    provided = (keys.index, *keys.optional)
+    unknown = [k for k in potential.in_keys if k not in provided]
+    if unknown:
+        raise ValueError(f"the potential reads {unknown}, which this transform does not keep; it keeps "
+                         f"{list(provided)} (prefix {keys.prefix!r}): build the potential with those keys")
+
+
+def kept_entries(keys: SubgoalKeys, potential: TensorDictModuleBase, subgoals: Subgoals,
+                 start: StartPotential) -> tuple[str, ...]:
+    """The entries kept: ``z``, ``r_h``, ``k``, those the potential reads, and its input at reset when the
+    start level needs it (unless that input is ``z = 0``, where every subgoal series starts).
+
+    Examples:
+        >>> from torchrl_subgoal import State
+        >>> kept_entries(SubgoalKeys(), TabularPotential(2, (4,)), Subgoals(SubgoalSeries([State(1)])), "zero")
+        ('subgoal_index', 'subgoal_return', 'subgoal_steps', 'subgoal_learner')
+    """
+    reads = potential.in_keys
+    extra = tuple(k for k in keys.optional if k in reads)
+    if start != "value" and not isinstance(potential, NaivePotential) and (
+            keys.anchor in reads or (subgoals.aggregation is not None and keys.index in reads)):
+        extra = (*extra, keys.start)
+    return (keys.index, keys.ret, keys.steps, *extra)
+
+
+def online_update(value_update: ValueUpdate | float | None, potential: TensorDictModuleBase,
+                  gamma: float) -> ValueUpdate | None:
+    """``value_update`` as a :class:`ValueUpdate` whose loss trains ``potential`` (``None``: none); the
+    default loss has ``γ_v = gamma``.
+
+    Examples:
+        >>> online_update(0.25, TabularPotential(3), 0.9).loss.reduction
+        'sum'
+    """
+    if value_update is None:
+        return None
+    update = value_update if isinstance(value_update, ValueUpdate) else ValueUpdate(float(value_update))
+    if not list(potential.parameters()):
+        raise ValueError(f"value_update: {type(potential).__name__} has no parameters to train")
+    if update.loss is None:
+        return ValueUpdate(update.lr, SubgoalValueLoss(potential, reduction="sum").make_value_estimator(gamma=gamma))
+    if update.loss.potential is not potential:
+        raise ValueError("value_update: its loss trains another potential than the transform's")
+    return update
+
+
+def observation_layout(spec: TensorSpec | None, obs: torch.Tensor | None, batch_shape: torch.Size,
+                       subgoals: Subgoals) -> tuple[int, bool]:
+    """(entries per observation, one-hot?): from the env's ``spec`` when there is one, else from the data
+    (where a :class:`State` predicate reads an observation of more than one entry as one-hot).
+
+    Examples:
+        >>> from torchrl_subgoal import State
+        >>> observation_layout(None, torch.zeros(3, 4), torch.Size([3]), Subgoals(SubgoalSeries([State(1)])))
+        (4, True)
+    """
+    if spec is not None:
+        shape = spec.shape[len(batch_shape):]
+        return (shape.numel() if len(shape) else 1), isinstance(spec, OneHot)
+    if obs is None:
+        return 0, False
+    size = obs.shape[len(batch_shape):].numel() if obs.dim() > len(batch_shape) else 1
+    return size, subgoals.one_hot_states and size > 1
+
+
+def initial_state(setup: BatchSetup, settings: Settings, obs: torch.Tensor | None) -> dict[str, torch.Tensor]:
+    """The kept entries at a reset to the observation ``obs`` (``None`` when it is not read).
+
+    Examples:
+        >>> from torchrl_subgoal import State
+        >>> subgoals = Subgoals(SubgoalSeries([State(1)]))
+        >>> learner = torch.arange(2).reshape(2, 1)
+        >>> setup = BatchSetup(torch.Size([2]), subgoals.compile(learner, torch.Size([2]), 2, (1, False), "o"), learner)
+        >>> settings = Settings(SubgoalKeys(), ("subgoal_index", "subgoal_return", "subgoal_steps"), 0.9, 0.9, True,
+        ...                     "value", "o", True, False, ("subgoal_index",))
+        >>> initial_state(setup, settings, None)["subgoal_index"].tolist()
+        [[0], [0]]
+    """
+    batch_shape, k, kept = setup.batch_shape, settings.keys, settings.kept
+    col = (*batch_shape, 1)
+    state = {k.index: setup.abstraction.initial(obs, batch_shape), k.ret: torch.zeros(col),
+             k.steps: torch.zeros(col, dtype=torch.long)}
+    if k.achieved in kept:
+        state[k.achieved] = torch.zeros(col, dtype=torch.bool)
+    if k.anchor in kept:
+        assert obs is not None
+        state[k.anchor] = obs.reshape(*batch_shape, -1).to(torch.float32)
+    if k.learner in kept:
+        state[k.learner] = setup.learner
+    if k.start in kept:
+        state[k.start] = state[k.anchor if k.anchor in kept else k.index]
+    return state

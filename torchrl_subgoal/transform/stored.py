@@ -1,15 +1,22 @@
-"""Stored data: which learner each row of a replay sample belongs to, when that matters."""
+"""Stored data: shaping trajectories along their time dimension, and which learner each row of a replay
+sample belongs to, when that matters."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import torch
-from tensordict import TensorDictBase
+from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
+from tensordict.utils import NestedKey
 
 from torchrl_subgoal.potentials import TabularPotential
-from torchrl_subgoal.transform.setup import Subgoals
+from torchrl_subgoal.transform.compiled import StepInputs
+from torchrl_subgoal.transform.keys import ENV_REWARD, EnvKeys, at, read
+from torchrl_subgoal.transform.setup import BatchSetup, Settings, Subgoals, initial_state
 
-__all__ = ["learners_of", "time_dim"]
+__all__ = ["learners_of", "shape_stored", "time_dim"]
 
 
 def time_dim(data: TensorDictBase) -> int:
@@ -67,3 +74,58 @@ def learners_of(
         f"or tables: each row's learner is unknown. Keep the {learner_key!r} entry in the stored data (the transform "
         "writes it when the potential reads it), or pass rows in env order"
     )
+
+
+def shape_stored(
+    data: TensorDictBase,
+    env: EnvKeys,
+    settings: Settings,
+    in_keys: list[NestedKey],
+    transitions_key: NestedKey | None,
+    set_up: Callable[[torch.Size, torch.Tensor | None, int, torch.Tensor | None], BatchSetup],
+    advance: Callable[[BatchSetup, dict[str, torch.Tensor], StepInputs], dict[str, Any]],
+) -> TensorDictBase:
+    """Shape stored trajectories ``data`` ``[*B, T]`` (see ``SubgoalPotentialTransform.forward``):
+    ``set_up(batch_shape, stored learner entry, time dim, first observation)`` sets the rows up,
+    ``advance`` makes one step without training."""
+    time = time_dim(data)
+    nxt = data.get("next", None)
+    stored_reward = nxt is not None and read(nxt, env.env_reward) is not None  # then the one shaped
+    missing = [("next", key) for key in in_keys if key != env.env_reward and not (key == env.reward and stored_reward)
+               and (nxt is None or read(nxt, key) is None)]
+    if missing:
+        raise KeyError(f"SubgoalPotentialTransform: the stored data has no {missing}; store the steps' entries the "
+                       "transform reads (in_keys)")
+    steps = data.unbind(time)
+    group: Callable[[TensorDictBase], TensorDictBase] = lambda td: td.get(env.group) if env.group else td  # noqa: E731
+    first, keys, kept = group(steps[0]), settings.keys, settings.kept
+    setup = set_up(first.batch_size, group(data).get(keys.learner, None), time,
+                   read(steps[0], settings.observation_key))
+    if all(first.get(name, None) is not None for name in kept):  # a slice from the middle of an episode
+        current = {name: first.get(name) for name in kept}
+        if keys.learner in current:
+            current[keys.learner] = setup.learner
+    else:
+        current = initial_state(setup, settings, read(steps[0], settings.observation_key))
+    outs = []
+    for t, step in enumerate(steps):
+        step_next = step.get("next")
+        reward = read(step_next, env.env_reward)
+        reward = read(step_next, env.reward) if reward is None else reward
+        done, terminated = read(step_next, env.done), read(step_next, env.terminated)
+        obs = read(step_next, settings.observation_key) if settings.reads_observation else None
+        out = advance(setup, current, StepInputs(obs, reward, reward, done, done if terminated is None else terminated,
+                                                 step_next))
+        outs.append({**out, ENV_REWARD: reward})
+        if t + 1 < len(steps):
+            restart = initial_state(setup, settings, read(steps[t + 1], settings.observation_key))
+            ended = done.reshape(*setup.batch_shape, 1)
+            current = {name: torch.where(ended, restart[name], out[name]) for name in current}
+    written: dict[str, NestedKey] = {name: at(env.group, name) for name in kept}
+    written |= {"reward": env.reward, ENV_REWARD: env.env_reward}
+    written |= {"transition": transitions_key} if transitions_key is not None else {}
+    for name, key in written.items():
+        values = [out[name] for out in outs]
+        value = torch.stack(values, time) if isinstance(values[0], torch.Tensor) else TensorDict.stack(values, time)
+        data.set(("next", *key) if isinstance(key, tuple) else ("next", key), value)
+    return data

@@ -6,23 +6,23 @@ from collections.abc import Sequence
 from typing import Any, Literal
 
 import torch
-from tensordict import TensorDict, TensorDictBase
+from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from tensordict.utils import NestedKey
-from torchrl.data import Composite, OneHot, TensorSpec
+from torchrl.data import Composite, TensorSpec
 from torchrl.envs.transforms import Transform
 
-from torchrl_subgoal.loss import SubgoalValueLoss, ValueUpdate
-from torchrl_subgoal.potentials import NaivePotential, TabularPotential
+from torchrl_subgoal.loss import ValueUpdate
+from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.subgoals import StateAggregation, SubgoalSeries, SubgoalTables
-from torchrl_subgoal.transform import compiled, keys, stored
+from torchrl_subgoal.transform import compiled, keys, setup, stored
 from torchrl_subgoal.transform.cache import ValueCache
 from torchrl_subgoal.transform.compiled import ShapingKernelState, StepInputs, compiled_step
 from torchrl_subgoal.transform.eager import torch_step
 from torchrl_subgoal.transform.keys import EnvKeys, SubgoalKeys, at, read, write
-from torchrl_subgoal.transform.setup import BatchSetup, Settings, Subgoals, compiled_potential
+from torchrl_subgoal.transform.setup import BatchSetup, Settings, Subgoals
 from torchrl_subgoal.transform.shaping import START_MODES, StartPotential
-from torchrl_subgoal.transform.transitions import rebuild, transition
+from torchrl_subgoal.transform.transitions import empty_transition, rebuild
 
 __all__ = ["SubgoalPotentialTransform"]
 
@@ -32,86 +32,58 @@ Backend = Literal["auto", "compiled", "torch"]
 class SubgoalPotentialTransform(Transform):
     """Adds the shaping reward ``F = γ Φ(z') − Φ(z)`` of a subgoal series to any TorchRL env.
 
-    The transform keeps, per env of the batch, the abstract state of dynamic
-    trajectory aggregation (Okudo & Yamada 2021) in the TensorDict (names with
-    the default ``prefix="subgoal"``; see :class:`SubgoalKeys`), declared in the
-    env's specs as observations and as carried state (``full_state_spec``):
+    Per env of the batch, the transform keeps the abstract state of dynamic trajectory aggregation
+    (Okudo & Yamada 2021) in the TensorDict, declared in the specs as observations and as carried
+    state (names with the default ``prefix``; see :class:`SubgoalKeys`): ``"subgoal_index"`` ``z`` (the
+    node of the series reached: 0 at reset, advanced when the next subgoal holds), ``"subgoal_return"``
+    ``r_h ← r_h + γ_v^k r`` and ``"subgoal_steps"`` ``k ← k + 1`` since ``z`` was entered, and, when the
+    potential reads them, ``"subgoal_achieved"``, ``"subgoal_anchor"`` (the observation at which ``z``
+    was entered) and ``"subgoal_learner"`` (the env's index in the batch).
 
-    * ``"subgoal_index"`` ``z`` — the node of the subgoal series reached
-      (``0`` at reset; advanced when the next subgoal's predicate holds);
-    * ``"subgoal_return"`` ``r_h ← r_h + γ_v^k r`` and ``"subgoal_steps"``
-      ``k ← k + 1`` since ``z`` was entered;
-    * only when the potential reads them: ``"subgoal_achieved"``,
-      ``"subgoal_anchor"`` (the observation at which ``z`` was entered) and
-      ``"subgoal_learner"`` (the env's index in the batch).
+    The reward, done and terminated entries are the parent env's, resolved as TorchRL's ``RewardSum``
+    and ``StepCounter`` resolve theirs (nested and multi-agent keys keep the abstract state in the
+    reward's group, one row per episode). Every step adds ``F`` to the reward; the env's reward stays
+    under ``"env_reward"``, a second reward entry. ``in_keys`` are the step's entries read, ``out_keys``
+    those written.
 
-    The reward, done and terminated entries are the parent env's, resolved as
-    TorchRL's ``RewardSum`` and ``StepCounter`` resolve theirs: nested and
-    multi-agent keys keep the abstract state in the reward's group (one row per
-    episode: the reward must have the done entry's shape). Every step adds ``F``
-    to the reward; the env's reward stays under ``"env_reward"`` beside it,
-    declared as a second reward entry. ``in_keys`` are the step's entries read,
-    ``out_keys`` those written.
-
-    When a subgoal is achieved or the episode ends, the step closes one SMDP
-    transition ``(z, r_h, k, z', terminated)``: :meth:`transitions` rebuilds
-    those of collected data (any batch shape) from the kept entries, in the
-    layout :class:`~torchrl_subgoal.SubgoalValueLoss` reads. At truncation the
-    transition bootstraps from ``V(z')``.
-
-    **Shaping and learning are separate.** The shaping uses the potential *as
-    it is now* (a dynamic potential). With ``value_update`` the env step first
-    trains it online on this step's transitions (the paper's algorithm);
-    otherwise train it yourself from :meth:`transitions` with the same loss.
-    Freeze a trained potential with ``transform.potential.requires_grad_(False)``.
-
-    **Stored data.** ``transform(data)`` (e.g. a replay-buffer sample
-    ``[*B, T]``) recomputes the abstract state and the shaping along the time
-    dimension from the stored entries, without training. A row's learner matters
-    only when learners have their own table or pattern: then it is read from
-    ``"subgoal_learner"`` (or the rows are the env batch in order).
-
-    Policy invariance (Ng et al. 1999) needs ``Φ`` to be a function of the
-    *agent's* state: give the agent ``z`` too for the exact guarantee once ``Φ``
-    is fixed. A NaN or infinite reward, or a NaN in the observation, raises
-    ``ValueError`` naming the entry. Append the transform to the *outer* env
-    (``TransformedEnv(ParallelEnv(...), t)``) so that the potential trained is
-    the one shaping; see :mod:`torchrl_subgoal.training` for collector workers.
+    A step that achieves a subgoal or ends the episode closes an SMDP transition ``(z, r_h, k, z',
+    terminated)``; :meth:`transitions` rebuilds those of collected data for
+    :class:`~torchrl_subgoal.SubgoalValueLoss`. Shaping uses the potential as it is now; with
+    ``value_update`` the step first trains it online (the paper's algorithm). ``transform(data)`` shapes
+    stored trajectories (a replay-buffer sample) without training. Policy invariance needs ``Φ`` to be a
+    function of the agent's state: give the agent ``z`` too. A NaN or infinite reward, or a NaN in the
+    observation, is a ``ValueError`` naming the entry. Append the transform to the *outer* env
+    (``TransformedEnv(ParallelEnv(...), t)``), so that the potential trained is the one shaping
+    (collector workers: :mod:`torchrl_subgoal.training`).
 
     Args:
         subgoals: a :class:`SubgoalSeries` shared by every env of the batch; a
             sequence of series, one per env (flattened batch order; equal series
             are compiled once); or a :class:`StateAggregation` ``z = g(s)``.
-        potential: ``Φ`` — :class:`TabularPotential`, :class:`NeuralPotential`,
-            :class:`NaivePotential`, or any TensorDict module reading entries
-            this transform keeps and writing one value entry.
+        potential: ``Φ``: :class:`TabularPotential`, :class:`NeuralPotential`, :class:`NaivePotential`,
+            or any TensorDict module reading entries this transform keeps and writing one value.
 
     Keyword Args:
         gamma: the agent's discount ``γ`` in ``F = γ Φ(z') − Φ(z)``.
         observation_key: the observation the region predicates and an
             aggregation read, and the anchor snapshots.
-        value_update: train the potential online: a :class:`~torchrl_subgoal.ValueUpdate`
-            (its learning rate ``α_v`` and, optionally, the
-            :class:`~torchrl_subgoal.SubgoalValueLoss` stepped, whose ``γ_v``
-            discounts ``r_h``), or the learning rate alone. ``None`` (default):
-            no online update, and ``γ_v = γ``.
-        zero_terminal_potential: ``Φ = 0`` at terminal states (strict policy
-            invariance in episodic tasks). ``False`` shapes with ``V(z')`` at
-            the goal as the authors' released code does.
+        value_update: train the potential online: a :class:`~torchrl_subgoal.ValueUpdate` (the learning
+            rate ``α_v`` and, optionally, the configured :class:`~torchrl_subgoal.SubgoalValueLoss` it
+            steps, whose ``γ_v`` discounts ``r_h``), or the learning rate alone. ``None``: none, ``γ_v = γ``.
+        zero_terminal_potential: ``Φ = 0`` at terminal states (strict policy invariance in episodic
+            tasks); ``False`` shapes with ``V(z')`` at the goal, as the authors' released code does.
         start_potential: the level of ``Φ``, set by the potential of the state
             the episode started in: ``"value"`` (``Φ = V``), ``"zero"``
-            (``Φ = V − V(z_0)``) or ``"nonpositive"`` (the default,
-            ``Φ = V − max(V(z_0), 0)``; see ``docs/shaping_defaults.md``).
+            (``Φ = V − V(z_0)``) or ``"nonpositive"`` (default,
+            ``Φ = V − max(V(z_0), 0)``; see docs/shaping_defaults.md).
         transitions_key: if given, every step also writes its SMDP transition
-            entry under ``("next", transitions_key)`` (``"mask"`` tells the real
-            ones); :meth:`transitions` needs none.
-        prefix: the names of the kept entries (see :class:`SubgoalKeys`); the
-            potential reads entries of the same prefix. Two transforms on one
-            env need different prefixes (the same one is refused).
-        backend: ``"compiled"``: the numba kernels (a tabular or naive potential
-            on the CPU; anything else is a ``TypeError`` that says why);
-            ``"torch"``: torch operations only (any potential and device);
-            ``"auto"`` (default): compiled when possible. Both agree.
+            under ``("next", transitions_key)`` (``"mask"`` tells the real ones).
+        prefix: the names of the kept entries; two transforms on one env need
+            different prefixes (the same one is refused).
+        backend: ``"compiled"``: numba kernels (a tabular or naive potential on
+            the CPU; anything else is a ``TypeError`` saying why); ``"torch"``:
+            torch operations only (any potential, any device); ``"auto"``
+            (default): compiled when possible. Both agree.
 
     Examples:
         >>> from torchrl.envs import TransformedEnv
@@ -150,108 +122,59 @@ class SubgoalPotentialTransform(Transform):
             raise ValueError(f"start_potential must be one of {sorted(START_MODES)}, got {start_potential!r}")
         if backend not in ("auto", "compiled", "torch"):
             raise ValueError(f"backend must be 'auto', 'compiled' or 'torch', got {backend!r}")
-        self.subgoals = Subgoals(subgoals)
-        self.keys = SubgoalKeys(prefix)
+        self.subgoals, self.keys = Subgoals(subgoals), SubgoalKeys(prefix)
+        setup.check_potential(potential, self.keys)
         self.potential = potential
-        self._check_potential_keys()
-        self.backend = backend
-        self.transitions_key = transitions_key
-        self.value_update = _value_update(value_update, potential, gamma)
+        self.backend, self.transitions_key = backend, transitions_key
+        self.value_update = setup.online_update(value_update, potential, gamma)
         self.value_optimizer = torch.optim.SGD(potential.parameters(), self.value_update.lr) if self.value_update else None
         self._parameters_list = list(potential.parameters())
-        value_gamma = float(gamma) if self.value_update is None or value_update_loss_default(value_update) \
-            else self.value_update.loss.gamma  # type: ignore[union-attr]
-        self._settings = Settings(self.keys, self._kept(start_potential), float(gamma), value_gamma,
-                                  zero_terminal_potential, start_potential, observation_key,
-                                  self.subgoals.reads_observation, transitions_key is not None, tuple(potential.in_keys))
+        value_gamma = float(gamma) if not isinstance(value_update, ValueUpdate) or value_update.loss is None \
+            else value_update.loss.gamma
+        kept = setup.kept_entries(self.keys, potential, self.subgoals, start_potential)
+        self._settings = Settings(self.keys, kept, float(gamma), value_gamma, zero_terminal_potential, start_potential,
+                                  observation_key, self.subgoals.reads_observation, transitions_key is not None,
+                                  tuple(potential.in_keys))
         self._env = EnvKeys.resolve(None)
         self._online: BatchSetup | None = None
         self._layout: tuple[int, bool] | None = None
         self._cache = ValueCache()
 
-    def _kept(self, start: StartPotential) -> tuple[str, ...]:
-        keys, reads = self.keys, self.potential.in_keys
-        extra = tuple(k for k in keys.optional if k in reads)
-        # Φ(z_0) needs the potential's input at reset, unless it is z = 0 (every subgoal series starts there)
-        if start != "value" and not isinstance(self.potential, NaivePotential) and (
-                keys.anchor in reads or (self.subgoals.aggregation is not None and keys.index in reads)):
-            extra = (*extra, keys.start)
-        return (keys.index, keys.ret, keys.steps, *extra)
+    # ------------------------------------------------------------------ what it keeps, reads and writes
 
-    def _check_potential_keys(self) -> None:
-        pot = self.potential
-        if not isinstance(pot, TensorDictModuleBase) or not pot.out_keys:
-            raise TypeError(
-                "the potential must be a TensorDict module whose (last) output entry is the value (a Potential, or e.g. "
-                f"TensorDictModule(net, in_keys=[{self.keys.anchor!r}], out_keys=['subgoal_value'])), "
-                f"got {type(pot).__name__}")
-        provided = (self.keys.index, *self.keys.optional)
-        unknown = [k for k in pot.in_keys if k not in provided]
-        if unknown:
-            raise ValueError(f"the potential reads {unknown}, which this transform does not keep; it keeps "
-                             f"{list(provided)} (prefix {self.keys.prefix!r}): build the potential with those keys")
-
-    # ------------------------------------------------------------------ what it reads and writes
-
-    @property
-    def gamma(self) -> float:
-        """``γ`` of the shaping term."""
-        return self._settings.gamma
-
-    @property
-    def value_gamma(self) -> float:
-        """``γ_v`` of the SMDP return (the online update's loss's, else ``γ``)."""
-        return self._settings.value_gamma
-
-    @property
-    def observation_key(self) -> NestedKey:
-        """The observation the region predicates read and the anchor snapshots."""
-        return self._settings.observation_key
-
-    @property
-    def zero_terminal_potential(self) -> bool:
-        """Whether ``Φ = 0`` at terminal states."""
-        return self._settings.zero_terminal
-
-    @property
-    def start_potential(self) -> StartPotential:
-        """The level of ``Φ`` (see the class's ``start_potential``)."""
-        return self._settings.start
-
-    @property
-    def state_keys(self) -> tuple[str, ...]:
-        """Abstract-state entries kept in the TensorDict (``"subgoal_*"``, in the reward's group)."""
-        return self._settings.kept
-
-    @property
-    def value_key(self) -> NestedKey:
-        """The potential's value entry (its last output entry)."""
-        return self.potential.out_keys[-1]
-
-    @property
-    def env_reward_key(self) -> NestedKey:
-        """Where the unshaped reward is kept (``"env_reward"`` beside the reward)."""
-        return self._env.env_reward
+    gamma = property(lambda self: self._settings.gamma, doc="The discount of the shaping term.")
+    value_gamma = property(lambda self: self._settings.value_gamma, doc="The discount of the SMDP return.")
+    observation_key = property(lambda self: self._settings.observation_key,
+                               doc="The observation the region predicates read and the anchor snapshots.")
+    zero_terminal_potential = property(lambda self: self._settings.zero_terminal, doc="``Φ = 0`` at terminal states.")
+    start_potential = property(lambda self: self._settings.start, doc="The level of ``Φ``.")
+    state_keys = property(lambda self: self._settings.kept,
+                          doc="The abstract-state entries kept (``\"subgoal_*\"``, in the reward's group).")
+    env_reward_key = property(lambda self: self._env.env_reward, doc="Where the unshaped reward is kept.")
+    value_key = property(lambda self: self.potential.out_keys[-1], doc="The potential's value entry.")
+    num_abstract_states = property(lambda self: self.subgoals.num_states,
+                                   doc="Number of abstract states ``z`` (the terminal one excluded).")
+    aggregation = property(lambda self: self.subgoals.aggregation, doc="The hand-given aggregation, if any.")
 
     @property
     def in_keys(self) -> list[NestedKey]:
-        """The step's entries read: the reward, the done and terminated entries, the observation (when
-        read) and an earlier shaping's env reward. The kept entries (:attr:`out_keys`) are read back at the root."""
+        """The step's entries read: the reward, the done and terminated entries, the observation (when read)
+        and an earlier shaping's env reward; the kept entries (:attr:`out_keys`) are read back at the root."""
         env = self._env
         read_obs = self._settings.reads_observation or self.keys.anchor in self.state_keys
-        extra = [env.env_reward] if env.shaped_before else []
         done = [env.done] if env.terminated == env.done else [env.done, env.terminated]
-        return [env.reward, *extra, *done, *([self.observation_key] if read_obs else [])]
+        return [env.reward, *([env.env_reward] if env.shaped_before else []), *done,
+                *([self.observation_key] if read_obs else [])]
 
     @in_keys.setter
-    def in_keys(self, value: Any) -> None:
+    def in_keys(self, value: Any) -> None:  # Transform.__init__ sets None
         if value:
             raise AttributeError("SubgoalPotentialTransform's in_keys come from the parent env and observation_key")
 
     @property
     def out_keys(self) -> list[NestedKey]:
-        """The step's entries written: the shaped reward, the env reward (unless an earlier shaping keeps
-        it) and the kept abstract state (and the transition entry with ``transitions_key``)."""
+        """The step's entries written: the shaped reward, the env reward (unless an earlier shaping keeps it),
+        the kept abstract state, and the transition entry with ``transitions_key``."""
         env = self._env
         written = [env.reward, *([] if env.shaped_before else [env.env_reward])]
         written += [at(env.group, name) for name in self.state_keys]
@@ -264,18 +187,9 @@ class SubgoalPotentialTransform(Transform):
 
     @property
     def learning(self) -> bool:
-        """Whether the potential is trained online: ``value_update`` was given and it is not frozen."""
+        """Whether the potential is trained online: ``value_update`` was given and it is not frozen
+        (freeze it with ``transform.potential.requires_grad_(False)``)."""
         return self.value_update is not None and any(p.requires_grad for p in self._parameters_list)
-
-    @property
-    def num_abstract_states(self) -> int:
-        """Number of abstract states ``z`` (the terminal one excluded)."""
-        return self.subgoals.num_states
-
-    @property
-    def aggregation(self) -> StateAggregation | None:
-        """The hand-given aggregation (``None``: subgoal series)."""
-        return self.subgoals.aggregation
 
     @property
     def abstraction(self) -> SubgoalTables | StateAggregation | None:
@@ -283,27 +197,6 @@ class SubgoalPotentialTransform(Transform):
         return self._online.abstraction if self._online is not None else None
 
     # ------------------------------------------------------------------ set-up and specs
-
-    def _resolve(self) -> None:
-        self._env = EnvKeys.resolve(self.parent)
-
-    def _observation_layout(self, obs: torch.Tensor | None, batch_shape: torch.Size) -> tuple[int, bool]:
-        """(entries per observation, one-hot?): from the env's spec once known, else from the data (a
-        :class:`State` predicate then reads an observation of more than one entry as one-hot)."""
-        if self._layout is not None:
-            return self._layout
-        if not self._settings.reads_observation and self.keys.anchor not in self.state_keys:
-            return 0, False
-        parent = self.parent
-        if parent is not None:
-            spec = _observation(parent.full_observation_spec, self.observation_key, "observation_key")
-            shape = spec.shape[len(batch_shape):]
-            self._layout = (shape.numel() if len(shape) else 1), isinstance(spec, OneHot)
-            return self._layout
-        if obs is None:
-            return 0, False
-        size = obs.shape[len(batch_shape):].numel() if obs.dim() > len(batch_shape) else 1
-        return size, self.subgoals.one_hot_states and size > 1
 
     def _batch(self, batch_shape: torch.Size, learner: torch.Tensor, n_learners: int, obs: torch.Tensor | None,
                online: bool) -> BatchSetup:
@@ -315,146 +208,119 @@ class SubgoalPotentialTransform(Transform):
         if isinstance(pot, TabularPotential) and pot.num_states < self.num_abstract_states:
             raise ValueError(f"TabularPotential has {pot.num_states} states; the abstraction has "
                              f"{self.num_abstract_states}")
-        layout = self._observation_layout(obs, batch_shape)
-        setup = BatchSetup(batch_shape, self.subgoals.compile(learner, batch_shape, n_learners, layout,
-                                                              self.observation_key), learner,
-                           compiled_search=self.backend != "torch")
-        why = "backend='torch'" if self.backend == "torch" else compiled_potential(
+        layout = self._layout  # the observation's entries and encoding: the env's spec's once known
+        if layout is None:
+            spec = None
+            if self.parent is not None and (self._settings.reads_observation or self.keys.anchor in self.state_keys):
+                spec = keys.observation(self.parent.full_observation_spec, self.observation_key, "observation_key")
+            layout = setup.observation_layout(spec, obs, batch_shape, self.subgoals)
+            if spec is not None:
+                self._layout = layout
+        abstraction = self.subgoals.compile(learner, batch_shape, n_learners, layout, self.observation_key)
+        batch = BatchSetup(batch_shape, abstraction, learner, compiled_search=self.backend != "torch")
+        why = "backend='torch'" if self.backend == "torch" else setup.compiled_potential(
             pot, self.value_update.loss if self.value_update is not None else None)
         if why is None:
-            setup.use_kernels(pot, self._settings, self.value_update.lr if self.value_update else 0.0, online)
+            batch.use_kernels(pot, self._settings, self.value_update.lr if self.value_update else 0.0, online)
         elif self.backend == "compiled":
             raise TypeError(f"SubgoalPotentialTransform(backend='compiled'): {why}; use backend='torch' or 'auto'")
-        return setup
+        return batch
 
     def _online_batch(self, batch_shape: torch.Size, obs: torch.Tensor | None) -> BatchSetup:
-        setup = self._online
-        if setup is None or setup.batch_shape != batch_shape or setup.moved:
+        batch = self._online
+        if batch is None or batch.batch_shape != batch_shape or batch.moved:
             n = batch_shape.numel()
-            setup = self._online = self._batch(batch_shape, torch.arange(n).reshape(*batch_shape, 1), n, obs, True)
-        return setup
+            batch = self._online = self._batch(batch_shape, torch.arange(n).reshape(*batch_shape, 1), n, obs, True)
+        return batch
+
+    def _kept_specs(self) -> dict[str, TensorSpec]:
+        self._env = EnvKeys.resolve(self.parent)
+        s = self._settings
+        return keys.kept_specs(self.parent, self._env, self.keys, s.kept, self.num_abstract_states,  # type: ignore[arg-type]
+                               s.observation_key)
 
     def transform_observation_spec(self, observation_spec: TensorSpec) -> TensorSpec:
         assert isinstance(observation_spec, Composite)
-        self._resolve()
+        specs = self._kept_specs()
         if self._settings.reads_observation:
-            _observation(observation_spec, self.observation_key, "observation_key")
-        for key, spec in self._state_specs(observation_spec).items():
-            if key in observation_spec.keys(True, True):
-                raise ValueError(f"SubgoalPotentialTransform: {key!r} is kept already by another transform on this "
-                                 f"env; give this one another prefix (prefix='room') and its potential matching keys")
-            observation_spec[key] = spec
+            keys.observation(observation_spec, self.observation_key, "observation_key")
+        for name, spec in specs.items():
+            if at(self._env.group, name) in observation_spec.keys(True, True):
+                raise ValueError(f"SubgoalPotentialTransform: {at(self._env.group, name)!r} is kept already by another "
+                                 "transform on this env; give this one another prefix (prefix='room') and its "
+                                 "potential matching keys")
+            observation_spec[at(self._env.group, name)] = spec
         if self.transitions_key is not None:
-            inputs = {k: s for k, s in self._state_specs(observation_spec, relative=True).items()
-                      if k in self._settings.inputs}
-            observation_spec[self.transitions_key] = keys.transition_spec(inputs, self._group_shape(observation_spec))
+            shape = specs[self.keys.index].shape[:-1]
+            inputs = {k: s for k, s in specs.items() if k in self._settings.inputs}
+            observation_spec[self.transitions_key] = keys.transition_spec(inputs, shape)
         return observation_spec
 
     def transform_input_spec(self, input_spec: TensorSpec) -> TensorSpec:
         # the kept entries are carried from step to step: state, as RewardSum's and StepCounter's are
         assert isinstance(input_spec, Composite)
-        self._resolve()
         state = input_spec["full_state_spec"]
         if state is None:
             state = Composite(shape=input_spec.shape, device=input_spec.device)
-        for key, spec in self._state_specs(self.parent.full_observation_spec).items():  # type: ignore[union-attr]
-            state[key] = spec
+        for name, spec in self._kept_specs().items():
+            state[at(self._env.group, name)] = spec
         input_spec["full_state_spec"] = state
         return input_spec
 
     def transform_reward_spec(self, reward_spec: TensorSpec) -> TensorSpec:
         assert isinstance(reward_spec, Composite)
-        self._resolve()
-        env = self._env
-        done = self.parent.full_done_spec[env.done]  # type: ignore[union-attr]
-        if reward_spec[env.reward].shape != done.shape:
-            raise ValueError(f"SubgoalPotentialTransform: the reward {env.reward!r} has shape "
-                             f"{tuple(reward_spec[env.reward].shape)} but episodes end by {env.done!r} of shape "
-                             f"{tuple(done.shape)}: one reward per episode row is needed (combine the rewards first)")
-        if not env.shaped_before:
-            reward_spec[env.env_reward] = reward_spec[env.reward].clone()
+        self._env = EnvKeys.resolve(self.parent)
+        keys.add_env_reward(reward_spec, self.parent, self._env)  # type: ignore[arg-type]
         return reward_spec
-
-    def _group_shape(self, observation_spec: Composite) -> torch.Size:
-        done = self.parent.full_done_spec[self._env.done]  # type: ignore[union-attr]
-        return done.shape[:-1]
-
-    def _state_specs(self, observation_spec: Composite, relative: bool = False) -> dict[NestedKey, TensorSpec]:
-        shape = self._group_shape(observation_spec)
-        anchor = _observation(observation_spec, self.observation_key, "observation_key") \
-            if self.keys.anchor in self.state_keys else None
-        specs = keys.state_specs(self.keys, self.state_keys, self.num_abstract_states, shape, anchor)
-        return specs if relative else {at(self._env.group, k): s for k, s in specs.items()}  # type: ignore[misc]
 
     # ------------------------------------------------------------------ reset and step
 
-    def _initial_state(self, setup: BatchSetup, td: TensorDictBase) -> dict[str, torch.Tensor]:
-        """The abstract state at a reset observation (``td`` holds the reset entries)."""
-        batch_shape, k = setup.batch_shape, self.keys
-        col = (*batch_shape, 1)
-        obs = read(td, self.observation_key)
-        state = {k.index: setup.abstraction.initial(obs, batch_shape), k.ret: torch.zeros(col),
-                 k.steps: torch.zeros(col, dtype=torch.long)}
-        kept = self.state_keys
-        if k.achieved in kept:
-            state[k.achieved] = torch.zeros(col, dtype=torch.bool)
-        if k.anchor in kept:
-            state[k.anchor] = obs.reshape(*batch_shape, -1).to(torch.float32)
-        if k.learner in kept:
-            state[k.learner] = setup.learner
-        if k.start in kept:
-            state[k.start] = state[k.anchor if k.anchor in kept else k.index]
-        return state
-
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
-        # values for every env: TorchRL keeps the old ones where "_reset" is False
-        group = self._env.group
-        root = tensordict_reset.get(group) if group else tensordict_reset
-        setup = self._online_batch(root.batch_size, read(tensordict_reset, self.observation_key))
-        state = self._initial_state(setup, tensordict_reset)
-        for name, value in state.items():
-            write(root, name, value)
-        if self.transitions_key is not None:
-            zero, false = torch.zeros_like(state[self.keys.ret]), torch.zeros_like(state[self.keys.index], dtype=torch.bool)
-            inputs = {k: state[k] for k in self._settings.inputs}
-            write(tensordict_reset, self.transitions_key, transition(setup.batch_shape, inputs, inputs, zero,
-                                                                     state[self.keys.steps], false, false, false))
-        return tensordict_reset
+        return self._start(tensordict_reset, native=False)  # every env's: TorchRL keeps the rest where not "_reset"
 
     def _reset_on_native_autoreset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
-        # the env reset itself during the step: start the abstract state again where "_reset" is set
-        group = self._env.group
-        root = tensordict_reset.get(group) if group else tensordict_reset
-        reset = root.get("_reset", None)
-        if reset is None:
-            return tensordict_reset
-        setup = self._online_batch(root.batch_size, read(tensordict_reset, self.observation_key))
-        for name, value in self._initial_state(setup, tensordict_reset).items():
-            current = root.get(name)
-            write(root, name, torch.where(reset.reshape(*reset.shape[:root.batch_dims], 1).expand_as(current)
-                                          if current.dim() > reset.dim() else reset, value, current))
-        return tensordict_reset
+        return self._start(tensordict_reset, native=True)  # the env reset itself in its step: where "_reset" is set
+
+    def _start(self, td: TensorDictBase, native: bool) -> TensorDictBase:
+        """The kept entries at a reset: every row's, or (``native``) those of the rows ``"_reset"`` flags."""
+        group, obs = self._env.group, read(td, self.observation_key)
+        root = td.get(group) if group else td
+        reset = root.get("_reset", None) if native else None
+        if native and reset is None:
+            return td
+        batch = self._online_batch(root.batch_size, obs)
+        state = setup.initial_state(batch, self._settings, obs)
+        for name, value in state.items():
+            write(root, name, value if reset is None else torch.where(reset.reshape(*batch.batch_shape, 1), value,
+                                                                        root.get(name)))
+        if self.transitions_key is not None and not native:
+            write(td, self.transitions_key, empty_transition(batch.batch_shape, state, self._settings.inputs, self.keys))
+        return td
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
-        env = self._env
+        # every env step comes here: entries are read and written unchecked (their shapes are the specs')
+        env, settings = self._env, self._settings
         root, nxt = (tensordict.get(env.group), next_tensordict.get(env.group)) if env.group \
             else (tensordict, next_tensordict)
         current = {}
-        for name in self._settings.kept:
-            value = read(root, name)
+        for name in settings.kept:
+            value = root._get_str(name, None)
             if value is None:
                 raise KeyError(f"SubgoalPotentialTransform: {name!r} is missing from the step's input: reset the "
                                "env through the transform (env.reset()) before stepping")
             current[name] = value
-        reward = read(next_tensordict, env.reward)
-        done = read(next_tensordict, env.done)
-        obs = read(next_tensordict, self._settings.observation_key) if self._settings.reads_observation else None
+        reward, done = read(next_tensordict, env.reward), read(next_tensordict, env.done)
+        obs = read(next_tensordict, settings.observation_key) if settings.reads_observation else None
         step = StepInputs(obs, reward, read(next_tensordict, env.env_reward) if env.shaped_before else reward, done,
                           done if env.terminated == env.done else read(next_tensordict, env.terminated),
                           next_tensordict)
-        out = self._advance(self._online_batch(nxt.batch_size, obs), current, step, self.learning)
-        for name in self._settings.kept:
-            write(nxt, name, out[name])
+        batch = self._online  # set up again for another batch shape, or when a table moved (to shared memory…)
+        if batch is None or batch.batch_shape != nxt.batch_size or (
+                batch.table is not None and batch.table.data_ptr() != batch.table_ptr):
+            batch = self._online_batch(nxt.batch_size, obs)
+        out = self._advance(batch, current, step, self.value_update is not None and self.learning)
+        for name in settings.kept:
+            nxt._set_str(name, out[name], inplace=False, validated=True)
         write(next_tensordict, env.reward, out["reward"])
         if not env.shaped_before:
             write(next_tensordict, env.env_reward, reward)
@@ -462,30 +328,29 @@ class SubgoalPotentialTransform(Transform):
             write(next_tensordict, self.transitions_key, out["transition"])
         return next_tensordict
 
-    def _advance(self, setup: BatchSetup, current: dict[str, torch.Tensor], step: StepInputs, learn: bool) -> Any:
+    def _advance(self, batch: BatchSetup, current: dict[str, torch.Tensor], step: StepInputs, learn: bool) -> Any:
         """One step from ``current``: compiled when set up so (and on the CPU), else in torch."""
         learner = self.keys.learner
         if learner in self._settings.kept and learner not in current:
-            current[learner] = setup.learner
-        if setup.compiled and current[self.keys.index].device.type == "cpu":
-            return compiled_step(setup, self._settings, current, step, learn)
+            current[learner] = batch.learner
+        if batch.compiled and current[self.keys.index].device.type == "cpu":
+            return compiled_step(batch, self._settings, current, step, learn)
         if step.obs is None and self._settings.reads_observation:
             raise KeyError(f"SubgoalPotentialTransform: the step has no {self.observation_key!r} entry")
-        return torch_step(setup, self._settings, self.potential, self._cache, current, step,
+        return torch_step(batch, self._settings, self.potential, self._cache, current, step,
                           self.update_potential if learn else None)
 
     def update_potential(self, transitions: TensorDictBase) -> None:
-        """The online update: one SGD step of the potential on ``transitions`` (SMDP layout, masked).
+        """The online update: one SGD step of ``value_update``'s loss on ``transitions`` (SMDP layout, masked).
 
         Examples:
             >>> from torchrl_subgoal import State
-            >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9,
-            ...                               value_update=0.5)
-            >>> one = torch.ones(1, 1)
-            >>> t.update_potential(transition(torch.Size([1]), {"subgoal_index": 0 * one.long()},
-            ...                               {"subgoal_index": one.long()}, one, one.long(), one.bool(),
-            ...                               one.bool(), one.bool()))
-            >>> t.potential.table.tolist()  # V(0) += 0.5 (1 + 0.9 · 0 − 0): the episode terminated
+            >>> from torchrl_subgoal.transform.transitions import transition
+            >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9, value_update=0.5)
+            >>> z, one = torch.zeros(1, 1, dtype=torch.long), torch.ones(1, 1, dtype=torch.bool)
+            >>> t.update_potential(transition(torch.Size([1]), {"subgoal_index": z}, {"subgoal_index": z + 1},
+            ...                               one.float(), z + 1, one, one, one))  # r_h = 1, then terminated
+            >>> t.potential.table.tolist()  # V(0) += 0.5 (1 + 0 − 0)
             [0.5, 0.0]
         """
         update = self.value_update
@@ -498,9 +363,9 @@ class SubgoalPotentialTransform(Transform):
     def transitions(self, data: TensorDictBase) -> TensorDictBase:
         """The real SMDP transitions closed in collected ``data`` (any batch shape), as ``[N]``.
 
-        Rebuilt from the entries the transform keeps (nothing extra stored per step): a step closes a
-        transition when ``z`` changed or the episode ended. Rows keep the potential's inputs (with
-        ``"subgoal_learner"``, a per-env table finds its row in a shuffled replay buffer), in the layout
+        Rebuilt from the kept entries (nothing extra stored per step): a step closes a transition when ``z``
+        changed or the episode ended. Rows keep the potential's inputs (with ``"subgoal_learner"``, a per-env
+        table finds its row in a shuffled replay buffer), in the layout
         :class:`~torchrl_subgoal.SubgoalValueLoss` reads.
 
         Examples:
@@ -519,67 +384,30 @@ class SubgoalPotentialTransform(Transform):
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         """Shape stored trajectories (e.g. a replay-buffer sample) along their time dimension, without training.
 
-        ``tensordict`` has shape ``[*B, T]`` with the time dimension named
-        ``"time"`` (as :meth:`~torchrl.envs.EnvBase.rollout` returns) or last,
-        and holds the root observation and the step's :attr:`in_keys` under
-        ``"next"``. The abstract state starts from the stored entries of the
-        first step when the data has them (a slice from the middle of an
-        episode), else from the first observation as at a reset, and restarts
-        after every ``done``. The reward shaped is the env reward
-        (``"env_reward"`` when stored). The potential is used as it is now.
+        ``tensordict`` has shape ``[*B, T]`` with the time dimension named ``"time"`` (as
+        :meth:`~torchrl.envs.EnvBase.rollout` returns) or last, and holds the root observation and the
+        step's :attr:`in_keys` under ``"next"``. The abstract state starts from the stored entries of the
+        first step when the data has them (a slice from the middle of an episode), else from the first
+        observation as at a reset, and restarts after every ``done``. The reward shaped is the env reward
+        (``"env_reward"`` when stored). The rows' learners matter only when learners have their own table
+        or pattern: then each row's is read from ``"subgoal_learner"`` (or the rows are the env batch in
+        order); otherwise any sample, shuffled or not, is shaped.
         """
-        time = stored.time_dim(tensordict)
-        env, k = self._env, self.keys
-        nxt = tensordict.get("next", None)
-        stored_reward = nxt is not None and read(nxt, env.env_reward) is not None  # then the one shaped
-        missing = [("next", key) for key in self.in_keys if key != env.env_reward and not (key == env.reward and stored_reward)
-                   and (nxt is None or read(nxt, key) is None)]
-        if missing:
-            raise KeyError(f"SubgoalPotentialTransform: the stored data has no {missing}; store the steps' entries "
-                           f"the transform reads (in_keys)")
-        steps = tensordict.unbind(time)
-        first = steps[0].get(env.group) if env.group else steps[0]
-        batch_shape = first.batch_size
-        learned = (tensordict.get(env.group) if env.group else tensordict).get(k.learner, None)
-        learner, n_learners = stored.learners_of(learned, batch_shape, time, self.subgoals, self.potential,
-                                                 self._online.batch_shape.numel() if self._online else None, k.learner)
-        setup = self._batch(batch_shape, learner, n_learners, read(steps[0], self.observation_key), online=False)
-        if all(read(first, name) is not None for name in self.state_keys):
-            current = {name: read(first, name) for name in self.state_keys}
-            if k.learner in current:
-                current[k.learner] = learner
-        else:
-            current = self._initial_state(setup, steps[0])
-        outs = []
-        for t, step_td in enumerate(steps):
-            step_next = step_td.get("next")
-            reward = read(step_next, env.env_reward)
-            reward = read(step_next, env.reward) if reward is None else reward
-            done = read(step_next, env.done)
-            terminated = read(step_next, env.terminated)
-            obs = read(step_next, self.observation_key) if self._settings.reads_observation else None
-            step = StepInputs(obs, reward, reward, done, done if terminated is None else terminated, step_next)
-            out = self._advance(setup, current, step, learn=False)
-            out[env.env_reward] = reward
-            outs.append(out)
-            if t + 1 < len(steps):
-                restart = self._initial_state(setup, steps[t + 1])
-                ended = done.reshape(*batch_shape, 1)
-                current = {name: torch.where(ended, restart[name], out[name]) for name in current}
-        for name, first_out in outs[0].items():
-            values = [o[name] for o in outs]
-            value = torch.stack(values, time) if isinstance(first_out, torch.Tensor) else TensorDict.stack(values, time)
-            key = env.reward if name == "reward" else self.transitions_key if name == "transition" else \
-                name if name == env.env_reward else at(env.group, name)
-            tensordict.set(("next", *key) if isinstance(key, tuple) else ("next", key), value)
-        return tensordict
+        def set_up(batch_shape: torch.Size, learned: torch.Tensor | None, time: int,
+                   obs: torch.Tensor | None) -> BatchSetup:
+            learner, n = stored.learners_of(learned, batch_shape, time, self.subgoals, self.potential,
+                                            self._online.rows if self._online else None, self.keys.learner)
+            return self._batch(batch_shape, learner, n, obs, online=False)
+
+        return stored.shape_stored(tensordict, self._env, self._settings, self.in_keys, self.transitions_key, set_up,
+                                   lambda batch, current, step: self._advance(batch, current, step, learn=False))
 
     def kernel_state(self, tensordict: TensorDictBase) -> ShapingKernelState:
         """This transform for a compiled loop: its abstraction, its potential and each learner's abstract
         state as ``tensordict`` (a reset of the env through this transform) holds it, copied.
 
-        Needs the CPU, a subgoal series (regions only, no conditions), a lookup or a region aggregation, and
-        a tabular or naive potential; anything else is a ``TypeError`` that says so.
+        Needs what the compiled step needs, and a subgoal series of regions (no conditions), a lookup or a
+        region aggregation; anything else is a ``TypeError`` that says so.
 
         Examples:
             >>> from torchrl.envs import TransformedEnv
@@ -592,40 +420,12 @@ class SubgoalPotentialTransform(Transform):
             >>> state.potential.table.shape, state.potential.value_lr
             ((2, 3), 0.1)
         """
-        setup = self._online
-        if setup is None:
-            raise TypeError("kernel_state needs the env reset through the transform first (env.reset())")
-        if not setup.compiled:
-            why = compiled_potential(self.potential, self.value_update.loss if self.value_update else None)
-            raise TypeError(f"a compiled loop shapes as the compiled step does, which cannot here: {why or 'backend'}")
+        batch = self._online
+        if batch is None or not batch.compiled:
+            why = setup.compiled_potential(self.potential, self.value_update.loss if self.value_update else None)
+            raise TypeError("kernel_state needs the env reset through the transform first (env.reset())" if batch is
+                            None else f"a compiled loop shapes as the compiled step does, which it cannot here: "
+                            f"{why or 'backend=' + repr(self.backend)}")
         root = tensordict.get(self._env.group) if self._env.group else tensordict
         state = (root.get(self.keys.index), root.get(self.keys.ret), root.get(self.keys.steps))
-        return compiled.kernel_state(setup, state, self.learning,  # type: ignore[arg-type]
-                                     self._observation_layout(None, setup.batch_shape)[0])
-
-
-def _observation(spec: Composite, key: NestedKey, what: str) -> TensorSpec:
-    if key not in spec.keys(True, True):
-        raise KeyError(f"SubgoalPotentialTransform: {what} {key!r} is not an observation of the env; "
-                       f"available: {sorted(map(str, spec.keys(True, True)))}")
-    return spec[key]
-
-
-def value_update_loss_default(value_update: ValueUpdate | float | None) -> bool:
-    """Whether the online update steps the default loss (``γ_v = γ``)."""
-    return not isinstance(value_update, ValueUpdate) or value_update.loss is None
-
-
-def _value_update(value_update: ValueUpdate | float | None, potential: TensorDictModuleBase,
-                  gamma: float) -> ValueUpdate | None:
-    """``value_update`` as a :class:`ValueUpdate` whose loss trains ``potential`` (``None``: none)."""
-    if value_update is None:
-        return None
-    update = value_update if isinstance(value_update, ValueUpdate) else ValueUpdate(float(value_update))
-    if not list(potential.parameters()):
-        raise ValueError(f"value_update: {type(potential).__name__} has no parameters to train")
-    if update.loss is None:
-        return ValueUpdate(update.lr, SubgoalValueLoss(potential, reduction="sum").make_value_estimator(gamma=gamma))
-    if update.loss.potential is not potential:
-        raise ValueError("value_update: its loss trains another potential than the transform's")
-    return update
+        return compiled.kernel_state(batch, state, self.learning, (self._layout or (1, False))[0])

@@ -10,7 +10,7 @@ from tensordict.utils import NestedKey
 from torchrl_subgoal.transform.keys import EnvKeys, SubgoalKeys, at
 from torchrl_subgoal.transform.shaping import accumulate, closes
 
-__all__ = ["rebuild", "transition"]
+__all__ = ["empty_transition", "rebuild", "transition"]
 
 
 def transition(
@@ -36,6 +36,24 @@ def transition(
     """
     nxt = TensorDict({**next_inputs, "reward": r_h, "done": done, "terminated": terminated}, batch_size=batch_shape)
     return TensorDict({**inputs, "steps_to_next_obs": k, "mask": mask, "next": nxt}, batch_size=batch_shape)
+
+
+def empty_transition(
+    batch_shape: torch.Size, state: dict[str, torch.Tensor], inputs: tuple[NestedKey, ...], keys: SubgoalKeys
+) -> TensorDict:
+    """The transition entry at a reset: no transition (``mask`` false), the potential's ``inputs`` at the reset
+    ``state`` on both sides.
+
+    Examples:
+        >>> state = {"subgoal_index": torch.zeros(2, 1, dtype=torch.long), "subgoal_return": torch.zeros(2, 1),
+        ...          "subgoal_steps": torch.zeros(2, 1, dtype=torch.long)}
+        >>> empty_transition(torch.Size([2]), state, ("subgoal_index",), SubgoalKeys())["mask"].any().item()
+        False
+    """
+    at_reset = {k: state[k] for k in inputs}
+    false = torch.zeros_like(state[keys.index], dtype=torch.bool)
+    return transition(batch_shape, at_reset, at_reset, torch.zeros_like(state[keys.ret]), state[keys.steps], false,
+                      false, false)
 
 
 def rebuild(
