@@ -69,8 +69,11 @@ class CorridorEnv(EnvBase):
     def _set_seed(self, seed: int | None) -> None:
         pass
 
-    def kernel_state(self) -> CorridorKernelState:
-        """The corridor as the fused engine reads it (optional; see "The fused engine" below)."""
+    def kernel_state(self, observation_key: str = "observation") -> CorridorKernelState:
+        """The corridor as the fused engine reads it, the shaping reading ``observation_key`` (optional; see
+        "The fused engine" below)."""
+        if observation_key != "observation":
+            raise TypeError(f"the corridor's compiled steps read 'observation', not {observation_key!r}")
         return CorridorKernelState(self.position.numpy(), self.t.numpy(), self.length, self.max_steps)
 # --8<-- [end:env]
 

@@ -11,7 +11,7 @@ from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import Cell, SubgoalSeries
 from torchrl_subgoal._kernels.random import learner_keys
-from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
+from torchrl_subgoal.agents import AC_PRESETS, SARSA_PRESETS, FourierActorCritic, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import room_aggregation
 from torchrl_subgoal.methods import paper_methods, shaping_transform
@@ -130,11 +130,15 @@ def test_fused_rejects_other_setups() -> None:
         run_episodes(env, agent, 1, engine="fused")
     with pytest.raises(ValueError, match="engine must be"):
         run_episodes(FourRoomsEnv(2), agent, 1, engine="jax")  # type: ignore[arg-type]
-    with pytest.raises(TypeError, match="got LineEnv with SoftmaxSarsa"):  # no kernel_state()
+    with pytest.raises(TypeError, match="LineEnv with SoftmaxSarsa do not: use engine='torchrl'"):  # no kernel_state()
         run_episodes(LineEnv(2), agent, 1, engine="fused")
     with pytest.raises(TypeError, match=r"^LineState and SarsaKernelState do not implement the fused engine's "
                                         r"env_scratch, env_observe, env_step, env_reset, env_shaping_observation "):
         run_episodes(LineWithRecord(2), agent, 1, engine="fused")
+    actor_critic = FourierActorCritic(2, torch.zeros(4), torch.ones(4), 3, AC_PRESETS["released"], seed=0)
+    with pytest.raises(TypeError, match=r"the fused loop does not compile for GridKernelState with "
+                                        r"ActorCriticKernelState"):  # both registered, but not for each other
+        run_episodes(FourRoomsEnv(2), actor_critic, 1, engine="fused")
 
 
 class LineState(NamedTuple):
@@ -144,7 +148,7 @@ class LineState(NamedTuple):
 class LineWithRecord(LineEnv):
     """A record whose type implements none of the fused engine's steps."""
 
-    def kernel_state(self) -> LineState:
+    def kernel_state(self, observation_key: str = "observation") -> LineState:
         return LineState(self.pos.numpy())
 
 

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
-from typing import Any, Protocol, TypeVar
+from typing import Any, Protocol
 
 import numba.core.errors
 import torch
@@ -50,7 +50,6 @@ from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal._kernels.engine import fused_run, fused_run_uncached
-from torchrl_subgoal._kernels.shaping import LOOKUP_SHAPING
 from torchrl_subgoal._kernels.steps import (
     env_observe,
     env_reset,
@@ -62,36 +61,24 @@ from torchrl_subgoal._kernels.steps import (
     learner_step,
     missing_steps,
 )
-from torchrl_subgoal.agents.actor_critic import FourierActorCritic
 from torchrl_subgoal.agents.records import EpisodeArrays, EpisodeRecords
-from torchrl_subgoal.agents.sarsa import SoftmaxSarsa
-from torchrl_subgoal.envs.four_rooms import FourRoomsEnv, GridKernelState
-from torchrl_subgoal.envs.pinball import BallKernelState, PinBallEnv
 from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.transform import ShapingKernelState, SubgoalPotentialTransform
 
 __all__ = [
-    "FusedLearner", "env_observe", "env_reset", "env_scratch", "env_shaping_observation", "env_step", "implements",
-    "learner_scratch", "learner_step", "run_episodes_fused", "run_four_rooms_fused", "run_pinball_fused",
+    "FusedEnv", "FusedLearner", "env_observe", "env_reset", "env_scratch", "env_shaping_observation", "env_step",
+    "implements", "learner_scratch", "learner_step", "missing_steps", "run_episodes_fused",
 ]
 
-B = TypeVar("B", bound=EnvBase)
 
-
-def _unwrap(env: EnvBase, base_type: type[B]) -> tuple[B, SubgoalPotentialTransform | None]:
-    """The ``base_type`` env and its shaping transform (``None`` if bare); a clear error for anything else."""
-    if isinstance(env, base_type):
+def _unwrap(env: EnvBase) -> tuple[EnvBase, SubgoalPotentialTransform | None]:
+    """The env under the shaping transform (``None`` if bare); a clear error for any other transform."""
+    if not isinstance(env, TransformedEnv):
         return env, None
-    if (
-        isinstance(env, TransformedEnv)
-        and isinstance(env.base_env, base_type)
-        and isinstance(env.transform, SubgoalPotentialTransform)
-    ):
+    if isinstance(env.transform, SubgoalPotentialTransform):
         return env.base_env, env.transform
-    raise TypeError(
-        f"the fused engine runs {base_type.__name__}, alone or with one SubgoalPotentialTransform; "
-        f"got {env}. Use engine='torchrl' for other envs and transforms."
-    )
+    raise TypeError(f"the fused engine runs an env alone or with one SubgoalPotentialTransform; got {env}. "
+                    "Use engine='torchrl' for other transforms.")
 
 
 def _run_blocks(
@@ -124,6 +111,22 @@ def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase
     return shaping.kernel_state(td)
 
 
+class FusedEnv(Protocol):
+    """What the fused engine asks of an env: ``kernel_state(observation_key)``, a record of its state (updated in
+    place) whose type implements the env's steps (:func:`implements`), and whose
+    ``env_shaping_observation`` gives the entry ``observation_key`` a shaping transform reads. An optional
+    ``fused_block`` attribute sets how many steps a learner makes per compiled call (default 1024).
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> env: FusedEnv = FourRoomsEnv(num_envs=2)
+        >>> type(env.kernel_state("cell")).__name__, env.fused_block
+        ('GridKernelState', 2048)
+    """
+
+    def kernel_state(self, observation_key: Any = "observation") -> Any: ...
+
+
 class FusedLearner(Protocol):
     """What the fused engine asks of a learner: ``act`` (its first actions, as in the TorchRL loop) and
     ``kernel_state()``, a record whose type implements ``learner_scratch`` and ``learner_step``
@@ -150,11 +153,11 @@ def run_episodes_fused(
 ) -> EpisodeRecords:
     """Same as ``run_episodes(env, agent, episodes)`` (see the module doc), compiled.
 
-    Four-rooms with SARSA and PinBall with the actor-critic go through
-    :func:`run_four_rooms_fused` and :func:`run_pinball_fused`; any other env
-    with a ``kernel_state()`` and learner (:class:`FusedLearner`) whose records
-    implement the fused engine's steps runs through the same loop
-    (docs/adding_a_domain.md).
+    The env (a :class:`FusedEnv`) and the learner give their records (``kernel_state()``), whose types
+    implement the engine's steps: :class:`~torchrl_subgoal.envs.FourRoomsEnv` with
+    :class:`~torchrl_subgoal.agents.SoftmaxSarsa`, :class:`~torchrl_subgoal.envs.PinBallEnv` with
+    :class:`~torchrl_subgoal.agents.FourierActorCritic`, or any env and learner whose records do
+    (docs/adding_a_domain.md). A pair that does not fit is a ``TypeError`` that says why.
 
     Args:
         env: the env (its batch is the learners), alone or in a ``TransformedEnv`` with one
@@ -171,46 +174,27 @@ def run_episodes_fused(
         >>> run_episodes_fused(env, agent, 3).steps.shape
         torch.Size([8, 3])
     """
-    base = env.base_env if isinstance(env, TransformedEnv) else env
+    base, shaping = _unwrap(env)
     if base.device is not None and base.device.type != "cpu":
         raise TypeError("the fused engine runs on the CPU")
-    if isinstance(base, PinBallEnv) and isinstance(agent, FourierActorCritic):
-        return run_pinball_fused(env, agent, episodes, progress=progress)
-    if isinstance(base, FourRoomsEnv) and isinstance(agent, SoftmaxSarsa):
-        return run_four_rooms_fused(env, agent, episodes, progress=progress)
-    if isinstance(base, (FourRoomsEnv, PinBallEnv)) or not hasattr(base, "kernel_state") or not hasattr(
-            agent, "kernel_state"):
-        raise TypeError(
-            "the fused engine runs FourRoomsEnv with SoftmaxSarsa, PinBallEnv with FourierActorCritic, or an env "
-            "and a learner whose kernel_state() records implement its steps (docs/adding_a_domain.md); "
-            f"got {type(base).__name__} with {type(agent).__name__}; use engine='torchrl'"
-        )
-    base, shaping = _unwrap(env, type(base))
-    return _run_fused(env, shaping, agent, episodes, lambda state: base.kernel_state(), progress, 1024)
-
-
-def _run_fused(
-    env: EnvBase,
-    shaping: SubgoalPotentialTransform | None,
-    agent: FusedLearner,
-    episodes: int,
-    env_state: Callable[[ShapingKernelState], Any],
-    progress: Callable[[int], None] | None,
-    block: int,
-) -> EpisodeRecords:
-    """The fused engine's driver: the same start as the TorchRL loop, then :func:`~torchrl_subgoal._kernels.engine.fused_run`
-    in blocks of ``block`` steps; ``env_state(shaping's record)`` is the env's record (and its checks)."""
+    if not hasattr(base, "kernel_state") or not hasattr(agent, "kernel_state"):
+        raise TypeError(f"the fused engine runs an env and a learner whose kernel_state() records implement its "
+                        f"steps (docs/adding_a_domain.md); {type(base).__name__} with {type(agent).__name__} "
+                        "do not: use engine='torchrl'")
     td = agent.act(env.reset())  # the same start as the TorchRL loop, tables compiled
     n = max(1, env.batch_size.numel())
     action = td.get("action").reshape(-1).numpy().copy()
     state = _shaping_state(shaping, td, n)
-    record, learner = env_state(state), agent.kernel_state()
+    record = base.kernel_state("observation" if shaping is None else shaping.observation_key)
+    learner = agent.kernel_state()
     missing = missing_steps(record, learner)
     if missing:
         raise TypeError(f"{type(record).__name__} and {type(learner).__name__} do not implement the fused engine's "
-                        f"{', '.join(missing)} (register them with torchrl_subgoal.agents.fused.implements; docs/adding_a_domain.md)")
+                        f"{', '.join(missing)} (register them with torchrl_subgoal.agents.fused.implements; "
+                        "docs/adding_a_domain.md)")
     packaged = all(type(r).__module__.startswith("torchrl_subgoal.") for r in (record, learner))
     loop = fused_run if packaged else fused_run_uncached  # see fused_run_uncached
+    block = getattr(base, "fused_block", 1024)
 
     def run_block(records: EpisodeArrays) -> tuple[int, int]:
         try:
@@ -223,65 +207,3 @@ def _run_fused(
                             f"{said[0] if said else error}") from None
 
     return _run_blocks(n, episodes, run_block, progress)
-
-
-def run_four_rooms_fused(
-    env: EnvBase,
-    agent: SoftmaxSarsa,
-    episodes: int,
-    *,
-    progress: Callable[[int], None] | None = None,
-    block: int = 2048,
-) -> EpisodeRecords:
-    """The fused engine for four-rooms with SARSA (see :func:`run_episodes_fused`).
-
-    Examples:
-        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
-        >>> from torchrl_subgoal.envs import FourRoomsEnv
-        >>> env = FourRoomsEnv(num_envs=8)
-        >>> agent = SoftmaxSarsa(8, env.num_states, 4, SARSA_PRESETS["released"], seed=0)
-        >>> records = run_four_rooms_fused(env, agent, 3)
-        >>> records.steps.shape, bool((records.steps > 0).all())
-        (torch.Size([8, 3]), True)
-    """
-    base, shaping = _unwrap(env, FourRoomsEnv)
-    key = "observation" if shaping is None else shaping.observation_key
-
-    def grid(state: ShapingKernelState) -> GridKernelState:  # the shaping reads the state number or its cell
-        if key == "cell" and state.kind == LOOKUP_SHAPING:
-            raise TypeError("a lookup aggregation reads the state number ('observation')")
-        return base.kernel_state(key)
-
-    return _run_fused(env, shaping, agent, episodes, grid, progress, block)
-
-
-def run_pinball_fused(
-    env: EnvBase,
-    agent: FourierActorCritic,
-    episodes: int,
-    *,
-    progress: Callable[[int], None] | None = None,
-    block: int = 1024,
-) -> EpisodeRecords:
-    """The fused engine for :class:`~torchrl_subgoal.envs.PinBallEnv` with a
-    :class:`~torchrl_subgoal.agents.FourierActorCritic` (see :func:`run_episodes_fused`).
-
-    Examples:
-        >>> from torchrl_subgoal.agents import AC_PRESETS
-        >>> env = PinBallEnv(4, seed=0, max_steps=50)
-        >>> spec = env.observation_spec["observation"]
-        >>> agent = FourierActorCritic(4, spec.low[0], spec.high[0], 5, AC_PRESETS["released"], seed=0)
-        >>> records = run_pinball_fused(env, agent, 2)
-        >>> records.steps.shape, bool((records.steps <= 50).all())
-        (torch.Size([4, 2]), True)
-    """
-    base, shaping = _unwrap(env, PinBallEnv)
-    if base.physics.backend != "numba":
-        raise TypeError("the fused engine needs PinBall's numba physics backend")
-
-    def balls(state: ShapingKernelState) -> BallKernelState:
-        if state.kind == LOOKUP_SHAPING:
-            raise TypeError("the fused PinBall engine needs a region aggregation (StateAggregation.from_regions)")
-        return base.kernel_state()
-
-    return _run_fused(env, shaping, agent, episodes, balls, progress, block)

@@ -50,6 +50,7 @@ import numba
 import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
+from tensordict.utils import NestedKey
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
@@ -923,8 +924,11 @@ class PinBallEnv(EnvBase):
 
     # -- map helpers -------------------------------------------------------
 
-    def kernel_state(self) -> BallKernelState:
+    def kernel_state(self, observation_key: NestedKey = "observation") -> BallKernelState:
         """The balls' state as numpy views (CPU only), for a compiled loop to step in place.
+
+        Args:
+            observation_key: the entry a compiled loop's shaping reads: ``"observation"``, the one there is.
 
         Examples:
             >>> PinBallEnv(2, seed=0).kernel_state().position.shape
@@ -932,6 +936,10 @@ class PinBallEnv(EnvBase):
         """
         if self.device.type != "cpu":
             raise TypeError(f"kernel_state needs a CPU env, not {self.device}")
+        if observation_key != "observation":
+            raise TypeError(f"a compiled loop reads PinBall's 'observation', not {observation_key!r}")
+        if self.physics.backend != "numba":  # the compiled loop steps the numba physics
+            raise TypeError("a compiled loop needs PinBall's numba physics backend")
         g = self.physics.geometry
         tx, ty, tr = g.target
         return BallKernelState(
