@@ -11,7 +11,13 @@ from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import Cell, SubgoalSeries
 from torchrl_subgoal._kernels.random import learner_keys
-from torchrl_subgoal.agents import AC_PRESETS, SARSA_PRESETS, FourierActorCritic, SoftmaxSarsa, run_episodes
+from torchrl_subgoal.agents import (
+    AC_PRESETS,
+    SARSA_PRESETS,
+    FourierActorCritic,
+    SoftmaxSarsa,
+    run_episodes,
+)
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import room_aggregation
 from torchrl_subgoal.methods import paper_methods, shaping_transform
