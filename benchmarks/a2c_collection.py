@@ -55,11 +55,24 @@ from torchrl.envs import EnvBase, ParallelEnv
 from torchrl.objectives import A2CLoss
 from torchrl.objectives.value import GAE
 
-from torchrl_subgoal import Cell, SubgoalSeries, SubgoalValueLoss, TabularPotential, load_patterns
+from torchrl_subgoal import (
+    Cell,
+    SubgoalSeries,
+    SubgoalValueLoss,
+    TabularPotential,
+    domains,
+    load_patterns,
+)
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.methods import paper_methods, shaping_parts
-from torchrl_subgoal.training import A2CConfig, Shaping, actor_critic, shaped_env, smdp_transitions
-from torchrl_subgoal.training.domains import A2CDomain, a2c_domain
+from torchrl_subgoal.training import (
+    A2CConfig,
+    A2CDomain,
+    Shaping,
+    actor_critic,
+    shaped_env,
+    smdp_transitions,
+)
 
 HALLWAYS = SubgoalSeries([Cell(3, 6), Cell(7, 9)])
 
@@ -113,6 +126,16 @@ def call_counts(setups: dict[str, Callable[[], int]]) -> dict[str, float]:
     return counts
 
 
+def four_rooms_a2c() -> A2CDomain:
+    """The A2C recipe's four-rooms set-up (the four-rooms plugin's registration).
+
+    Examples:
+        >>> four_rooms_a2c().a2c.features
+        'one_hot'
+    """
+    return domains.part("four_rooms", A2CDomain)
+
+
 def load_average() -> str:
     """The 1-, 5- and 15-minute load averages (``"n/a"`` where the OS has none)."""
     try:
@@ -148,9 +171,9 @@ def hrs_shaping(domain: A2CDomain) -> Shaping:
     states); PinBall, the recipe's HRS learner of the first participant's pattern.
 
     Examples:
-        >>> hrs_shaping(a2c_domain("four_rooms")).options
+        >>> hrs_shaping(domains.part("four_rooms", A2CDomain)).options
         {'observation_key': 'cell'}
-        >>> shaping = hrs_shaping(a2c_domain("pinball"))
+        >>> shaping = hrs_shaping(domains.part("pinball", A2CDomain))
         >>> type(shaping.potential).__name__, shaping.options["start_potential"]
         ('TabularPotential', 'value')
     """
@@ -237,7 +260,7 @@ def main() -> None:
         parser.error(f"--repeats must be >= 0, got {args.repeats}")
     torch.set_num_threads(1)
     repeats, batches = (3, 10) if args.quick else (7, 30)
-    domain = a2c_domain(args.domain)
+    domain = domains.part(args.domain, A2CDomain)
 
     if args.part != "2":
         collector_throughput(args.repeats or repeats, batches)

@@ -33,7 +33,7 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
-from torchrl_subgoal import load_patterns
+from torchrl_subgoal import domains, load_patterns
 from torchrl_subgoal.experiments import Chunk, EpisodeTable
 from torchrl_subgoal.experiments.cli import ConfigError, check, setting
 from torchrl_subgoal.experiments.recipe import (
@@ -48,7 +48,7 @@ from torchrl_subgoal.experiments.recipe import (
     recipe_main,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_parts
-from torchrl_subgoal.training import A2CConfig, Shaping, a2c_domain, experiment_logger, train_a2c
+from torchrl_subgoal.training import A2CConfig, A2CDomain, Shaping, experiment_logger, train_a2c
 
 METHODS = paper_methods(baseline="A2C")
 
@@ -99,7 +99,7 @@ def a2c_config(config: Mapping[str, Any]) -> A2CConfig:
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
     """Train the chunk's learners one after the other (each steps its own batch of envs)."""
     torch.set_num_threads(1)
-    domain = a2c_domain(config["domain"])
+    domain = domains.part(config["domain"], A2CDomain)
     method = METHODS[chunk.method]
     patterns, pattern_index = chunk_patterns(chunk, config)
     a2c = a2c_config(config)
@@ -124,7 +124,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
 
 def plan(cfg: Config) -> Plan:
     """The sweep of ``cfg``: one chunk per learner, the stored configuration, the report's thresholds."""
-    domain = a2c_domain(cfg.domain)
+    domain = domains.part(cfg.domain, A2CDomain)
     human = load_patterns(cfg.subgoals or domain.participants, domain=cfg.domain)
     patterns = pattern_sets(human, domain.candidates(cfg.seed), cfg.random_patterns, cfg.seed)
     check_patterns(patterns, domain.make_env(1), str(domain.subgoal_key))

@@ -20,6 +20,7 @@ from torchrl_subgoal import domains, load_patterns
 from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.experiments import Chunk, EpisodeTable, MethodSpec, Sweep
+from torchrl_subgoal.experiments.paper import PaperResults
 from torchrl_subgoal.experiments.recipe import chunk_patterns
 from torchrl_subgoal.experiments.report import write_report
 from torchrl_subgoal.methods import paper_methods, shaping_transform
@@ -28,7 +29,8 @@ from torchrl_subgoal.subgoals import SubgoalFileError
 TUTORIAL = Path(__file__).resolve().parents[1] / "docs" / "tutorials" / "adding_a_domain.py"
 CORE = ("torchrl_subgoal", "torchrl_subgoal.subgoals", "torchrl_subgoal.experiments",
         "torchrl_subgoal.experiments.plots", "torchrl_subgoal.experiments.paper",
-        "torchrl_subgoal.experiments.report", "torchrl_subgoal.experiments.recipe", "torchrl_subgoal.domains")
+        "torchrl_subgoal.experiments.report", "torchrl_subgoal.experiments.recipe", "torchrl_subgoal.domains",
+        "torchrl_subgoal.studio.domains", "torchrl_subgoal.training")
 
 
 @pytest.fixture
@@ -44,16 +46,18 @@ def corridor(monkeypatch: pytest.MonkeyPatch) -> ModuleType:
 
 
 def test_the_core_imports_no_domain_module() -> None:
+    """Importing the library, the registry and the layers that read it imports no domain plugin (nor the
+    envs it would bring): a plugin is imported when its domain is first looked up."""
     code = f"import importlib, sys\nfor m in {CORE!r}: importlib.import_module(m)\n" \
-           "print(sorted(m for m in sys.modules if m.startswith('torchrl_subgoal.envs')))"
+           "print(sorted(m for m in sys.modules if m.startswith(('torchrl_subgoal.envs', 'torchrl_subgoal.domains.'))))"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert done.stdout.strip() == "[]"
 
 
 def test_built_in_domains_load_on_first_use() -> None:
-    assert domains.names()[:3] == ["four_rooms", "pinball", "pick_and_place"]
+    assert domains.names()[:3] == ["four_rooms", "pick_and_place", "pinball"]
     assert domains.get("fetch") is domains.get("pick_and_place")  # what its recipe's results record
-    assert domains.get("four_rooms").paper.time_to_threshold[50]["SARSA"].mean == 51.8
+    assert domains.part("four_rooms", PaperResults).time_to_threshold[50]["SARSA"].mean == 51.8
     assert domains.get("pinball").make_env(3).batch_size == torch.Size([3])
 
 
@@ -61,7 +65,7 @@ def test_a_file_naming_an_unknown_domain_is_one_line(tmp_path: Path) -> None:
     path = tmp_path / "elsewhere.yaml"
     path.write_text("domain: elsewhere\npatterns:\n  p:\n    subgoals:\n      - state: 3\n")
     with pytest.raises(SubgoalFileError, match=r"^\S*elsewhere.yaml: domain: unknown domain 'elsewhere'; "
-                                               r"known: four_rooms, pinball, pick_and_place"):
+                                               r"known: four_rooms, pick_and_place, pinball"):
         load_patterns(path)
 
 

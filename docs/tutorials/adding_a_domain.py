@@ -1,7 +1,8 @@
 """Tutorial: add a domain (a 1-D corridor) and shape SARSA on it from a subgoal file.
 
 A domain is one :func:`torchrl_subgoal.domains.register` call: an env factory,
-the check a subgoal file's subgoals must pass, and how the report draws them.
+the check a subgoal file's subgoals must pass, and the parts other layers read
+(here the report's map: a :class:`~torchrl_subgoal.experiments.plots.ReportMap`).
 With that, a subgoal file that says ``domain: corridor`` is checked against the
 corridor, the method runs on it like on four-rooms, and the report draws its map.
 
@@ -28,7 +29,7 @@ from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal import State, domains, load_patterns
 from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, fused, run_episodes
-from torchrl_subgoal.experiments.plots import plot_pattern_maps
+from torchrl_subgoal.experiments.plots import ReportMap, plot_pattern_maps
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 from torchrl_subgoal.subgoals import Predicate
 
@@ -103,7 +104,7 @@ def draw_map(ax: Any, patterns: Mapping[str, Any], options: Mapping[str, Any]) -
 
 
 domains.register(domains.Domain(
-    "corridor", "Corridor", make_env=CorridorEnv, check_subgoal=check_subgoal, draw_map=draw_map,
+    "corridor", "Corridor", make_env=CorridorEnv, check_subgoal=check_subgoal, parts=(ReportMap(draw_map),),
 ))
 # --8<-- [end:register]
 

@@ -13,13 +13,13 @@ from torchrl.envs.utils import check_env_specs
 
 from torchrl_subgoal.envs.pinball import (
     ACTION_NAMES,
-    DRAG,
     PinBallConfig,
     PinBallEnv,
     PinBallPhysics,
     check_subgoal,
     draw_map,
 )
+from torchrl_subgoal.envs.pinball_physics import DRAG
 
 from .pinball_reference import Obstacle, ReferencePinBall, closest_point
 

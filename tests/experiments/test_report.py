@@ -15,6 +15,7 @@ from tests.experiments import toy_domain
 from torchrl_subgoal import domains
 from torchrl_subgoal.domains import Domain, register
 from torchrl_subgoal.experiments import Sweep, load_results, stats
+from torchrl_subgoal.experiments.plots import ReportMap
 from torchrl_subgoal.experiments.report import ReportSpec, main, write_report
 
 REPO = Path(__file__).resolve().parents[2]
@@ -105,8 +106,8 @@ def test_map_hooks_are_looked_up_by_domain_and_failures_only_cost_the_map(
     def broken(ax: Any, patterns: Any, options: Any) -> None:
         raise ImportError("no module named envs.broken")
 
-    register(Domain("hooked", draw_map=hook))
-    register(Domain("broken", draw_map=broken))
+    register(Domain("hooked", parts=(ReportMap(hook),)))
+    register(Domain("broken", parts=(ReportMap(broken),)))
     path = make_results(tmp_path / "hooked", "hooked")
     write_report(path, n_boot=50)
     assert drawn == [{"p1": 2}, {"p2": 2}] and (path / "patterns.png").exists()
@@ -136,7 +137,7 @@ def test_a_sweep_named_after_its_recipe_draws_the_map_of_its_config_domain(
     """recipes/a2c.py names its sweep a2c_four_rooms and stores ``"domain": "four_rooms"``."""
     monkeypatch.setattr(domains, "_REGISTRY", dict(domains._REGISTRY))
     drawn: list[str] = []
-    register(Domain("hooked2", draw_map=lambda ax, patterns, options: drawn.extend(patterns)))
+    register(Domain("hooked2", parts=(ReportMap(lambda ax, patterns, options: drawn.extend(patterns)),)))
     config = toy_domain.toy_config(12) | {"domain": "hooked2"}
     Sweep("a2c_hooked2", tmp_path, toy_domain.toy_methods(1, ("HRS",)), toy_domain.run_chunk,
           config).run(workers=0, progress=False)

@@ -55,7 +55,8 @@ def test_extra_pinball_map_file(tmp_path: Path) -> None:
     custom = tmp_path / "box.cfg"
     custom.write_text((_DATA_DIR / "simple.cfg").read_text().replace("target 0.9 0.2", "target 0.5 0.1"))
     client = server.create_app(tmp_path / "files", pinball_maps={"box": custom}).test_client()
-    assert client.get("/api/domains").json[1]["maps"] == ["simple", "hard", "box"]
+    pinball = next(d for d in client.get("/api/domains").json if d["name"] == "pinball")
+    assert pinball["maps"] == ["simple", "hard", "box"]
     assert client.get("/api/geometry?domain=pinball&map=box").json["target"][:2] == [0.5, 0.1]
 
 

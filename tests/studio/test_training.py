@@ -77,7 +77,7 @@ def test_unknown_domain() -> None:
 
 def test_a_domain_without_a_learner_is_named() -> None:
     """The learner comes from the domain's registration; pick-and-place registers none."""
-    with pytest.raises(ValueError, match=r"^no learner \(Domain.learner\) for domain 'pick_and_place'; known: "
+    with pytest.raises(ValueError, match=r"^no learner \(StudioDomain.learner\) for domain 'pick_and_place'; known: "
                                          r"\['four_rooms', 'pinball'"):
         try_pattern("pick_and_place", HALLWAYS, TrySettings(1, 1))
 

@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 import torch
 
-from torchrl_subgoal import Cell, NaivePotential, State, SubgoalSeries, TabularPotential
+from torchrl_subgoal import Cell, NaivePotential, State, SubgoalSeries, TabularPotential, domains
 from torchrl_subgoal._kernels.actor_critic import _feature_scratch, fourier_features
+from torchrl_subgoal.domains.four_rooms import four_rooms_env
 from torchrl_subgoal.envs import PinBallEnv
-from torchrl_subgoal.envs.four_rooms_domain import four_rooms_env
 from torchrl_subgoal.training import (
     A2CConfig,
+    A2CDomain,
     FourierFeatures,
     Shaping,
-    a2c_domain,
     actor_critic,
     experiment_logger,
     shaped_env,
@@ -45,7 +45,7 @@ def test_fourier_features_equal_the_fused_kernels() -> None:
 
 @pytest.mark.parametrize("domain", ["four_rooms", "pinball"])
 def test_actor_critic_for_each_domain(domain: str) -> None:
-    d = a2c_domain(domain)
+    d = domains.part(domain, A2CDomain)
     env = d.make_env(3)
     actor, critic = actor_critic(env, d.observation_key, features=d.a2c.features, hidden=(8,))
     td = critic(actor(env.reset()))
@@ -153,15 +153,16 @@ def test_bad_settings(bad: dict) -> None:
 
 
 def test_a2c_domains_come_from_the_registry() -> None:
-    assert a2c_domain("four_rooms").name == "four_rooms" and a2c_domain("pinball").a2c.features == "fourier"
-    with pytest.raises(ValueError, match=r"^unknown A2C domain 'chess'; these have one: four_rooms, pinball"):
-        a2c_domain("chess")
-    with pytest.raises(ValueError, match=r"^no A2C set-up \(Domain.a2c\) for domain 'pick_and_place'"):
-        a2c_domain("pick_and_place")
+    assert domains.part("four_rooms", A2CDomain).name == "four_rooms"
+    assert domains.part("pinball", A2CDomain).a2c.features == "fourier"
+    with pytest.raises(ValueError, match=r"^unknown domain 'chess'; these did: four_rooms, pinball"):
+        domains.part("chess", A2CDomain)
+    with pytest.raises(ValueError, match=r"^domain 'pick_and_place' registered no A2CDomain; these did: four_rooms, "):
+        domains.part("pick_and_place", A2CDomain)
 
 
 def test_pinball_env_factory_is_seeded_from_torch() -> None:
-    d = a2c_domain("pinball")
+    d = domains.part("pinball", A2CDomain)
     rollouts = []
     for _ in range(2):
         torch.manual_seed(0)
@@ -174,7 +175,7 @@ def test_pinball_env_factory_is_seeded_from_torch() -> None:
 
 def test_pinball_default_step_is_the_papers_divided_by_the_feature_norm() -> None:
     """PinBall A2C's Adam rate is the paper's 0.01 over ``‖φ‖`` on visited states (0.01 itself was unstable)."""
-    d = a2c_domain("pinball")
+    d = domains.part("pinball", A2CDomain)
     torch.manual_seed(0)
     env = d.make_env(8)
     obs = env.rollout(200, break_when_any_done=False)["observation"].reshape(-1, 4)

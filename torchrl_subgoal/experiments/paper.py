@@ -81,8 +81,8 @@ def paper_table(
 
 
 def paper_results(domain: str) -> PaperResults | None:
-    """The paper's results for ``domain`` (its registered :class:`~torchrl_subgoal.domains.Domain`'s
-    ``paper``), or None if the paper has none for it.
+    """The paper's results for ``domain`` (the :class:`PaperResults` part of its registration), or None if
+    the paper has none for it.
 
     Examples:
         >>> paper_results("four_rooms").time_to_threshold[500]["HRS"]
@@ -91,4 +91,4 @@ def paper_results(domain: str) -> PaperResults | None:
         True
     """
     registered = domains.find(domain)
-    return registered.paper if registered is not None else None
+    return registered.part(PaperResults) if registered is not None else None

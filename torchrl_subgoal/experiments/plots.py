@@ -3,17 +3,16 @@
 Figures are drawn with matplotlib's object API (no pyplot), so making a report
 neither needs a display nor changes the caller's matplotlib backend.
 
-Maps are drawn by the ``draw_map`` of the domain registered under the sweep's
-domain name (:mod:`torchrl_subgoal.domains`). A built-in domain's module is
-imported only when its map is drawn, so a domain whose module is missing or
-broken costs the report its map panel (with a note saying why), never the whole
-report.
+Maps are drawn by the :class:`ReportMap` part of the domain registered under the
+sweep's domain name (:mod:`torchrl_subgoal.domains`). A domain plugin is imported
+only when its map is drawn, so a domain whose module is missing or broken costs
+the report its map panel (with a note saying why), never the whole report.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,6 +23,26 @@ from matplotlib.figure import Figure
 
 from torchrl_subgoal import domains
 from torchrl_subgoal.experiments.stats import mean_and_sem, moving_average
+
+#: ``draw_map(ax, patterns, options)``: draw the map and ``patterns`` (name -> SubgoalSeries) on a
+#: matplotlib ``Axes``; ``options`` is the ``report.map`` section of a sweep's config.
+MapHook = Callable[[Any, Mapping[str, Any], Mapping[str, Any]], None]
+
+
+@dataclass(frozen=True)
+class ReportMap:
+    """A domain's map in reports: the part of its registration the report's pattern maps are drawn by.
+
+    Args:
+        draw: ``draw(ax, patterns, options)``, the map and the patterns on a matplotlib ``Axes``.
+
+    Examples:
+        >>> from torchrl_subgoal import domains
+        >>> isinstance(domains.get("four_rooms").part(ReportMap), ReportMap)
+        True
+    """
+
+    draw: MapHook
 
 
 @dataclass(frozen=True)
@@ -123,8 +142,8 @@ def plot_pattern_maps(
         registered = domains.find(domain)
     except Exception as exc:  # a broken domain module costs the map, not the report
         return FigureFile(None, f"map for domain {domain!r} skipped: {type(exc).__name__}: {exc}")
-    hook = registered.draw_map if registered is not None else None
-    if hook is None:
+    drawing = registered.part(ReportMap) if registered is not None else None
+    if drawing is None:
         return FigureFile(None, f"no map is registered for domain {domain!r}")
     if not patterns:
         return FigureFile(None, "the sweep's config has no subgoal patterns to draw")
@@ -139,7 +158,7 @@ def plot_pattern_maps(
         fig = Figure(figsize=(2.6 * cols, 2.6 * rows))
         axes = fig.subplots(rows, cols, squeeze=False)
         for ax, name in zip(axes.flat, names, strict=False):
-            hook(ax, {name: series[name]}, dict(options or {}))
+            drawing.draw(ax, {name: series[name]}, dict(options or {}))
             ax.set_title(name, fontsize=9)
             ax.set_xticks([])
             ax.set_yticks([])

@@ -2,7 +2,7 @@
 
 Everything the studio trains goes through :func:`try_pattern`, built from the
 library's pieces: the domain's batched env and the paper's learner, both from
-its registration (:attr:`torchrl_subgoal.domains.Domain.learner`: SARSA on
+its registration (the ``learner`` of its :class:`~torchrl_subgoal.studio.domains.StudioDomain`: SARSA on
 four-rooms, the Fourier actor-critic on PinBall), the HRS shaping transform of
 :func:`torchrl_subgoal.methods.shaping_transform` and
 :func:`torchrl_subgoal.agents.run_episodes` on the fused engine. Both runs use
@@ -26,6 +26,7 @@ from torchrl_subgoal import domains
 from torchrl_subgoal.agents import run_episodes
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 from torchrl_subgoal.potentials import TabularPotential
+from torchrl_subgoal.studio.domains import studio_domain
 from torchrl_subgoal.subgoals import SubgoalSeries
 from torchrl_subgoal.transform import SubgoalPotentialTransform
 
@@ -124,7 +125,7 @@ def try_pattern(
     """Learn with ``series`` (HRS) and without shaping, same seeds, on the fused engine.
 
     Args:
-        domain: a registered domain with a learner (:attr:`~torchrl_subgoal.domains.Domain.learner`):
+        domain: a registered domain whose studio part has a learner:
             ``"four_rooms"``, ``"pinball"``.
         series: the drawn pattern.
         settings: episodes, learners, seed, episode cap.
@@ -142,10 +143,11 @@ def try_pattern(
         >>> len(result.shaped.mean), len(result.potential)
         (3, 3)
     """
-    found = domains.find(domain)
+    found = studio_domain(domain)
     if found is None or found.learner is None:
-        problem = "unknown domain" if found is None else "no learner (Domain.learner) for domain"
-        raise ValueError(f"{problem} {domain!r}; known: {domains.having('learner')}")
+        problem = "unknown domain" if domains.find(domain) is None else "no learner (StudioDomain.learner) for domain"
+        with_learner = [name for name in domains.names() if (view := studio_domain(name)) and view.learner]
+        raise ValueError(f"{problem} {domain!r}; known: {with_learner}")
     learner = found.learner
     start = time.perf_counter()
     curves: dict[str, Curve] = {}

@@ -6,7 +6,7 @@
   for envs in collector worker processes (shared memory);
 * :mod:`~torchrl_subgoal.training.a2c`: env, networks, collector and the A2C
   loop (:func:`train_a2c`);
-* :mod:`~torchrl_subgoal.training.domains`: the four-rooms and PinBall set-ups.
+* :mod:`~torchrl_subgoal.training.domains`: what a domain registers for the A2C recipe (:class:`A2CDomain`).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from torchrl_subgoal.training.a2c import (
     shaped_env,
     train_a2c,
 )
-from torchrl_subgoal.training.domains import A2CDomain, a2c_domain
+from torchrl_subgoal.training.domains import A2CDomain
 from torchrl_subgoal.training.shared import EnvFactory
 from torchrl_subgoal.training.smdp import extend_transitions, smdp_transitions
 
@@ -39,7 +39,6 @@ __all__ = [
     "FourierFeatures",
     "LearningCurve",
     "Shaping",
-    "a2c_domain",
     "actor_critic",
     "batched",
     "close_collector",

@@ -1,11 +1,10 @@
 """What the A2C recipe needs of a domain: env factory, keys, baselines' inputs, defaults.
 
-A domain gives its set-up through its registration
-(:attr:`torchrl_subgoal.domains.Domain.a2c`, a function returning an
-:class:`A2CDomain`; four-rooms and PinBall do, in their ``envs/*_domain.py``).
-A user's own domain is the same handful of fields: an env factory
-``make_env(num_envs)``, the observation the networks read, the one the
-subgoals read, and a subgoal file.
+A domain gives its set-up as a part of its registration (an :class:`A2CDomain` in
+:attr:`torchrl_subgoal.domains.Domain.parts`; the four-rooms and PinBall plugins
+do), found with ``torchrl_subgoal.domains.part(name, A2CDomain)``. A user's own
+domain is the same handful of fields: an env factory ``make_env(num_envs)``, the
+observation the networks read, the one the subgoals read, and a subgoal file.
 """
 
 from __future__ import annotations
@@ -16,11 +15,10 @@ from dataclasses import dataclass, field
 from tensordict.utils import NestedKey
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal import domains
 from torchrl_subgoal.subgoals import Predicate, StateAggregation
 from torchrl_subgoal.training.a2c import A2CConfig
 
-__all__ = ["A2CDomain", "a2c_domain"]
+__all__ = ["A2CDomain"]
 
 
 @dataclass(frozen=True)
@@ -41,7 +39,8 @@ class A2CDomain:
         candidates: RRS's candidate subgoals, from a seed.
 
     Examples:
-        >>> domain = a2c_domain("four_rooms")
+        >>> from torchrl_subgoal import domains
+        >>> domain = domains.part("four_rooms", A2CDomain)
         >>> domain.observation_key, domain.subgoal_key, domain.make_env(2).batch_size
         ('observation', 'cell', torch.Size([2]))
     """
@@ -57,24 +56,3 @@ class A2CDomain:
     a2c: A2CConfig
     aggregation: Callable[[], StateAggregation | None] = field(default=lambda: None)
     candidates: Callable[[int], list[Predicate]] = field(default=lambda seed: [])
-
-
-def a2c_domain(name: str) -> A2CDomain:
-    """The A2C set-up of a registered domain (its :attr:`~torchrl_subgoal.domains.Domain.a2c`).
-
-    Raises:
-        ValueError: the domain is unknown or has no A2C set-up; the message lists those that have one.
-
-    Examples:
-        >>> a2c_domain("four_rooms").a2c.features
-        'one_hot'
-        >>> a2c_domain("pick_and_place")
-        Traceback (most recent call last):
-        ...
-        ValueError: no A2C set-up (Domain.a2c) for domain 'pick_and_place'; these have one: four_rooms, pinball
-    """
-    domain = domains.find(name)
-    if domain is None or domain.a2c is None:
-        problem = "unknown A2C domain" if domain is None else "no A2C set-up (Domain.a2c) for domain"
-        raise ValueError(f"{problem} {name!r}; these have one: {', '.join(domains.having('a2c'))}")
-    return domain.a2c()

@@ -1,4 +1,5 @@
-"""The four-rooms domain's registration: env, subgoal check, map, paper table, studio grid, learners.
+"""The four-rooms domain plugin: env, subgoal check, and each layer's part (A2C set-up, paper table and
+report map, studio grid and learner).
 
 Everything the package knows about four-rooms beyond the env itself, in one
 place; :mod:`torchrl_subgoal.domains` imports this module the first time
@@ -9,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from importlib.resources import files
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from torchrl.envs import EnvBase
 
@@ -18,12 +19,12 @@ from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
 from torchrl_subgoal.agents.loop import OnlineAgent
 from torchrl_subgoal.envs import four_rooms
 from torchrl_subgoal.experiments.paper import PaperResults, paper_table
+from torchrl_subgoal.experiments.plots import ReportMap
+from torchrl_subgoal.studio.domains import Limit, StudioDomain
 from torchrl_subgoal.subgoals import Cell, Predicate, State
+from torchrl_subgoal.training import A2CConfig, A2CDomain
 
-if TYPE_CHECKING:
-    from torchrl_subgoal.training.domains import A2CDomain
-
-__all__ = ["DOMAIN", "four_rooms_env"]
+__all__ = ["A2C", "DOMAIN", "PAPER", "STUDIO", "four_rooms_env"]
 
 
 def four_rooms_env(num_envs: int) -> EnvBase:
@@ -77,16 +78,12 @@ def _candidates(seed: int) -> list[Predicate]:
     return [Cell(r, c) for r, c in four_rooms.free_cells() if (r, c) not in (four_rooms.START, four_rooms.GOAL)]
 
 
-def _a2c() -> A2CDomain:
-    from torchrl_subgoal.training.a2c import A2CConfig
-    from torchrl_subgoal.training.domains import A2CDomain
-
-    return A2CDomain(
-        "four_rooms", four_rooms_env, "observation", "cell", "observation",
-        str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml"), eta=1.0, thresholds=(100.0, 50.0),
-        a2c=A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=100_000),
-        aggregation=four_rooms.room_aggregation, candidates=_candidates,
-    )
+A2C = A2CDomain(
+    "four_rooms", four_rooms_env, "observation", "cell", "observation",
+    str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml"), eta=1.0, thresholds=(100.0, 50.0),
+    a2c=A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=100_000),
+    aggregation=four_rooms.room_aggregation, candidates=_candidates,
+)
 
 
 PAPER = PaperResults(
@@ -109,10 +106,13 @@ PAPER = PaperResults(
     ),
 )
 
+STUDIO = StudioDomain(
+    _geometry, limits={"episodes": Limit(300, 1, 2000), "learners": Limit(20, 1, 200),
+                       "max_steps": Limit(1000, 50, 1000)},
+    recipe="recipes/four_rooms.py", to_page=_cell_of_state, learner=_sarsa,
+)
+
 DOMAIN = domains.register(domains.Domain(
     "four_rooms", "Four rooms", make_env=four_rooms_env, check_subgoal=four_rooms.check_subgoal,
-    draw_map=_draw_map, paper=PAPER, geometry=_geometry,
-    limits={"episodes": domains.Limit(300, 1, 2000), "learners": domains.Limit(20, 1, 200),
-            "max_steps": domains.Limit(1000, 50, 1000)},
-    recipe="recipes/four_rooms.py", to_page=_cell_of_state, learner=_sarsa, a2c=_a2c,
+    parts=(A2C, PAPER, ReportMap(_draw_map), STUDIO),
 ))

@@ -1,4 +1,5 @@
-"""The PinBall domain's registration: env, subgoal check, map, paper table, studio table, learners.
+"""The PinBall domain plugin: env, subgoal check, and each layer's part (A2C set-up, paper table and
+report map, studio table and learner).
 
 Everything the package knows about PinBall beyond the env itself, in one
 place; :mod:`torchrl_subgoal.domains` imports this module the first time
@@ -10,7 +11,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Mapping
 from importlib.resources import files
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import torch
 from torchrl.envs import EnvBase
@@ -20,12 +21,12 @@ from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic
 from torchrl_subgoal.agents.loop import OnlineAgent
 from torchrl_subgoal.envs import pinball
 from torchrl_subgoal.experiments.paper import PaperResults, paper_table
+from torchrl_subgoal.experiments.plots import ReportMap
+from torchrl_subgoal.studio.domains import Limit, StudioDomain
 from torchrl_subgoal.subgoals import Box, Circle, Predicate, StateAggregation
+from torchrl_subgoal.training import A2CConfig, A2CDomain
 
-if TYPE_CHECKING:
-    from torchrl_subgoal.training.domains import A2CDomain
-
-__all__ = ["DOMAIN", "pinball_env"]
+__all__ = ["A2C", "DOMAIN", "PAPER", "STUDIO", "pinball_env"]
 
 
 def pinball_env(num_envs: int) -> EnvBase:
@@ -94,20 +95,16 @@ def _aggregation() -> StateAggregation:
     return StateAggregation.from_regions([Box((c,), (1 / 6,), (0,)) for c in (1 / 6, 1 / 2, 5 / 6)], 4)
 
 
-def _a2c() -> A2CDomain:
-    from torchrl_subgoal.training.a2c import A2CConfig
-    from torchrl_subgoal.training.domains import A2CDomain
-
-    return A2CDomain(
-        "pinball", pinball_env, "observation", "observation", "observation",
-        str(files("torchrl_subgoal") / "data" / "pinball_participants.yaml"), eta=1.0,
-        thresholds=(3000.0, 2000.0, 1000.0, 500.0),
-        # lr: the paper's 0.01 divided by the Fourier features' norm (‖φ‖ ≈ 11.3 for order 3 on PinBall's
-        # states), as its actor-critic divides its steps; with 0.01 A2C learns, then collapses (docs/torchrl.md).
-        a2c=A2CConfig(features="fourier", hidden=(), fourier_order=3, lr=1e-3, reward_scale=1e-4,
-                      total_frames=2_000_000),
-        aggregation=_aggregation, candidates=_candidates,
-    )
+A2C = A2CDomain(
+    "pinball", pinball_env, "observation", "observation", "observation",
+    str(files("torchrl_subgoal") / "data" / "pinball_participants.yaml"), eta=1.0,
+    thresholds=(3000.0, 2000.0, 1000.0, 500.0),
+    # lr: the paper's 0.01 divided by the Fourier features' norm (‖φ‖ ≈ 11.3 for order 3 on PinBall's
+    # states), as its actor-critic divides its steps; with 0.01 A2C learns, then collapses (docs/torchrl.md).
+    a2c=A2CConfig(features="fourier", hidden=(), fourier_order=3, lr=1e-3, reward_scale=1e-4,
+                  total_frames=2_000_000),
+    aggregation=_aggregation, candidates=_candidates,
+)
 
 
 PAPER = PaperResults(
@@ -126,10 +123,13 @@ PAPER = PaperResults(
     learnings=100,
 )
 
+STUDIO = StudioDomain(
+    _geometry, maps={"simple": "simple", "hard": "hard"}, map_check=_map_check,
+    limits={"episodes": Limit(30, 1, 100), "learners": Limit(5, 1, 10), "max_steps": Limit(10_000, 100, 10_000)},
+    recipe="recipes/pinball.py", learner=_actor_critic,
+)
+
 DOMAIN = domains.register(domains.Domain(
-    "pinball", "PinBall", make_env=pinball_env, check_subgoal=pinball.check_subgoal, draw_map=_draw_map,
-    paper=PAPER, geometry=_geometry, maps={"simple": "simple", "hard": "hard"}, map_check=_map_check,
-    limits={"episodes": domains.Limit(30, 1, 100), "learners": domains.Limit(5, 1, 10),
-            "max_steps": domains.Limit(10_000, 100, 10_000)},
-    recipe="recipes/pinball.py", learner=_actor_critic, a2c=_a2c,
+    "pinball", "PinBall", make_env=pinball_env, check_subgoal=pinball.check_subgoal,
+    parts=(A2C, PAPER, ReportMap(_draw_map), STUDIO),
 ))

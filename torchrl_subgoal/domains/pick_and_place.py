@@ -1,4 +1,4 @@
-"""The pick-and-place domain's registration: env, subgoal check, paper numbers, studio form.
+"""The pick-and-place domain plugin: env, subgoal check, and each layer's part (paper numbers, studio form).
 
 Everything the package knows about pick-and-place beyond the env itself, in one
 place; :mod:`torchrl_subgoal.domains` imports this module the first time
@@ -16,12 +16,12 @@ from typing import Any
 from torchrl.envs import EnvBase
 
 from torchrl_subgoal import domains
-from torchrl_subgoal.domains import FormError
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.experiments.paper import PaperResults
+from torchrl_subgoal.studio.domains import FormError, StudioDomain
 from torchrl_subgoal.subgoals import Box, Predicate
 
-__all__ = ["DOMAIN", "fetch_env"]
+__all__ = ["DOMAIN", "PAPER", "STUDIO", "fetch_env"]
 
 
 def fetch_env(num_envs: int) -> EnvBase:
@@ -65,7 +65,7 @@ def _box_from_page(subgoal: dict[str, Any], where: str) -> dict[str, Any]:
         >>> _box_from_page({"box": {"components": []}}, "patterns.p.subgoals[0]")
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.domains.FormError: patterns.p.subgoals[0].box.components: expected a non-empty list of component names, got []
+        torchrl_subgoal.studio.domains.FormError: patterns.p.subgoals[0].box.components: expected a non-empty list of component names, got []
     """
     box = subgoal.get("box")
     if not isinstance(box, Mapping) or "components" not in box:
@@ -104,8 +104,10 @@ PAPER = PaperResults(
     notes=("Success rate 0.6 reached 30 epochs earlier with HRS than with DDPG.",),
 )
 
+STUDIO = StudioDomain(_geometry, recipe="recipes/pick_and_place.py", to_page=_box_to_page, from_page=_box_from_page,
+                      try_note=TRY_NOTE)
+
 DOMAIN = domains.register(domains.Domain(
     "pick_and_place", "Pick and place", aliases=("fetch",), make_env=fetch_env, check_subgoal=fetch.check_subgoal,
-    paper=PAPER, geometry=_geometry, recipe="recipes/pick_and_place.py", to_page=_box_to_page,
-    from_page=_box_from_page, try_note=TRY_NOTE,
+    parts=(PAPER, STUDIO),
 ))

@@ -1,0 +1,145 @@
+"""The package's layers only look down, and its rooms stay small.
+
+Layers, from the bottom: 0 the compiled kernels' random streams and the fused engine's step
+protocol; 1 predicates and subgoal series (with their files); 2 abstraction tables; 3 potentials;
+4 the loss; 5 the shaping transform; 6 envs and learners; 7 the engines (TorchRL loop, fused) and
+the training building blocks; 8 the domain registry; 9 domain plugins, experiments, the studio and
+the package's facade. Every import counts: module-level, inside functions, under ``TYPE_CHECKING``,
+and a module named to ``importlib.import_module``.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "torchrl_subgoal"
+
+#: module (exact) or package (every module below it) -> layer; the longest match wins
+LAYERS: dict[str, int] = {
+    "torchrl_subgoal._kernels": 0, "torchrl_subgoal._kernels.random": 0, "torchrl_subgoal._kernels.steps": 0,
+    "torchrl_subgoal.subgoals.errors": 1, "torchrl_subgoal.subgoals.predicates": 1,
+    "torchrl_subgoal.subgoals.forms": 1, "torchrl_subgoal.subgoals.series": 1, "torchrl_subgoal.subgoals.files": 1,
+    "torchrl_subgoal.subgoals": 2, "torchrl_subgoal._kernels.regions": 2,
+    "torchrl_subgoal.potentials": 3,
+    "torchrl_subgoal.loss": 4,
+    "torchrl_subgoal.transform": 5, "torchrl_subgoal._kernels.shaping": 5,
+    "torchrl_subgoal.envs": 6, "torchrl_subgoal.agents.module": 6, "torchrl_subgoal.agents.sarsa": 6,
+    "torchrl_subgoal.agents.actor_critic": 6, "torchrl_subgoal.agents.ddpg": 6, "torchrl_subgoal._kernels.grid": 6,
+    "torchrl_subgoal._kernels.sarsa": 6, "torchrl_subgoal._kernels.actor_critic": 6,
+    "torchrl_subgoal.agents": 7, "torchrl_subgoal._kernels.records": 7, "torchrl_subgoal._kernels.engine": 7,
+    "torchrl_subgoal.training": 7, "torchrl_subgoal.methods": 7,
+    "torchrl_subgoal.domains": 8,
+    "torchrl_subgoal.domains.": 9, "torchrl_subgoal.experiments": 9, "torchrl_subgoal.studio": 9,
+    "torchrl_subgoal.console": 9, "torchrl_subgoal": 9,
+}
+#: what the core of the method never imports, whatever the layers say
+NOT_IN_THE_CORE = ("torchrl_subgoal.domains", "torchrl_subgoal.agents", "torchrl_subgoal.training",
+                   "torchrl_subgoal.experiments", "torchrl_subgoal.studio", "torchrl_subgoal.envs")
+CORE = ("torchrl_subgoal.subgoals", "torchrl_subgoal.transform", "torchrl_subgoal.potentials", "torchrl_subgoal.loss")
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+MODULES = {module_name(path): path for path in sorted(PACKAGE.rglob("*.py"))}
+
+
+def layer(module: str) -> int:
+    """The layer of ``module``: its exact entry, else its closest package's (a ``"pkg."`` entry covers the
+    modules below ``pkg`` but not ``pkg`` itself)."""
+    if module in LAYERS:
+        return LAYERS[module]
+    parts = module.split(".")
+    for end in range(len(parts) - 1, 0, -1):
+        package = ".".join(parts[:end])
+        if package + "." in LAYERS:
+            return LAYERS[package + "."]
+        if package in LAYERS:
+            return LAYERS[package]
+    raise KeyError(f"{module} has no layer: add it to LAYERS in {__file__}")
+
+
+def imports(path: Path) -> set[str]:
+    """The package modules ``path`` imports, anywhere in it (``from pkg import name`` counts as the module
+    ``pkg.name`` when there is one, else ``pkg``)."""
+    found = set()
+    module = module_name(path)
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:  # relative: from the module's package
+                package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+                base = ".".join(package[:len(package) - node.level + 1] + ([base] if base else []))
+            for alias in node.names:
+                found.add(f"{base}.{alias.name}" if f"{base}.{alias.name}" in MODULES else base)
+        elif isinstance(node, ast.Call) and getattr(node.func, "attr", getattr(node.func, "id", "")) == "import_module":
+            found |= {a.value for a in node.args if isinstance(a, ast.Constant) and isinstance(a.value, str)}
+    return {name for name in found if name == "torchrl_subgoal" or name.startswith("torchrl_subgoal.")}
+
+
+def test_every_module_has_a_layer() -> None:
+    assert all(layer(module) >= 0 for module in MODULES)
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_no_module_imports_a_higher_layer(module: str) -> None:
+    higher = sorted(f"{name} (layer {layer(name)})" for name in imports(MODULES[module]) if layer(name) > layer(module))
+    assert not higher, f"{module} (layer {layer(module)}) imports {higher}"
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if m.startswith(CORE)))
+def test_the_core_imports_no_registry_domain_agent_training_experiment_or_studio(module: str) -> None:
+    assert not [name for name in imports(MODULES[module]) if name.startswith(NOT_IN_THE_CORE)]
+
+
+def test_the_graph_is_read() -> None:
+    """The test can fail: a plugin's imports reach up to the registry, the transform's down to the loss."""
+    assert "torchrl_subgoal.domains" in imports(MODULES["torchrl_subgoal.domains.four_rooms"])
+    assert "torchrl_subgoal.loss" in imports(MODULES["torchrl_subgoal.transform.setup"])
+    assert layer("torchrl_subgoal.domains.four_rooms") > layer("torchrl_subgoal.domains")
+
+
+# ----------------------------------------------------------------- small rooms
+
+
+def _functions(tree: ast.AST) -> list[ast.FunctionDef | ast.AsyncFunctionDef]:
+    return [node for node in ast.walk(tree) if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)]
+
+
+def _compiled(function: ast.FunctionDef | ast.AsyncFunctionDef) -> bool:
+    """A numba kernel (its arguments are arrays a compiled loop passes one by one)."""
+    return any("numba" in ast.unparse(d) or "implements" in ast.unparse(d) for d in function.decorator_list)
+
+
+def test_no_module_is_over_800_lines() -> None:
+    long = {m: n for m, p in MODULES.items() if (n := len(p.read_text().splitlines())) > 800}
+    assert not long
+
+
+def test_no_function_but_a_kernel_takes_more_than_12_parameters() -> None:
+    """Kernels (numba-compiled, or the compiled engine's generic steps in ``_kernels``) take their arrays one
+    by one; every other function takes at most 12."""
+    many = []
+    for module, path in MODULES.items():
+        for function in _functions(ast.parse(path.read_text())):
+            args = function.args
+            count = len(args.posonlyargs) + len(args.args) + len(args.kwonlyargs) - (args.args[:1] != [] and
+                                                                                     args.args[0].arg == "self")
+            if count > 12 and not _compiled(function) and not module.startswith("torchrl_subgoal._kernels"):
+                many.append(f"{module}.{function.name}: {count}")
+    assert not many
+
+
+def test_the_transform_class_is_at_most_400_lines() -> None:
+    tree = ast.parse(MODULES["torchrl_subgoal.transform.transform"].read_text())
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "SubgoalPotentialTransform")
+    assert cls.end_lineno is not None and cls.end_lineno - cls.lineno + 1 <= 400
+    init = next(n for n in cls.body if isinstance(n, ast.FunctionDef) and n.name == "__init__")
+    assert len(init.args.args) - 1 + len(init.args.kwonlyargs) <= 10  # the constructor's parameters
