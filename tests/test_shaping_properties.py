@@ -209,3 +209,89 @@ def test_infinite_observations_compare_as_numbers() -> None:
     z = torch.zeros(3, 1, dtype=torch.long)
     assert tables.advance(z, obs).reshape(-1).tolist() == [1, 0, 1]
     assert torch.equal(tables.advance(z, obs), tables.advance_eager(z, obs))
+
+
+@PROPERTY
+@given(st.data())
+def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> None:
+    """``_kernels.shaping.shape_step`` against the torch functions of ``transform.shaping`` and one SGD step of
+    ``SubgoalValueLoss`` (reduction "sum"): the SMDP return, the online update (a table per row or one shared
+    table), the start level and the terminal potential."""
+    from torchrl_subgoal import SubgoalValueLoss
+    from torchrl_subgoal._kernels.shaping import shape_step
+    from torchrl_subgoal.transform.setup import PotentialKernelState
+    from torchrl_subgoal.transform.shaping import START_MODES, accumulate, closes, restart, shaped_reward, start_level
+    from torchrl_subgoal.transform.transitions import transition
+
+    n, states = data.draw(st.integers(1, 6)), data.draw(st.integers(2, 4))
+    shared, zero_terminal = data.draw(st.booleans()), data.draw(st.booleans())
+    start, lr = data.draw(st.sampled_from(sorted(START_MODES))), data.draw(st.sampled_from([0.0, 0.25, 1.0]))
+    gamma, value_gamma = data.draw(st.sampled_from([0.9, 0.99, 1.0])), data.draw(st.sampled_from([0.5, 0.95]))
+    col = (n, 1)
+
+    def ints(high: int) -> torch.Tensor:
+        return torch.tensor(data.draw(st.lists(st.integers(0, high), min_size=n, max_size=n))).reshape(col)
+
+    def floats() -> torch.Tensor:
+        return torch.tensor(data.draw(st.lists(st.floats(-5, 5, width=32), min_size=n, max_size=n))).reshape(col)
+
+    z, z_next, k, r_h, reward = ints(states - 1), ints(states - 1), ints(40), floats(), floats()
+    done = ints(1).bool()
+    terminated = done & ints(1).bool()
+    table = torch.tensor(data.draw(st.lists(st.floats(-3, 3, width=32), min_size=(1 if shared else n) * states,
+                                            max_size=(1 if shared else n) * states))).reshape(-1, states)
+    # the compiled step
+    kernel_table = table.numpy().copy()
+    outputs = [np.empty(col, np.float32), np.empty(col, np.int64), np.empty(col, np.float32),
+               np.empty(col, np.float32), np.empty(col, np.int64), np.empty(col, np.bool_)]
+    potential = PotentialKernelState(kernel_table, 0.0, gamma, value_gamma, lr, zero_terminal, START_MODES[start])
+    shape_step(potential, shared, z.numpy(), z_next.numpy(), z.numpy(), r_h.numpy(), k.numpy(), reward.numpy(),
+               done.numpy(), terminated.numpy(), np.zeros(col, np.int64), *outputs)
+    # the torch reference
+    v = TabularPotential(states, () if shared else (n,))
+    with torch.no_grad():
+        v.table.copy_(table[0] if shared else table)
+    r_acc, k_acc = accumulate(r_h, k, reward, value_gamma)
+    closed = closes(z, z_next, done)
+    learner = {} if shared else {"subgoal_learner": torch.arange(n).reshape(col)}
+    if lr:
+        loss = SubgoalValueLoss(v).make_value_estimator(gamma=value_gamma)
+        loss(transition(torch.Size([n]), {INDEX: z, **learner}, {INDEX: z_next, **learner}, r_acc, k_acc, closed,
+                        done, terminated))["loss_value"].backward()
+        with torch.no_grad():
+            v.table -= lr * v.table.grad
+    rows = torch.zeros(n, dtype=torch.long) if shared else torch.arange(n)
+    values = v.table.detach().reshape(-1, states)[rows]
+    level = start_level(values[:, :1], start)  # z_0 = 0: every subgoal series starts there
+    phi, phi_next = values.gather(1, z), values.gather(1, z_next)
+    if level is not None:
+        phi, phi_next = phi - level, phi_next - level
+    shaped = shaped_reward(reward, phi, phi_next, terminated, gamma, zero_terminal)
+    rh_out, k_out = restart(r_acc, k_acc, closed)
+    torch.testing.assert_close(torch.from_numpy(kernel_table), v.table.detach().reshape(-1, states), rtol=1e-5,
+                               atol=1e-4)
+    torch.testing.assert_close(torch.from_numpy(outputs[2]), shaped, rtol=1e-5, atol=1e-4)
+    torch.testing.assert_close(torch.from_numpy(outputs[0]), rh_out, rtol=1e-5, atol=1e-4)
+    assert torch.equal(torch.from_numpy(outputs[1]), k_out) and torch.equal(torch.from_numpy(outputs[5]), closed)
+    torch.testing.assert_close(torch.from_numpy(outputs[3]), r_acc, rtol=1e-5, atol=1e-4)
+
+
+@PROPERTY
+@given(batch(), st.data())
+def test_conditions_advance_alike_compiled_and_in_torch(case: tuple, data: st.DataObject) -> None:
+    """Subgoals of regions and conditions (functions of the step's TensorDict): the compiled region search,
+    called with each condition's mask, and the torch one reach the same abstract states."""
+    from tensordict import TensorDict
+
+    from torchrl_subgoal import Condition
+
+    series, shape, index, z, obs = case
+    n = shape.numel()
+    flags = [Condition(lambda td, c=c: td[f"flag{c}"], name=f"flag{c}") for c in range(3)]
+    mixed = [SubgoalSeries([flags[data.draw(st.integers(0, 2))] if data.draw(st.booleans()) else p
+                            for p in s.predicates], order=s.order, name=s.name) for s in series]
+    td = TensorDict({f"flag{c}": torch.tensor(data.draw(st.lists(st.booleans(), min_size=n, max_size=n))).reshape(shape)
+                     for c in range(3)}, batch_size=shape)
+    tables = SubgoalTables(mixed, index, D)
+    observation = obs if tables.uses_regions else None
+    assert torch.equal(tables.advance(z, observation, td), tables.advance_eager(z, observation, td))

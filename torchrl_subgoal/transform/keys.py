@@ -13,8 +13,8 @@ from tensordict.utils import NestedKey
 from torchrl.data import Binary, Bounded, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase
 
-__all__ = ["EnvKeys", "SubgoalKeys", "add_env_reward", "at", "kept_specs", "observation", "read", "state_specs",
-           "transition_spec", "write"]
+__all__ = ["EnvKeys", "SubgoalKeys", "add_env_reward", "at", "declare", "kept_specs", "observation", "read",
+           "state_specs", "transition_spec", "write"]
 
 RETURN = "subgoal_return"
 STEPS = "subgoal_steps"
@@ -243,3 +243,28 @@ def add_env_reward(reward_spec: Composite, parent: EnvBase, env: EnvKeys) -> Non
                          f"{tuple(done.shape)}: one reward per episode row is needed (combine the rewards first)")
     if not env.shaped_before:
         reward_spec[env.env_reward] = reward_spec[env.reward].clone()
+
+
+def declare(spec: Composite, parent: EnvBase, env: EnvKeys, specs: dict[str, TensorSpec], refuse_taken: bool) -> None:
+    """Add the kept entries' ``specs`` to ``spec`` in the group ``env.group`` (its levels made with the batch
+    shapes they have in ``parent``); with ``refuse_taken``, an entry already there (another transform's) is
+    a ``ValueError`` saying what to change.
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> base = FourRoomsEnv(2)
+        >>> env = EnvKeys.resolve(base)
+        >>> spec = base.full_observation_spec.clone()
+        >>> declare(spec, base, env, kept_specs(base, env, SubgoalKeys(), ("subgoal_index",), 3, "cell"), True)
+        >>> spec["subgoal_index"].shape
+        torch.Size([2, 1])
+    """
+    for depth in range(1, len(env.group) + 1):
+        if env.group[:depth] not in spec.keys(True):
+            spec[env.group[:depth]] = parent.full_done_spec[env.group[:depth]].empty()
+    for name, value in specs.items():
+        key = at(env.group, name)
+        if refuse_taken and key in spec.keys(True, True):
+            raise ValueError(f"SubgoalPotentialTransform: {key!r} is kept already by another transform on this env; "
+                             "give this one another prefix (prefix='room') and its potential matching keys")
+        spec[key] = value

@@ -244,16 +244,10 @@ class SubgoalPotentialTransform(Transform):
         specs = self._kept_specs()
         if self._settings.reads_observation:
             keys.observation(observation_spec, self.observation_key, "observation_key")
-        for name, spec in specs.items():
-            if at(self._env.group, name) in observation_spec.keys(True, True):
-                raise ValueError(f"SubgoalPotentialTransform: {at(self._env.group, name)!r} is kept already by another "
-                                 "transform on this env; give this one another prefix (prefix='room') and its "
-                                 "potential matching keys")
-            observation_spec[at(self._env.group, name)] = spec
+        keys.declare(observation_spec, self.parent, self._env, specs, refuse_taken=True)  # type: ignore[arg-type]
         if self.transitions_key is not None:
-            shape = specs[self.keys.index].shape[:-1]
             inputs = {k: s for k, s in specs.items() if k in self._settings.inputs}
-            observation_spec[self.transitions_key] = keys.transition_spec(inputs, shape)
+            observation_spec[self.transitions_key] = keys.transition_spec(inputs, specs[self.keys.index].shape[:-1])
         return observation_spec
 
     def transform_input_spec(self, input_spec: TensorSpec) -> TensorSpec:
@@ -262,8 +256,7 @@ class SubgoalPotentialTransform(Transform):
         state = input_spec["full_state_spec"]
         if state is None:
             state = Composite(shape=input_spec.shape, device=input_spec.device)
-        for name, spec in self._kept_specs().items():
-            state[at(self._env.group, name)] = spec
+        keys.declare(state, self.parent, self._env, self._kept_specs(), refuse_taken=False)  # type: ignore[arg-type]
         input_spec["full_state_spec"] = state
         return input_spec
 
