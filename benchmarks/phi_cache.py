@@ -33,7 +33,7 @@ from torchrl_subgoal import NeuralPotential
 from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, mlp
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.training import Shaping, shaped_env
-from torchrl_subgoal.transform import _ValueCache
+from torchrl_subgoal.transform.cache import ValueCache as _ValueCache
 
 try:
     from torchrl_subgoal.training import close_collector

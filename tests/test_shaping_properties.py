@@ -220,7 +220,14 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
     from torchrl_subgoal import SubgoalValueLoss
     from torchrl_subgoal._kernels.shaping import shape_step
     from torchrl_subgoal.transform.setup import PotentialKernelState
-    from torchrl_subgoal.transform.shaping import START_MODES, accumulate, closes, restart, shaped_reward, start_level
+    from torchrl_subgoal.transform.shaping import (
+        START_MODES,
+        accumulate,
+        closes,
+        restart,
+        shaped_reward,
+        start_level,
+    )
     from torchrl_subgoal.transform.transitions import transition
 
     n, states = data.draw(st.integers(1, 6)), data.draw(st.integers(2, 4))

@@ -58,7 +58,7 @@ def test_single_env_check() -> None:
     env = TransformedEnv(FourRoomsEnv(3), shaping())
     check_env_specs(env)
     for key in ("subgoal_index", "subgoal_return", "subgoal_steps"):  # carried from step to step: state
-        assert key in env.full_state_spec.keys() and key in env.full_observation_spec.keys()
+        assert key in env.full_state_spec and key in env.full_observation_spec
 
 
 def test_serial_env_of_transformed_envs_check() -> None:

@@ -32,6 +32,7 @@ def _misfit(pred: Predicate, size: int, one_hot: bool) -> str | None:
 
 
 _NO_ENTRIES = np.zeros((0, 0), np.float64)  # the observation of subgoals that are all conditions
+_NO_MASK = torch.zeros(0, dtype=torch.bool)
 
 
 class RegionTables(NamedTuple):
@@ -251,17 +252,20 @@ class SubgoalTables:
             >>> out.tolist()
             [[1], [0]]
         """
+        if self.uses_regions and observation is None:
+            raise ValueError(f"the region subgoals read {self.observation_key!r}, which is missing")
         if self.conditions:
-            obs = self.rows(observation).numpy() if self.uses_regions else _NO_ENTRIES
+            obs = self.rows(observation).numpy() if observation is not None and self.uses_regions else _NO_ENTRIES
             advance_with_conditions(self._kernel_tables, self._condition_of, self._hits(tensordict), z, obs, out)
         else:
+            assert observation is not None
             advance_regions(self._kernel_tables, z, self.rows(observation).numpy(), out)
 
     def _hits(self, tensordict: TensorDictBase | None) -> np.ndarray:
         """``[B, C]``: where each condition holds (each called once, on the step's TensorDict)."""
         if tensordict is None:
             raise ValueError(f"condition {self.conditions[0][0]!r} needs the step's TensorDict")
-        n, masks = self._n, list(self._calls)
+        n, masks = self._n, [_NO_MASK] * len(self._calls)
         for c, call in enumerate(self._calls):
             try:
                 mask = call(tensordict)
@@ -383,10 +387,10 @@ class StateAggregation:
         regions = self.regions
         assert regions is not None
         n = z.numel()
-        table = [torch.from_numpy(a[0]).to(z.device) for a in (regions.lo, regions.hi, regions.centre, regions.weight,
-                                                               regions.radius2)]
+        lo, hi, centre, weight, radius2 = (torch.from_numpy(a[0]).to(z.device) for a in (
+            regions.lo, regions.hi, regions.centre, regions.weight, regions.radius2))
         obs = observation.reshape(n, 1, -1).to(torch.float64)
-        inside = _in_regions(obs, *table, bool(torch.isfinite(table[4]).any()))
+        inside = _in_regions(obs, lo, hi, centre, weight, radius2, bool(torch.isfinite(radius2).any()))
         return torch.where(inside.any(-1), inside.long().argmax(-1), z.reshape(-1)).view(z.shape)
 
     def initial(self, observation: torch.Tensor | None, batch_shape: torch.Size) -> torch.Tensor:

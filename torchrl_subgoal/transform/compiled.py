@@ -96,7 +96,7 @@ def compiled_step(
     achieved = _column(current[keys.achieved], n, keys.achieved) if keys.achieved in current else z_col
     z_next, rh_out, k_out, shaped = torch.empty_like(z), torch.empty_like(r_h), torch.empty_like(k), \
         torch.empty_like(reward)
-    outputs = (z_next.numpy(), rh_out.numpy(), k_out.numpy(), shaped.numpy())
+    outputs: tuple[np.ndarray, ...] = (z_next.numpy(), rh_out.numpy(), k_out.numpy(), shaped.numpy())
     if z_next.ndim != 2:
         outputs = tuple(a.reshape(col) for a in outputs)
     extra: tuple[np.ndarray, ...] = _NO_TRANSITION

@@ -236,7 +236,7 @@ class SubgoalPotentialTransform(Transform):
     def _kept_specs(self) -> dict[str, TensorSpec]:
         self._env = EnvKeys.resolve(self.parent)
         s = self._settings
-        return keys.kept_specs(self.parent, self._env, self.keys, s.kept, self.num_abstract_states,  # type: ignore[arg-type]
+        return keys.kept_specs(self.parent, self._env, self.keys, s.kept, self.num_abstract_states,
                                s.observation_key)
 
     def transform_observation_spec(self, observation_spec: TensorSpec) -> TensorSpec:
@@ -244,7 +244,7 @@ class SubgoalPotentialTransform(Transform):
         specs = self._kept_specs()
         if self._settings.reads_observation:
             keys.observation(observation_spec, self.observation_key, "observation_key")
-        keys.declare(observation_spec, self.parent, self._env, specs, refuse_taken=True)  # type: ignore[arg-type]
+        keys.declare(observation_spec, self.parent, self._env, specs, refuse_taken=True)
         if self.transitions_key is not None:
             inputs = {k: s for k, s in specs.items() if k in self._settings.inputs}
             observation_spec[self.transitions_key] = keys.transition_spec(inputs, specs[self.keys.index].shape[:-1])
@@ -256,14 +256,14 @@ class SubgoalPotentialTransform(Transform):
         state = input_spec["full_state_spec"]
         if state is None:
             state = Composite(shape=input_spec.shape, device=input_spec.device)
-        keys.declare(state, self.parent, self._env, self._kept_specs(), refuse_taken=False)  # type: ignore[arg-type]
+        keys.declare(state, self.parent, self._env, self._kept_specs(), refuse_taken=False)
         input_spec["full_state_spec"] = state
         return input_spec
 
     def transform_reward_spec(self, reward_spec: TensorSpec) -> TensorSpec:
         assert isinstance(reward_spec, Composite)
         self._env = EnvKeys.resolve(self.parent)
-        keys.add_env_reward(reward_spec, self.parent, self._env)  # type: ignore[arg-type]
+        keys.add_env_reward(reward_spec, self.parent, self._env)
         return reward_spec
 
     # ------------------------------------------------------------------ reset and step
