@@ -4,7 +4,7 @@ transform's online update with it."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -141,7 +141,7 @@ class SubgoalValueLoss(LossModule):
         """``γ_v``: the value estimator's discount (see :meth:`make_value_estimator`)."""
         return float(self.value_estimator.gamma)
 
-    def make_value_estimator(self, value_type: ValueEstimators | None = None, **hyperparams) -> SubgoalValueLoss:
+    def make_value_estimator(self, value_type: ValueEstimators | None = None, **hyperparams: Any) -> SubgoalValueLoss:
         """The TD(0) estimator over the potential (the SMDP target is one-step): ``gamma=γ_v``.
 
         Args:

@@ -75,7 +75,7 @@ def main() -> None:
 
     # --8<-- [start:setup]
     potential = make_potential()
-    # no value_lr: the transform shapes with the potential as it is and never trains it
+    # no value_update: the transform shapes with the potential as it is and never trains it
     transform = SubgoalPotentialTransform(series, potential, gamma=GAMMA, observation_key="observation")
     env = make_env_with(transform, num_envs=16, seed=args.seed)
     actor, update = a2c_agent()

@@ -21,7 +21,8 @@ from torchrl_subgoal.experiments import (
     UnknownMethodError,
     load_results,
 )
-from torchrl_subgoal.experiments.store import ResultsError, ResultsStore, diff_fields
+from torchrl_subgoal.experiments.results import ResultsError
+from torchrl_subgoal.experiments.store import ResultsStore, diff_fields
 
 CHUNK = Chunk("HRS", 3, (("p1", 4), ("p2", 0)), seed=11)
 

@@ -12,15 +12,8 @@ from tensordict.utils import NestedKey
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
+from torchrl_subgoal._kernels import steps
 from torchrl_subgoal._kernels.grid import grid_reset, grid_reset_one, grid_step, grid_step_one
-from torchrl_subgoal._kernels.steps import (
-    env_observe,
-    env_reset,
-    env_scratch,
-    env_shaping_observation,
-    env_step,
-    implements,
-)
 from torchrl_subgoal.subgoals import Cell, Predicate, State, StateAggregation, SubgoalSeries
 
 __all__ = ["ACTIONS", "LAYOUT", "FourRoomsEnv", "check_subgoal", "draw_map", "free_cells", "room_aggregation"]
@@ -377,27 +370,27 @@ def draw_map(ax: Any, patterns: Mapping[str, SubgoalSeries | Sequence[tuple[int,
 # The fused engine's env step (torchrl_subgoal._kernels.engine.fused_run): the learner reads the state number.
 
 
-@implements(env_scratch, GridKernelState)
+@steps.implements(steps.env_scratch, GridKernelState)
 def _grid_scratch(env: GridKernelState) -> tuple[()]:
     return ()
 
 
-@implements(env_observe, GridKernelState)
+@steps.implements(steps.env_observe, GridKernelState)
 def _grid_observe(env: GridKernelState, b: int, scratch: tuple[()]) -> int:
     return env.state[b]
 
 
-@implements(env_step, GridKernelState)
+@steps.implements(steps.env_step, GridKernelState)
 def _grid_step(env: GridKernelState, b: int, a: int, scratch: tuple[()]) -> tuple[int, np.float32, bool, bool]:
     return grid_step_one(env, b, a)
 
 
-@implements(env_reset, GridKernelState)
+@steps.implements(steps.env_reset, GridKernelState)
 def _grid_reset(env: GridKernelState, b: int, scratch: tuple[()]) -> int:
     grid_reset_one(env, b)
     return env.state[b]
 
 
-@implements(env_shaping_observation, GridKernelState)
+@steps.implements(steps.env_shaping_observation, GridKernelState)
 def _grid_shaping_observation(env: GridKernelState, s: int, scratch: tuple[()]) -> np.ndarray:
     return env.observed[s]

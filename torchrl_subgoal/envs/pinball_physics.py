@@ -17,15 +17,8 @@ import numba
 import numpy as np
 import torch
 
+from torchrl_subgoal._kernels import steps
 from torchrl_subgoal._kernels.random import _random_action
-from torchrl_subgoal._kernels.steps import (
-    env_observe,
-    env_reset,
-    env_scratch,
-    env_shaping_observation,
-    env_step,
-    implements,
-)
 
 __all__ = ["BallKernelState", "PinBallConfig", "PinBallPhysics", "point_in_polygon"]
 
@@ -432,7 +425,7 @@ def ball_reset(balls: BallKernelState, b: int) -> tuple[float, float, float, flo
 # observation as PinBallEnv emits it (float32), held in float64 scratch rows: before, after and at a reset.
 
 
-@implements(env_scratch, BallKernelState)
+@steps.implements(steps.env_scratch, BallKernelState)
 def _ball_scratch(env: BallKernelState) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     n = env.edges.shape[0]
     return np.empty(4), np.empty(4), np.empty(4), np.empty(n, np.int64), np.empty(n, np.int64)
@@ -445,25 +438,25 @@ def _observation(out: np.ndarray, px: float, py: float, vx: float, vy: float) ->
     return out
 
 
-@implements(env_observe, BallKernelState)
+@steps.implements(steps.env_observe, BallKernelState)
 def _ball_observe(env: BallKernelState, b: int, scratch: tuple[np.ndarray, ...]) -> np.ndarray:
     return _observation(scratch[0], env.position[b, 0], env.position[b, 1], env.velocity[b, 0], env.velocity[b, 1])
 
 
-@implements(env_step, BallKernelState)
+@steps.implements(steps.env_step, BallKernelState)
 def _ball_env_step(env: BallKernelState, b: int, a: int, scratch: tuple[np.ndarray, ...],
                    ) -> tuple[np.ndarray, np.float32, bool, bool]:
     px, py, vx, vy, reward, terminated, done = ball_step(env, b, a, scratch[3], scratch[4])
     return _observation(scratch[1], px, py, vx, vy), reward, terminated, done
 
 
-@implements(env_reset, BallKernelState)
+@steps.implements(steps.env_reset, BallKernelState)
 def _ball_env_reset(env: BallKernelState, b: int, scratch: tuple[np.ndarray, ...]) -> np.ndarray:
     px, py, vx, vy = ball_reset(env, b)
     return _observation(scratch[2], px, py, vx, vy)
 
 
-@implements(env_shaping_observation, BallKernelState)
+@steps.implements(steps.env_shaping_observation, BallKernelState)
 def _ball_shaping_observation(env: BallKernelState, o: np.ndarray, scratch: tuple[np.ndarray, ...]) -> np.ndarray:
     return o
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from torchrl_subgoal.experiments.store import (
+from torchrl_subgoal.experiments.results import (
     Chunk,
     ConfigMismatchError,
     CorruptChunkError,
@@ -28,9 +28,8 @@ from torchrl_subgoal.experiments.store import (
     Results,
     ResultsError,
     UnknownMethodError,
-    load_frame,
-    load_results,
 )
+from torchrl_subgoal.experiments.store import load_frame, load_results
 from torchrl_subgoal.experiments.sweep import (
     ChunkFailedError,
     CorruptChunkWarning,

@@ -21,7 +21,7 @@ import torch
 from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
-from torchrl_subgoal.experiments.store import Chunk, ResultsError, UnknownMethodError
+from torchrl_subgoal.experiments.results import Chunk, ResultsError, UnknownMethodError
 from torchrl_subgoal.experiments.sweep import (
     ChunkFailedError,
     MethodSpec,

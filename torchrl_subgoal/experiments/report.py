@@ -40,14 +40,13 @@ from torchrl_subgoal.experiments import stats
 from torchrl_subgoal.experiments.cli import OneLineParser
 from torchrl_subgoal.experiments.paper import PaperResults, paper_results
 from torchrl_subgoal.experiments.plots import plot_learning_curves, plot_pattern_maps
-from torchrl_subgoal.experiments.store import (
+from torchrl_subgoal.experiments.results import (
     METRICS,
     IncompleteResultsError,
     Results,
     ResultsError,
-    ResultsStore,
-    load_results,
 )
+from torchrl_subgoal.experiments.store import ResultsStore, load_results
 
 SUMMARY_FILE = "summary.json"
 REPORT_FILE = "report.md"
@@ -351,7 +350,7 @@ def render_markdown(
         notes: extra lines for the notes section (e.g. why a figure is missing).
 
     Examples:
-        >>> from torchrl_subgoal.experiments.store import EpisodeTable, MethodResults, Results
+        >>> from torchrl_subgoal.experiments.results import EpisodeTable, MethodResults, Results
         >>> table = EpisodeTable(np.array([[9, 5, 3], [8, 4, 2]]), np.zeros((2, 3)), np.ones((2, 3), bool))
         >>> method = MethodResults("HRS", np.array(["alice", "alice"]), np.array([0, 1]), table)
         >>> summary = summarize(Results(Path("results/demo"), "four_rooms", {}, {"HRS": method}), n_boot=100)

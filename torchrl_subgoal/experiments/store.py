@@ -40,19 +40,14 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from torchrl_subgoal.experiments import results
 from torchrl_subgoal.experiments.results import (
-    METRICS,
     Chunk,
     ChunkStatus,
-    ConfigMismatchError,
     CorruptChunkError,
-    DomainMismatchError,
     EpisodeTable,
-    IncompleteResultsError,
-    MethodResults,
     Results,
     ResultsError,
-    UnknownMethodError,
 )
 
 FORMAT_VERSION = 1
@@ -65,12 +60,8 @@ _CHUNK_FILE = re.compile(r"^[0-9]{5,}\.parquet(\.corrupt)?$")
 #: Fields of config.json that define an experiment; a mismatch on any is an error.
 IDENTITY_FIELDS = ("domain", "methods", "config", "seed", "chunk_size", "n_episodes", "chunks")
 
-__all__ = [  # the records of experiments.results, kept importable from here
-    "METRICS", "Chunk", "ChunkStatus", "ConfigMismatchError", "CorruptChunkError", "DomainMismatchError",
-    "EpisodeTable", "IncompleteResultsError", "MethodResults", "Results", "ResultsError", "ResultsStore",
-    "UnknownMethodError", "check_method_name", "collect_versions", "diff_fields", "load_frame", "load_results",
-    "open_manifest", "planned_chunks", "to_json_data",
-]
+__all__ = ["ResultsStore", "check_method_name", "collect_versions", "diff_fields", "load_frame", "load_results",
+           "open_manifest", "planned_chunks", "to_json_data"]
 
 
 def check_method_name(name: str) -> str:
@@ -464,7 +455,7 @@ def open_manifest(results_dir: str | os.PathLike[str], domain: str | None = None
 
     Raises:
         ResultsError: the directory holds no sweep.
-        DomainMismatchError: it holds a sweep of another domain.
+        results.DomainMismatchError: it holds a sweep of another domain.
 
     Examples:
         >>> import tempfile
@@ -479,7 +470,7 @@ def open_manifest(results_dir: str | os.PathLike[str], domain: str | None = None
     if manifest is None:
         raise ResultsError(f"{store.root} holds no results ({CONFIG_FILE} not found)")
     if domain is not None and manifest["domain"] != domain:
-        raise DomainMismatchError(
+        raise results.DomainMismatchError(
             f"{store.root} holds results of domain {manifest['domain']!r}, not {domain!r}"
         )
     return manifest
@@ -502,9 +493,9 @@ def load_results(
             missing (they are listed in :attr:`Results.missing`). Corrupt chunks always raise.
 
     Raises:
-        DomainMismatchError: the directory holds another domain's results.
-        UnknownMethodError: a method in ``methods`` is not in the sweep.
-        IncompleteResultsError: chunks are missing (unless ``allow_incomplete``).
+        results.DomainMismatchError: the directory holds another domain's results.
+        results.UnknownMethodError: a method in ``methods`` is not in the sweep.
+        results.IncompleteResultsError: chunks are missing (unless ``allow_incomplete``).
         CorruptChunkError: a chunk cannot be read.
 
     Examples:
@@ -517,7 +508,7 @@ def load_results(
     wanted = known if methods is None else list(methods)
     unknown = [name for name in wanted if name not in known]
     if unknown:
-        raise UnknownMethodError(
+        raise results.UnknownMethodError(
             f"unknown method(s) {unknown} for {store.root}; it holds {known}"
         )
     by_method: dict[str, list[tuple[Chunk, EpisodeTable]]] = {name: [] for name in wanted}
@@ -530,7 +521,7 @@ def load_results(
         except FileNotFoundError:
             missing.append(chunk.name)
     if missing and not allow_incomplete:
-        raise IncompleteResultsError(
+        raise results.IncompleteResultsError(
             f"{store.root}: {len(missing)} chunk(s) not computed yet (e.g. {missing[0]}); "
             "re-run the sweep to finish it"
         )
@@ -542,7 +533,7 @@ def load_results(
         if len(episodes) > 1:
             raise ResultsError(f"{store.root}: method {name} has chunks of {sorted(episodes)} episodes")
         learners = [learner for chunk, _ in parts for learner in chunk.learners]
-        loaded[name] = MethodResults(
+        loaded[name] = results.MethodResults(
             name=name,
             patterns=np.array([p for p, _ in learners], dtype=str),
             learnings=np.array([lrn for _, lrn in learners], dtype=np.int64),

@@ -36,18 +36,20 @@ from typing import Any, Literal, Protocol
 import numpy as np
 from tqdm.auto import tqdm
 
-from torchrl_subgoal.experiments.store import (
-    CONFIG_FILE,
-    FORMAT_VERSION,
-    IDENTITY_FIELDS,
+from torchrl_subgoal.experiments.results import (
     Chunk,
     ConfigMismatchError,
     DomainMismatchError,
     EpisodeTable,
     Results,
     ResultsError,
-    ResultsStore,
     UnknownMethodError,
+)
+from torchrl_subgoal.experiments.store import (
+    CONFIG_FILE,
+    FORMAT_VERSION,
+    IDENTITY_FIELDS,
+    ResultsStore,
     check_method_name,
     collect_versions,
     diff_fields,

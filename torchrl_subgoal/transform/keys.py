@@ -21,6 +21,13 @@ STEPS = "subgoal_steps"
 ENV_REWARD = "env_reward"
 
 
+def _named(role: str, doc: str) -> functools.cached_property[str]:
+    """The entry of ``role``: ``f"{prefix}_{role}"``, computed once per :class:`SubgoalKeys`."""
+    entry: functools.cached_property[str] = functools.cached_property(lambda keys: f"{keys.prefix}_{role}")
+    entry.__doc__ = doc
+    return entry
+
+
 @dataclass(frozen=True)
 class SubgoalKeys:
     """Names of the abstract-state entries one transform keeps: ``f"{prefix}_{role}"``.
@@ -38,40 +45,13 @@ class SubgoalKeys:
 
     prefix: str = "subgoal"
 
-    @functools.cached_property
-    def index(self) -> str:
-        """``z``, the node of the subgoal series reached."""
-        return f"{self.prefix}_index"
-
-    @functools.cached_property
-    def ret(self) -> str:
-        """``r_h``, the discounted reward since ``z`` was entered."""
-        return f"{self.prefix}_return"
-
-    @functools.cached_property
-    def steps(self) -> str:
-        """``k``, the steps since ``z`` was entered."""
-        return f"{self.prefix}_steps"
-
-    @functools.cached_property
-    def achieved(self) -> str:
-        """Whether ``z`` was entered on this step."""
-        return f"{self.prefix}_achieved"
-
-    @functools.cached_property
-    def anchor(self) -> str:
-        """The observation at which ``z`` was entered."""
-        return f"{self.prefix}_anchor"
-
-    @functools.cached_property
-    def learner(self) -> str:
-        """Which env of the batch the row belongs to (its learner)."""
-        return f"{self.prefix}_learner"
-
-    @functools.cached_property
-    def start(self) -> str:
-        """The potential's input at reset (``z_0`` of an aggregation, ``o_0`` of a neural potential)."""
-        return f"{self.prefix}_start"
+    index = _named("index", "``z``, the node of the subgoal series reached.")
+    ret = _named("return", "``r_h``, the discounted reward since ``z`` was entered.")
+    steps = _named("steps", "``k``, the steps since ``z`` was entered.")
+    achieved = _named("achieved", "Whether ``z`` was entered on this step.")
+    anchor = _named("anchor", "The observation at which ``z`` was entered.")
+    learner = _named("learner", "Which env of the batch the row belongs to (its learner).")
+    start = _named("start", "The potential's input at reset (``z_0`` of an aggregation, ``o_0`` of a neural potential).")
 
     @functools.cached_property
     def optional(self) -> tuple[str, ...]:
