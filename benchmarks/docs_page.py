@@ -66,6 +66,11 @@ RUNS = (
         "frames per second of TorchRL `Collector`s over the batched four-rooms env (in process and over a "
         "`ParallelEnv`), and the time of one A2C iteration with and without the shaping transform.",
         ("benchmarks/a2c_collection.py", "--quick")),
+    Run("transform_cost", "What the shaping transform costs a collector and an A2C iteration",
+        "Python calls per collector batch (16 four-rooms envs x 16 steps) the shaping transform adds over an "
+        "empty `TransformedEnv`, beside TorchRL's `RewardSum` + `StepCounter`, and its share of an A2C "
+        "iteration at the A2C recipe's four-rooms settings.",
+        ("benchmarks/transform_cost.py", "--repeats", "5")),
     Run("finite_check", "The NaN/inf check of the transform",
         "env-steps per second with and without the transform's finite-reward check.",
         ("benchmarks/finite_check.py", "--steps", "200", "--repeats", "3")),

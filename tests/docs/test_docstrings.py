@@ -20,8 +20,8 @@ def _public() -> dict[str, str]:
     """``module.name`` -> docstring of every module-level public class and function."""
     found = {}
     for path in sorted(PACKAGE.rglob("*.py")):
-        if path.name.startswith("_") and path.name != "__init__.py":
-            continue
+        if any(part.startswith("_") and part != "__init__.py" for part in path.relative_to(PACKAGE).parts):
+            continue  # private modules and packages (the compiled kernels)
         module = ".".join(path.relative_to(PACKAGE).with_suffix("").parts)
         for node in ast.parse(path.read_text()).body:
             if isinstance(node, ast.FunctionDef | ast.ClassDef) and not node.name.startswith("_"):

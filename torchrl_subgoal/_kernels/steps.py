@@ -41,6 +41,7 @@ def implements(generic: Callable[..., Any], record: type) -> Callable[[Callable[
 
     Examples:
         >>> from typing import NamedTuple
+        >>> import numpy as np
         >>> class Counter(NamedTuple):
         ...     count: np.ndarray
         >>> @implements(env_observe, Counter)

@@ -105,7 +105,7 @@ PAPER = PaperResults(
 )
 
 STUDIO = StudioDomain(_geometry, recipe="recipes/pick_and_place.py", to_page=_box_to_page, from_page=_box_from_page,
-                      try_note=TRY_NOTE)
+                      try_note=TRY_NOTE, position=2)
 
 DOMAIN = domains.register(domains.Domain(
     "pick_and_place", "Pick and place", aliases=("fetch",), make_env=fetch_env, check_subgoal=fetch.check_subgoal,

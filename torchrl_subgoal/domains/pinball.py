@@ -126,7 +126,7 @@ PAPER = PaperResults(
 STUDIO = StudioDomain(
     _geometry, maps={"simple": "simple", "hard": "hard"}, map_check=_map_check,
     limits={"episodes": Limit(30, 1, 100), "learners": Limit(5, 1, 10), "max_steps": Limit(10_000, 100, 10_000)},
-    recipe="recipes/pinball.py", learner=_actor_critic,
+    recipe="recipes/pinball.py", learner=_actor_critic, position=1,
 )
 
 DOMAIN = domains.register(domains.Domain(

@@ -53,6 +53,7 @@ from torchrl.envs import EnvBase
 
 from torchrl_subgoal._kernels.random import ENV_STREAM, learner_keys, new_streams, random_actions
 from torchrl_subgoal.envs.pinball_physics import (
+    _DATA_DIR,  # noqa: F401  (the shipped maps' folder, read here too)
     ACTION_NAMES,
     Backend,
     BallKernelState,

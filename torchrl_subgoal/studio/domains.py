@@ -99,6 +99,7 @@ class StudioDomain:
         try_note: why "Try it" is off for this domain.
         learner: ``learner(learners, seed, max_steps, map)``, a fresh env and the paper's online learner
             for it with its shaping settings: what "Try it" runs, on the fused engine.
+        position: where the studio's menu lists the domain (lower first; ties in the registry's order).
         name: the registration's name.
         title: the registration's title.
         check_subgoal: the registration's subgoal check.
@@ -118,6 +119,7 @@ class StudioDomain:
     from_page: Callable[[dict[str, Any], str], dict[str, Any]] = _as_sent
     try_note: str = ""
     learner: LearnerHook | None = None
+    position: int = 100
     name: str = ""
     title: str = ""
     check_subgoal: Callable[[Predicate], str | None] | None = None
@@ -177,7 +179,8 @@ def default_domains(pinball_maps: Mapping[str, str | Path] | None = None) -> dic
         >>> studio_domains["four_rooms"].geometry("")["rows"][0]
         'wwwwwwwwwwwww'
     """
-    drawn = {name: view for name in domains.names() if (view := studio_domain(name)) is not None}
+    views = [view for name in domains.names() if (view := studio_domain(name)) is not None]
+    drawn = {view.name: view for view in sorted(views, key=lambda view: view.position)}
     extra = {name: str(path) for name, path in (pinball_maps or {}).items()}
     if extra:
         pinball = drawn["pinball"].with_maps(extra)

@@ -17,6 +17,14 @@ class ValueCache:
     update that moves no version counter (through ``.data``, TorchRL's weight updates, or another
     process writing shared memory) is seen too. Assumes ``Φ`` is a deterministic function of its
     inputs and those tensors (no dropout).
+
+    Examples:
+        >>> from torchrl_subgoal import TabularPotential
+        >>> v, cache = TabularPotential(3), ValueCache()
+        >>> cache.check(v)
+        >>> cache.put("z", {"subgoal_index": torch.tensor([[1]])}, torch.tensor([[0.5]]))
+        >>> cache.get("z", {"subgoal_index": torch.tensor([[1]])}).item(), cache.get("z", {"subgoal_index": torch.tensor([[2]])})
+        (0.5, None)
     """
 
     def __init__(self) -> None:

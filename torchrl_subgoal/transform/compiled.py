@@ -31,7 +31,13 @@ _NO_ENTRIES = np.zeros((0, 0), np.float32)  # finite_inputs without an observati
 
 
 class StepInputs(NamedTuple):
-    """One step's entries of ``"next"`` that the shaping reads."""
+    """One step's entries of ``"next"`` that the shaping reads.
+
+    Examples:
+        >>> one = torch.ones(2, 1)
+        >>> StepInputs(None, one, one, one.bool(), one.bool(), None).reward.shape
+        torch.Size([2, 1])
+    """
 
     obs: torch.Tensor | None  #: the observation the region predicates read (``None``: not read)
     reward: torch.Tensor  #: the reward to shape
@@ -46,6 +52,12 @@ def check_finite(reward: torch.Tensor, obs: torch.Tensor | None, reward_key: Nes
 
     One reduction per tensor when all is well (a NaN or inf anywhere makes the sum
     non-finite); the search for the culprit runs only then.
+
+    Examples:
+        >>> check_finite(torch.tensor([[1.0], [float("nan")]]), None, "reward", "observation")
+        Traceback (most recent call last):
+        ...
+        ValueError: SubgoalPotentialTransform: 'reward' is NaN or infinite at index (1, 0) (value nan): it would make the potential NaN for good; fix the env, or replace such values before this transform
     """
     for tensor, key, bad in ((reward, reward_key, "NaN or infinite"), (obs, obs_key, "NaN")):
         if tensor is None or not tensor.is_floating_point():
@@ -77,6 +89,16 @@ def compiled_step(
 
     Returns the next entries (names as in :class:`~torchrl_subgoal.SubgoalKeys`, ``"reward"`` the
     shaped reward, ``"transition"`` the step's SMDP transition when the settings write it).
+
+    Examples:
+        >>> from torchrl_subgoal import State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
+        >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9)
+        >>> batch = t._batch(torch.Size([2]), torch.zeros(2, 1, dtype=torch.long), 1, torch.zeros(2, 1), online=True)
+        >>> z, zero = torch.zeros(2, 1, dtype=torch.long), torch.zeros(2, 1)
+        >>> out = compiled_step(batch, t._settings, {"subgoal_index": z, "subgoal_return": zero, "subgoal_steps": z},
+        ...                     StepInputs(torch.tensor([[1], [0]]), zero, zero, z.bool(), z.bool(), None), learn=False)
+        >>> out["subgoal_index"].tolist(), out["subgoal_steps"].tolist()
+        ([[1], [0]], [[0], [1]])
     """
     keys = settings.keys
     n = setup.rows
@@ -205,7 +227,18 @@ class ShapingKernelState(NamedTuple):
 def kernel_state(setup: BatchSetup, state: tuple[torch.Tensor, torch.Tensor, torch.Tensor], learn: bool,
                  observation_size: int) -> ShapingKernelState:
     """The record of a compiled loop for the env batch ``setup`` (set up for the compiled step), with every
-    learner's ``state = (z, r_h, k)`` copied; ``learn``: the loop applies the online update."""
+    learner's ``state = (z, r_h, k)`` copied; ``learn``: the loop applies the online update.
+
+    Examples:
+        >>> from torchrl.envs import TransformedEnv
+        >>> from torchrl_subgoal import State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> t = SubgoalPotentialTransform(SubgoalSeries([State(3)]), TabularPotential(2, (2,)), gamma=0.9)
+        >>> td = TransformedEnv(FourRoomsEnv(2), t).reset()
+        >>> state = (td["subgoal_index"], td["subgoal_return"], td["subgoal_steps"])
+        >>> kernel_state(t._online, state, learn=False, observation_size=1).learners.z.shape
+        (2, 1)
+    """
     abstraction = setup.abstraction
     lookup = np.zeros(1, np.int64)
     regions = ShapingKernelState.unshaped(0).regions

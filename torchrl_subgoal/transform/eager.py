@@ -64,6 +64,17 @@ def torch_step(
     With ``update``, the potential is first trained on the transitions this step closes (the online
     update). Returns the next entries, as :func:`~torchrl_subgoal.transform.compiled.compiled_step`
     does (``"transition"``: the step's SMDP transition TensorDict).
+
+    Examples:
+        >>> from torchrl_subgoal import State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
+        >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9, backend="torch")
+        >>> batch = t._batch(torch.Size([2]), torch.zeros(2, 1, dtype=torch.long), 1, torch.zeros(2, 1), online=True)
+        >>> z, zero = torch.zeros(2, 1, dtype=torch.long), torch.zeros(2, 1)
+        >>> out = torch_step(batch, t._settings, t.potential, ValueCache(), {"subgoal_index": z, "subgoal_return": zero,
+        ...                  "subgoal_steps": z}, StepInputs(torch.tensor([[1], [0]]), zero, zero, z.bool(), z.bool(), None),
+        ...                  update=None)
+        >>> out["subgoal_index"].tolist()
+        [[1], [0]]
     """
     keys, kept, batch_shape = settings.keys, settings.kept, setup.batch_shape
     check_finite(step.env_reward, step.obs, "reward", settings.observation_key)
@@ -113,7 +124,14 @@ def torch_step(
 
 
 def start_entries(current: dict[str, torch.Tensor], settings: Settings) -> dict[str, torch.Tensor]:
-    """The potential's inputs at the start of the episode: ``z_0`` (0 for a subgoal series) or ``o_0``."""
+    """The potential's inputs at the start of the episode: ``z_0`` (0 for a subgoal series) or ``o_0``.
+
+    Examples:
+        >>> from torchrl_subgoal import State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
+        >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9)
+        >>> start_entries({"subgoal_index": torch.tensor([[1]])}, t._settings)["subgoal_index"].tolist()
+        [[0]]
+    """
     keys = settings.keys
     start = dict(current)
     if keys.anchor in settings.kept:

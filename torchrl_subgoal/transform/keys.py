@@ -126,13 +126,28 @@ class EnvKeys(NamedTuple):
 
 
 def read(td: TensorDictBase, key: NestedKey) -> Any:
-    """``td``'s entry ``key``, or ``None``: TensorDict's unchecked read, as TorchRL's ``step_mdp`` reads."""
+    """``td``'s entry ``key``, or ``None``: TensorDict's unchecked read, as TorchRL's ``step_mdp`` reads.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> td = TensorDict({"a": torch.zeros(2, 1)}, [2])
+        >>> read(td, "a").shape, read(td, ("b", "c"))
+        (torch.Size([2, 1]), None)
+    """
     return td._get_str(key, None) if type(key) is str else td._get_tuple(key, None)
 
 
 def write(td: TensorDictBase, key: NestedKey, value: torch.Tensor) -> None:
     """Set ``td[key] = value`` without TensorDict's checks (``value`` fits by construction), as TorchRL's
-    ``step_mdp`` writes."""
+    ``step_mdp`` writes.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> td = TensorDict({}, [2])
+        >>> write(td, "a", torch.ones(2, 1))
+        >>> td["a"].sum().item()
+        2.0
+    """
     if type(key) is str:
         td._set_str(key, value, inplace=False, validated=True)
     else:
@@ -143,7 +158,13 @@ def state_specs(
     keys: SubgoalKeys, kept: tuple[str, ...], num_states: int, shape: torch.Size, anchor: TensorSpec | None,
 ) -> dict[str, TensorSpec]:
     """The specs of the ``kept`` abstract-state entries, each ``[*shape, 1]`` (the anchor ``[*shape, D]``),
-    ``anchor`` the spec of the observation the anchor snapshots."""
+    ``anchor`` the spec of the observation the anchor snapshots.
+
+    Examples:
+        >>> specs = state_specs(SubgoalKeys(), ("subgoal_index", "subgoal_return"), 3, torch.Size([4]), None)
+        >>> specs["subgoal_index"].shape, specs["subgoal_return"].dtype
+        (torch.Size([4, 1]), torch.float32)
+    """
     col = (*shape, 1)
     specs: dict[str, TensorSpec] = {
         keys.index: Bounded(0, num_states - 1, shape=col, dtype=torch.long),
@@ -164,7 +185,14 @@ def state_specs(
 
 
 def transition_spec(inputs: dict[str, TensorSpec], shape: torch.Size) -> Composite:
-    """The spec of one step's SMDP transition entry (the potential's ``inputs`` at ``z`` and ``z'``)."""
+    """The spec of one step's SMDP transition entry (the potential's ``inputs`` at ``z`` and ``z'``).
+
+    Examples:
+        >>> from torchrl.data import Bounded
+        >>> inputs = {"subgoal_index": Bounded(0, 2, shape=(4, 1), dtype=torch.long)}
+        >>> sorted(transition_spec(inputs, torch.Size([4]))["next"].keys())
+        ['done', 'reward', 'subgoal_index', 'terminated']
+    """
     col = (*shape, 1)
     flag = Binary(n=1, shape=col, dtype=torch.bool)
     nxt = Composite(**{k: s.clone() for k, s in inputs.items()}, reward=Unbounded(shape=col, dtype=torch.float32),

@@ -33,7 +33,14 @@ NO_TABLE = np.zeros((0, 1), dtype=np.float32)
 
 
 class Settings(NamedTuple):
-    """What a step reads of its transform, fixed when the transform is made."""
+    """What a step reads of its transform, fixed when the transform is made.
+
+    Examples:
+        >>> from torchrl_subgoal import State, SubgoalPotentialTransform
+        >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9)
+        >>> t._settings.kept, t._settings.value_gamma
+        (('subgoal_index', 'subgoal_return', 'subgoal_steps'), 0.9)
+    """
 
     keys: SubgoalKeys
     kept: tuple[str, ...]  #: the abstract-state entries kept in the TensorDict
@@ -142,7 +149,15 @@ class PotentialKernelState(NamedTuple):
 
 
 def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss | None) -> str | None:
-    """Why the compiled step cannot shape with ``potential`` (trained online by ``update``), or ``None``."""
+    """Why the compiled step cannot shape with ``potential`` (trained online by ``update``), or ``None``.
+
+    Examples:
+        >>> from torchrl_subgoal import NeuralPotential
+        >>> compiled_potential(TabularPotential(3), None) is None
+        True
+        >>> compiled_potential(NeuralPotential(torch.nn.Linear(2, 1)), None)
+        'it shapes with a TabularPotential or a NaivePotential, not NeuralPotential'
+    """
     if isinstance(potential, TabularPotential):
         if potential.table.device.type != "cpu":
             return f"it reads the potential's table on the CPU, not {potential.table.device}"
@@ -156,7 +171,15 @@ def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss
 @dataclass
 class BatchSetup:
     """What shaping a batch of a given shape needs: the abstraction compiled for its rows, each row's
-    learner, and, for the compiled path, the potential as the kernels read it."""
+    learner, and, for the compiled path, the potential as the kernels read it.
+
+    Examples:
+        >>> from torchrl_subgoal import State
+        >>> subgoals, learner = Subgoals(SubgoalSeries([State(1)])), torch.zeros(3, 1, dtype=torch.long)
+        >>> batch = BatchSetup(torch.Size([3]), subgoals.compile(learner, torch.Size([3]), 1, (1, False), "o"), learner)
+        >>> batch.rows, batch.compiled
+        (3, False)
+    """
 
     batch_shape: torch.Size
     abstraction: SubgoalTables | StateAggregation

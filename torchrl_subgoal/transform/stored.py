@@ -24,6 +24,11 @@ def time_dim(data: TensorDictBase) -> int:
 
     Raises:
         ValueError: the data has no batch dimension.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> time_dim(TensorDict({}, [4, 10])), time_dim(TensorDict({}, [10, 4], names=["time", None]))
+        (1, 0)
     """
     if data.batch_dims == 0:
         raise ValueError("forward() shapes stored trajectories [*B, T]; got a TensorDict without batch dims")
@@ -49,6 +54,13 @@ def learners_of(
 
     Raises:
         ValueError: learners differ and the rows' learners are unknown; the message says what to keep.
+
+    Examples:
+        >>> from torchrl_subgoal import State, SubgoalSeries, TabularPotential
+        >>> one_table = learners_of(None, torch.Size([5]), 1, Subgoals(SubgoalSeries([State(1)])), TabularPotential(2), 8,
+        ...                         "subgoal_learner")
+        >>> one_table[0].reshape(-1).tolist(), one_table[1]  # no row's learner matters: all are learner 0
+        ([0, 0, 0, 0, 0], 1)
     """
     per_learner = (isinstance(potential, TabularPotential) and bool(potential.batch_shape)) or subgoals.per_env
     if not per_learner:
@@ -87,7 +99,17 @@ def shape_stored(
 ) -> TensorDictBase:
     """Shape stored trajectories ``data`` ``[*B, T]`` (see ``SubgoalPotentialTransform.forward``):
     ``set_up(batch_shape, stored learner entry, time dim, first observation)`` sets the rows up,
-    ``advance`` makes one step without training."""
+    ``advance`` makes one step without training.
+
+    Examples:
+        >>> from torchrl.envs import TransformedEnv
+        >>> from torchrl_subgoal import Cell, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> t = SubgoalPotentialTransform(SubgoalSeries([Cell(1, 2)]), TabularPotential(2), gamma=0.9, observation_key="cell")
+        >>> data = TransformedEnv(FourRoomsEnv(2), t).rollout(6)
+        >>> bool((t(data.clone())["next", "reward"] == data["next", "reward"]).all())  # forward() calls it
+        True
+    """
     time = time_dim(data)
     nxt = data.get("next", None)
     stored_reward = nxt is not None and read(nxt, env.env_reward) is not None  # then the one shaped

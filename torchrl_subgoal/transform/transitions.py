@@ -64,6 +64,16 @@ def rebuild(
     A step closes a transition when ``z`` changed or the episode ended; its ``r_h`` and ``k`` are the
     root's kept ``r_h`` and ``k`` plus this step's env reward
     (:func:`~torchrl_subgoal.transform.shaping.accumulate`).
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> from torchrl_subgoal.transform.keys import EnvKeys
+        >>> zero, one = torch.zeros(1, 2, 1, dtype=torch.long), torch.ones(1, 2, 1, dtype=torch.long)
+        >>> data = TensorDict({"subgoal_index": zero, "subgoal_return": torch.zeros(1, 2, 1), "subgoal_steps": zero,
+        ...                    "next": {"subgoal_index": torch.tensor([[[0], [1]]]), "reward": torch.ones(1, 2, 1),
+        ...                             "done": zero.bool(), "terminated": zero.bool()}}, [1, 2])
+        >>> rebuild(data, SubgoalKeys(), EnvKeys.resolve(None), ["subgoal_index"], 0.9)["next", "subgoal_index"].tolist()
+        [[1]]
     """
     index, ret, steps = (at(env.group, name) for name in (keys.index, keys.ret, keys.steps))
     nxt = data.get("next", None)
