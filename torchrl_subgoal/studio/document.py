@@ -75,6 +75,9 @@ def parse_json(body: bytes) -> Any:
     (a lone surrogate such as ``"\\ud800"``): every malformed body is a
     :class:`RequestError` (400), never an exception of the decoder.
 
+    Args:
+        body: the request's bytes.
+
     Examples:
         >>> parse_json(b'{"a": 1}')
         {'a': 1}
@@ -400,6 +403,10 @@ def read_file(folder: Path, name: str) -> tuple[Path, bytes]:
     path was checked to lie directly in ``folder``, so a link swapped in meanwhile is
     refused rather than followed out of the folder. At most one byte more than a
     subgoal file may hold is read (the loader then names the limit).
+
+    Args:
+        folder: the save folder.
+        name: the file's name in it (as in a request).
 
     Raises:
         RequestError: 400 for a bad name or a link out of the folder, 404 if there is no such file.
