@@ -114,7 +114,8 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
             zero_terminal_potential=config["zero_terminal_potential"], start_potential=config["start_potential"],
         )
         shaping = Shaping(*parts) if parts is not None else None
-        logger = experiment_logger(Path(config["log_dir"]), f"{chunk.method}_{pattern}_{learning}")
+        # fresh: a learner run again after an interruption starts its log over, as its results do
+        logger = experiment_logger(Path(config["log_dir"]), f"{chunk.method}_{pattern}_{learning}", fresh=True)
         curve = train_a2c(domain.make_env, a2c, shaping=shaping, observation_key=domain.observation_key,
                           seed=chunk.seed + i, logger=logger, progress=progress)
         rows.append(curve)
