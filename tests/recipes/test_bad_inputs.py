@@ -452,3 +452,26 @@ def test_pinball_unknown_map_is_one_line(tmp_path: Path, capsys: pytest.CaptureF
         "error: --map: PinBall config 'moon' is neither one of ('simple', 'hard') nor an existing file")
     assert not (tmp_path / "r").exists()
 
+
+# -- the report while a sweep runs ---------------------------------------------------------------------
+
+
+def test_the_report_refuses_a_directory_a_sweep_is_writing_into(finished: Path, tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    res = copy_of(finished, tmp_path)
+    for name in ("report.md", "summary.json"):
+        (res / name).unlink()
+    with ResultsStore(res).lock():  # as the sweep holds it while it runs
+        assert report_main([str(res), "--n-boot", "10"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == (f"error: a sweep is running into {res} (it holds {res / '.lock'}), so its results are not "
+                       "final; wait for it to finish, or pass --allow-incomplete to report on the chunks finished "
+                       "so far")
+        assert not (res / "report.md").exists() and not (res / "summary.json").exists()
+        assert report_main([str(res), "--n-boot", "10", "--allow-incomplete"]) == 0
+        err = capsys.readouterr().err
+        assert err.splitlines()[0] == (f"warning: a sweep is running into {res}; this report covers the chunks it "
+                                       "has finished so far")
+        assert (res / "report.md").exists()
+    assert report_main([str(res), "--n-boot", "10"]) == 0  # the sweep is over: no word about it
+    assert "sweep is running" not in capsys.readouterr().err
