@@ -38,7 +38,7 @@ def live_studio(folder: Path, *, token: bool = True, **kwargs: Any) -> Iterator[
     does (``token=False``: without); yields ``(url, app)``, the url with its ``?token=`` (add parameters
     with ``&``)."""
     secret = secrets.token_urlsafe(24) if token else None
-    app = create_app(folder, token=secret, **kwargs)
+    app = create_app(folder, **({"token": secret} if secret else {}), **kwargs)
     server = serve(app, "127.0.0.1", 0)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
