@@ -16,12 +16,13 @@ from flask.testing import FlaskClient
 
 from torchrl_subgoal import load_patterns
 from torchrl_subgoal.studio import server
-from torchrl_subgoal.studio.document import MAX_DEPTH, MAX_REQUEST_BYTES
+from torchrl_subgoal.studio.document import MAX_REQUEST_BYTES
 from torchrl_subgoal.subgoals import Cell
 
 DRAWING = {"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [{"cell": [3, 6]}], "order": None}]}
 OTHER = {"domain": "four_rooms", "patterns": [{"name": "q", "subgoals": [{"cell": [7, 9]}], "order": None}]}
 SECRET = "precious: do not overwrite\n"
+MAX_DEPTH = 32  # the documented limit of nesting (studio.document.MAX_DEPTH)
 
 
 def folder_of(app: Flask) -> Path:
