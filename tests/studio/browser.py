@@ -16,7 +16,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from torchrl_subgoal.studio.server import create_app, serve, studio_url
+from torchrl_subgoal.studio.server import create_app, serve
 
 CHROMIUM = os.environ.get("STUDIO_CHROMIUM", "/usr/bin/chromium")
 #: A name of another site that the browser resolves to this machine, as after a DNS-rebinding attack
@@ -43,7 +43,7 @@ def live_studio(folder: Path, *, token: bool = True, **kwargs: Any) -> Iterator[
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     try:
-        yield studio_url("127.0.0.1", server.port, secret), app
+        yield f"http://127.0.0.1:{server.port}/" + (f"?token={secret}" if secret else ""), app
     finally:
         server.shutdown()
         server.server_close()
