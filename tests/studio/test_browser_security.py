@@ -66,6 +66,7 @@ def test_saving_over_another_file_asks_first(browser: Any, studio: Studio) -> No
     first = (folder / "plan.yaml").read_bytes()
     # the file this page saved: saved again without a question
     click_cell(page, 7, 9)
+    expect(page.locator("#message")).to_contain_text("valid: ready to save", timeout=TIMEOUT_MS)  # not "Saved"
     page.click("#save")
     expect(page.locator("#message")).to_contain_text("Saved", timeout=TIMEOUT_MS)
     assert dialogs == [] and load_patterns(folder / "plan.yaml")["pattern_1"].predicates == (Cell(3, 6), Cell(7, 9))
@@ -74,7 +75,7 @@ def test_saving_over_another_file_asks_first(browser: Any, studio: Studio) -> No
     # a new drawing under that name: the page asks; "Cancel" saves nothing
     page.click("#new")
     click_cell(page, 10, 6)
-    expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
+    expect(page.locator("#message")).to_contain_text("valid: ready to save", timeout=TIMEOUT_MS)
     page.fill("#file-name", "plan")
     page.click("#save")
     expect(page.locator("#message")).to_contain_text("Not saved: plan.yaml exists", timeout=TIMEOUT_MS)

@@ -19,8 +19,8 @@ Routes (JSON in and out; every error is ``{"error": message}`` with a 4xx code):
 
 Every request is checked first (:func:`create_app`): its ``Host`` must be one this
 studio serves (loopback names and the addresses it listens on), a browser's
-``Origin`` must be the studio's own, anything that changes state (POST, PUT,
-DELETE) must be JSON (``Content-Type: application/json``), and with a token (the
+``Origin`` must be the studio's own, anything that changes state (POST, PUT; a
+DELETE that has a body) must be JSON (``Content-Type: application/json``), and with a token (the
 command line makes one per launch) every request but the page's static files must
 carry it. So neither another web site the user visits nor a DNS-rebinding page can
 drive the studio.
@@ -204,7 +204,7 @@ def create_app(
 
     Every request must name a host the studio serves (the loopback names and
     ``hosts``); a browser's request must come from the studio's own page (its
-    ``Origin``); POST, PUT and DELETE must send JSON; with ``token``, every request
+    ``Origin``); POST and PUT must send JSON; with ``token``, every request
     but the static files must carry it (header ``X-Studio-Token`` or ``?token=``).
     Anything else is refused with a 4xx and changes nothing.
 
