@@ -123,6 +123,15 @@ class IncompleteResultsError(ResultsError):
     """
 
 
+class SweepRunningError(ResultsError):
+    """A sweep holds the results directory's lock: it is writing into it, so its results are not final.
+
+    Examples:
+        >>> issubclass(SweepRunningError, ResultsError)
+        True
+    """
+
+
 @dataclass(frozen=True)
 class Chunk:
     """A unit of work: consecutive learners of one method, run by one call of ``run_chunk``.
@@ -674,6 +683,37 @@ class ResultsStore:
             with contextlib.suppress(OSError):
                 self.chunks_dir.rmdir()
         return removed
+
+    def sweep_running(self) -> bool:
+        """Whether a process holds the directory's lock, i.e. a sweep is writing into it.
+
+        The lock is probed without waiting and released at once; a directory without a
+        lock file has no sweep running (nothing is created).
+
+        Examples:
+            >>> import tempfile
+            >>> store = ResultsStore(tempfile.mkdtemp())
+            >>> store.sweep_running()
+            False
+            >>> with store.lock():
+            ...     store.sweep_running()
+            True
+        """
+        import fcntl
+
+        try:
+            handle = open(self.root / LOCK_FILE, "rb")  # noqa: SIM115 (closed below)
+        except OSError:
+            return False
+        with handle:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return True
+            except OSError:
+                return False
+            fcntl.flock(handle, fcntl.LOCK_UN)
+            return False
 
     @contextlib.contextmanager
     def lock(self) -> Iterator[None]:

@@ -53,16 +53,34 @@ __all__ = [
 
 
 def experiment_logger(
-    log_dir: str | Path, name: str, backend: Literal["csv", "tensorboard", "none"] = "csv"
+    log_dir: str | Path, name: str, backend: Literal["csv", "tensorboard", "none"] = "csv", *, fresh: bool = False
 ) -> Logger | None:
     """A TorchRL logger writing under ``log_dir/name``: CSV (default), TensorBoard, or none.
+
+    Args:
+        log_dir: the directory of every learner's log.
+        name: this learner's (its subdirectory).
+        backend: ``"csv"``, ``"tensorboard"`` or ``"none"``.
+        fresh: start the learner's log afresh: remove what an earlier attempt of it logged (its
+            ``scalars/*.csv``, its TensorBoard event files), so a learner run again from its start
+            (a resumed sweep reruns the learners it had not finished) logs one series, not the
+            restarted one appended to the interrupted one. Nothing else in the directory is touched.
 
     Examples:
         >>> import tempfile
         >>> logger = experiment_logger(tempfile.mkdtemp(), "HRS_p1_0")
         >>> type(logger).__name__
         'CSVLogger'
+        >>> logger.log_scalar("episode_length", 30.0, step=256)
+        >>> again = experiment_logger(logger.log_dir, "HRS_p1_0", fresh=True)  # the learner starts over
+        >>> sorted(p.name for p in (Path(logger.log_dir) / "HRS_p1_0" / "scalars").iterdir())
+        []
     """
+    if fresh:
+        own = Path(log_dir) / name
+        for stale in [*own.glob("scalars/*.csv"), *own.glob("events.out.tfevents.*")]:
+            if stale.is_file() and not stale.is_symlink():
+                stale.unlink()
     if backend == "none":
         return None
     if backend == "tensorboard":
