@@ -70,4 +70,4 @@ def discrete_corridor(num_envs: int) -> Corridor:
 
 def continuous_corridor(num_envs: int) -> Corridor:
     """``make_env(num_envs)`` of the continuous corridor."""
-    return Corridor(num_envs, continuous=True)
+    return Corridor(num_envs, length=5, continuous=True)

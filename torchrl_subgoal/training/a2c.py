@@ -294,8 +294,8 @@ def train_a2c(
             if config.collector_workers:
                 collector.update_policy_weights_()
             recorder.add(data, frames, {
-                "loss_objective": float(losses["loss_objective"]), "loss_critic": float(losses["loss_critic"]),
-                "loss_entropy": float(losses["loss_entropy"]), "loss_potential": potential_loss})
+                "loss_objective": float(losses["loss_objective"].detach()), "loss_critic": float(losses["loss_critic"].detach()),
+                "loss_entropy": float(losses["loss_entropy"].detach()), "loss_potential": potential_loss})
     finally:
         close_collector(collector)
     return recorder.curve

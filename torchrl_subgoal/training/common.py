@@ -352,9 +352,9 @@ def _trunk(spec: TensorSpec, features: Features, hidden: Sequence[int], order: i
     return nn.Sequential(first, *layers), size
 
 
-def _network(trunk: nn.Module, head: nn.Module) -> nn.Module:
-    """``head(trunk(...))``; the trunk may read several inputs."""
-    return _Chain(trunk, head)
+def _network(trunk: nn.Module, *layers: nn.Module) -> nn.Module:
+    """The ``layers`` after ``trunk(...)``; the trunk may read several inputs."""
+    return _Chain(trunk, *layers)
 
 
 def subgoal_states(config: LearnerSettings, shaping: Shaping | None) -> int:

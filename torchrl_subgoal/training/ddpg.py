@@ -103,8 +103,11 @@ class DDPGTrainConfig:
     """s.d. of the Gaussian exploration noise (action units; actions clipped to their bounds)"""
     random_eps: float = 0.0
     """probability of a uniformly random action while collecting"""
+    action_l2: float = 0.0
+    """weight of an L2 penalty on the actor's actions (DDPG only; the pick-and-place authors' 1.0 keeps
+    a tanh actor off its bounds while the critic has nothing to say)"""
     norm_clip: float = 5.0
-    """normalised observations are clipped to ``±norm_clip``"""
+    """normalised observations are clipped to ``+-norm_clip``"""
     td3: bool = False
     """TD3 (two critics, smoothed targets, delayed actor updates) instead of DDPG"""
     policy_delay: int = 2
@@ -135,7 +138,9 @@ class DDPGTrainConfig:
         for name in ("updates_per_batch", "batch_size", "buffer_size", "policy_delay"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("learning_starts", "noise_eps", "target_noise", "noise_clip"):
+        if self.td3 and self.action_l2:
+            raise ValueError(f"action_l2 ({self.action_l2}) is DDPG's actor penalty; TD3 here has none: set it to 0")
+        for name in ("learning_starts", "noise_eps", "target_noise", "noise_clip", "action_l2"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         for name in ("lr", "norm_clip"):
@@ -151,10 +156,10 @@ class DDPGTrainConfig:
         return math.ceil(self.total_frames / self.frames_per_batch)
 
     def agent(self) -> DDPGConfig:
-        """The agent's hyper-parameters (no return clipping, no action penalty)."""
+        """The agent's hyper-parameters (no return clipping)."""
         return DDPGConfig(hidden=self.hidden, actor_lr=self.lr, critic_lr=self.lr, gamma=self.gamma,
                           polyak=self.polyak, batch_size=self.batch_size, buffer_size=self.buffer_size,
-                          random_eps=self.random_eps, noise_eps=self.noise_eps, action_l2=0.0, clip_return=None,
+                          random_eps=self.random_eps, noise_eps=self.noise_eps, action_l2=self.action_l2, clip_return=None,
                           clip_positive=False, norm_clip=self.norm_clip)
 
     def td3_settings(self) -> TD3Settings | None:

@@ -67,6 +67,7 @@ DQN_PRESETS: dict[str, dict[str, Any]] = {
         "target_update_interval": 300,  # gradient steps: 600 frames at 8 gradient steps per 16 frames
         "eps_init": 1.0, "eps_end": 0.07, "exploration_frames": 24_000, "hidden": (256, 256),
         "loss_function": "smooth_l1", "max_grad_norm": 10.0,
+        "record_window": 100,  # 1,600 frames: the recorded episode length spans several 200-step episodes
     },
 }
 
@@ -161,6 +162,8 @@ class DQNConfig:
     def __post_init__(self) -> None:
         self.hidden = tuple(int(h) for h in self.hidden)
         check_settings(self)
+        if self.features not in ("one_hot", "fourier", "mlp"):
+            raise ValueError(f"features must be one_hot, fourier or mlp, got {self.features!r}")
         for name in ("gradient_steps", "batch_size", "buffer_size", "target_update_interval",
                      "exploration_frames"):
             if getattr(self, name) < 1:

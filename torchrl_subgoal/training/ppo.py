@@ -137,6 +137,8 @@ class PPOConfig:
     def __post_init__(self) -> None:
         self.hidden = tuple(int(h) for h in self.hidden)
         check_settings(self)
+        if self.features not in ("one_hot", "fourier", "mlp"):
+            raise ValueError(f"features must be one_hot, fourier or mlp, got {self.features!r}")
         for name in ("epochs", "minibatch_size"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
@@ -216,7 +218,7 @@ def ppo_actor_critic(
     low, high = action_spec.space.low, action_spec.space.high
     while low.ndim > 1:
         low, high = low[0], high[0]
-    policy = nn.Sequential(_network(policy_trunk, loc_head), AddStateIndependentNormalScale(action_size))
+    policy = _network(policy_trunk, loc_head, AddStateIndependentNormalScale(action_size))
     actor = ProbabilisticActor(
         TensorDictModule(policy, in_keys=in_keys, out_keys=["loc", "scale"]),
         in_keys=["loc", "scale"], spec=action_spec, distribution_class=TanhNormal,
