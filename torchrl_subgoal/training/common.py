@@ -408,7 +408,8 @@ def make_collector(
         env_factory: builds a collecting process's env (picklable for worker processes).
         policy: the acting policy (its weights are sent to the workers).
         config: ``collector_workers``, ``frames_per_batch`` and ``total_frames``.
-        init_random_frames: frames collected with random actions first (off-policy learners).
+        init_random_frames: frames collected with random actions first (off-policy learners), rounded
+            up to whole batches.
 
     Examples:
         >>> import functools
@@ -421,7 +422,9 @@ def make_collector(
         [torch.Size([4, 8]), torch.Size([4, 8])]
         >>> close_collector(collector)
     """
-    extra: dict[str, Any] = {} if init_random_frames is None else {"init_random_frames": init_random_frames}
+    extra: dict[str, Any] = {}
+    if init_random_frames:  # whole batches (what the collector would do, with a warning)
+        extra["init_random_frames"] = -(-init_random_frames // config.frames_per_batch) * config.frames_per_batch
     if config.collector_workers == 0:
         return Collector(env_factory(), policy, frames_per_batch=config.frames_per_batch,
                          total_frames=config.total_frames, auto_register_policy_transforms=False, **extra)
@@ -661,6 +664,7 @@ class SampleReshaper:
     Args:
         transform: a shaping transform over the potential, with the collecting transform's
             options (:meth:`Shaping.transform`); one that has not stepped an env.
+        extra_keys: more entries to keep (what condition predicates read besides the observation).
 
     Examples:
         >>> from torchrl.data import LazyTensorStorage, ReplayBuffer
@@ -680,20 +684,22 @@ class SampleReshaper:
         True
     """
 
-    def __init__(self, transform: SubgoalPotentialTransform) -> None:
+    def __init__(self, transform: SubgoalPotentialTransform, extra_keys: Sequence[NestedKey] = ()) -> None:
         self.transform = transform
+        self.extra_keys = tuple(extra_keys)
 
     @property
     def keys(self) -> list[NestedKey]:
-        """The entries a replay buffer must keep for this (besides the learner's own)."""
+        """The entries a replay buffer must keep for this (besides the learner's own): the abstract-state
+        entries, the observation the predicates read (``observation_key``, and the anchor of a neural
+        potential) now and next, the unshaped reward, done and terminated, and ``extra_keys`` (the
+        ``"next"`` entries condition predicates read, e.g. ``("next", "has_key")``)."""
         t = self.transform
-        keys: list[NestedKey] = [*t.state_keys, ("next", t.env_reward_key), ("next", t.done_key),
-                                 ("next", t.terminated_key)]
-        if t._uses_observation:
-            keys += [t.observation_key, ("next", t.observation_key)]
+        keys: list[NestedKey] = [*t.state_keys, t.observation_key, ("next", t.observation_key),
+                                 ("next", t.env_reward_key), ("next", t.done_key), ("next", t.terminated_key)]
         if t.keys.anchor in t.state_keys:
             keys.append(("next", t.anchor_key))
-        return list(dict.fromkeys(keys))
+        return list(dict.fromkeys([*keys, *self.extra_keys]))
 
     def __call__(self, sample: TensorDictBase) -> TensorDictBase:
         """``sample`` (``[B]``) with ``("next", reward)`` and the next abstract-state entries recomputed."""
