@@ -61,7 +61,7 @@ def test_a2c_and_ppo_networks_read_z_one_hot(hidden: tuple[int, ...]) -> None:
     assert len(set(values)) == 3
     if not hidden:  # a table over (s, z): z = 1 reads only its own weights
         weight = first.weight.detach()
-        assert values[1] == pytest.approx(float(weight[0, 1] * 0.5 + first.bias[0]), abs=1e-6)
+        assert values[1] == pytest.approx(float(weight[0, 1] * 0.5 + first.bias.detach()[0]), abs=1e-6)
 
 
 def test_ppo_gaussian_policy_and_dqn_and_ddpg_read_z() -> None:
