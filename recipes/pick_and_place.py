@@ -48,7 +48,6 @@ from torchrl.envs import (
 
 from torchrl_subgoal import (
     NeuralPotential,
-    SubgoalPotentialTransform,
     SubgoalSeries,
     SubgoalValueLoss,
 )
@@ -82,10 +81,10 @@ from torchrl_subgoal.experiments.recipe import (
 from torchrl_subgoal.methods import paper_methods, shaping_parts
 from torchrl_subgoal.training import (
     EnvFactory,
+    PotentialTrainer,
     Shaping,
     close_collector,
     shaped_env,
-    smdp_transitions,
 )
 
 METHODS = paper_methods(baseline="DDPG")
@@ -157,23 +156,6 @@ class Config(RecipeConfig):
             raise ConfigError(f"--shaping: not valid JSON: {exc}") from None
         check(isinstance(options, dict), "shaping", f"must be a JSON object, got {self.shaping!r}")
         check_shaping(options)
-
-
-@dataclass
-class PotentialTrainer:
-    """V(o; θ)'s training in this process: ``keeper`` reads the SMDP transitions out of collected data."""
-
-    keeper: SubgoalPotentialTransform
-    loss: SubgoalValueLoss
-    optimizer: torch.optim.Optimizer
-
-    def step(self, data: TensorDictBase) -> None:
-        """One step of ``SubgoalValueLoss`` on the real SMDP transitions closed in ``data`` (if any)."""
-        real = smdp_transitions(data, self.keeper)
-        if real.numel():
-            self.optimizer.zero_grad(set_to_none=True)
-            self.loss(real)["loss_value"].backward()
-            self.optimizer.step()
 
 
 def make_shaping(method_name: str, series: SubgoalSeries | None, config: Mapping[str, Any],
