@@ -48,6 +48,7 @@ from torchrl.envs import (
 
 from torchrl_subgoal import (
     NeuralPotential,
+    SubgoalPotentialTransform,
     SubgoalSeries,
     SubgoalValueLoss,
 )
