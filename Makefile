@@ -30,7 +30,7 @@ demo: $(STAMP)
 	$(PY) recipes/four_rooms.py
 
 lint: $(STAMP)
-	$(PY) -m ruff check torchrl_subgoal recipes tests benchmarks docs/tutorials
+	$(PY) -m ruff check torchrl_subgoal recipes tests benchmarks tools docs/tutorials
 	$(PY) -m mypy
 
 # MkDocs + Material + mkdocstrings (the docs extra, part of dev); --strict turns every

@@ -1,11 +1,13 @@
 """Run the benchmarks at a quick scale and write the documentation's benchmarks page.
 
-Each benchmark script (and two end-to-end reproductions at a small scale) runs
-in its own process, one after another, under ``nice``; the page records the
-machine (CPU model, cores, memory, the load average before and after each
-run, library versions, the date) and every script's printed output verbatim,
-with its command and wall time. A script that fails is reported on the page
-with its exit status and the end of its error output, never left out.
+Each benchmark script under ``benchmarks/`` (and two end-to-end reproductions at a
+small scale) runs in its own process, one after another, under ``nice``; the page
+records the machine (CPU model, cores, memory, library versions), the load average
+before and after each run, and every script's printed output with its command and
+wall time. The output is verbatim except for what would tie the page to one run rather
+than to the figures: log lines with a time stamp are dropped and the temporary results
+directory reads ``RESULTS``. A script that fails is reported on the page with its exit
+status and the end of its error output, never left out.
 
     python benchmarks/docs_page.py docs/benchmarks.md       # `make bench-docs`
     python benchmarks/docs_page.py out.md --only four_rooms_step
@@ -14,7 +16,6 @@ with its exit status and the end of its error output, never left out.
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import os
 import platform
 import re
@@ -28,11 +29,20 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
+#: a log line that starts with a date and a time (TorchRL's ``[torchrl][INFO]`` lines)
+_STAMPED = re.compile(r"^\d{4}-\d{2}-\d{2}[ T]\d{2}:\d{2}:\d{2}\S*\s.*$\n?", re.MULTILINE)
 
 
-def clean(text: str) -> str:
-    """``text`` without terminal colour codes (TorchRL's log lines carry them)."""
-    return _ANSI.sub("", text)
+def clean(text: str, tmp: Path | None = None) -> str:
+    r"""``text`` without terminal colour codes, without time-stamped log lines, and with the
+    temporary directory ``tmp`` written ``RESULTS``.
+
+    Examples:
+        >>> clean("\x1b[32mok\x1b[0m\n2026-01-02 03:04:05,678 [torchrl][INFO] storage\nResults: `/tmp/x/a`", Path("/tmp/x"))
+        'ok\nResults: `RESULTS/a`'
+    """
+    text = _STAMPED.sub("", _ANSI.sub("", text))
+    return text.replace(str(tmp), "RESULTS") if tmp is not None else text
 
 
 @dataclass(frozen=True)
@@ -76,11 +86,18 @@ RUNS = (
         ("benchmarks/finite_check.py", "--steps", "200", "--repeats", "3")),
     Run("pick_and_place_throughput", "Pick-and-place collection and DDPG steps",
         "MuJoCo Fetch env-steps per second raw and through shaped collectors (the recipe's stack, whose envs "
-        "step with `fetch.LeanStep`, beside the same with gymnasium's step and the stack before that), CPU "
-        "time per env step beside the raw env's, DDPG gradient steps per CPU second (beside the previous "
-        "update and a hand-written "
-        "torch step), the FLOP floor, and the projected time of one paper-scale learning.",
+        "step with `fetch.LeanStep`, beside the same with gymnasium's step), CPU time per env step beside the "
+        "raw env's, DDPG gradient steps per CPU second (beside a hand-written torch step), the FLOP floor, and "
+        "the projected time of one paper-scale learning.",
         ("benchmarks/pick_and_place_throughput.py", "--quick", "--repeats", "1")),
+    Run("training_throughput", "Learner frames per second of the training building blocks",
+        "frames per CPU second of A2C, PPO, DQN and DDPG learnings (four-rooms, PinBall, PointMaze UMaze) "
+        "without shaping and with HRS, and the median HRS / plain ratio.",
+        ("benchmarks/training_throughput.py", "--quick")),
+    Run("studio_try_it", "The studio's Try it",
+        "wall time of the studio's *Try it* (HRS and the unshaped learner on the fused engine) at its default "
+        "and largest settings, for four-rooms and PinBall.",
+        ("benchmarks/studio_try_it.py",)),
     Run("four_rooms_demo", "End to end: the four-rooms reproduction at `make demo` scale",
         "wall time of `make demo`'s run (5 methods x 10 patterns x 10 learnings x 1,000 episodes, fused engine) "
         "including the report, in one worker process (`make demo` uses 2).",
@@ -165,11 +182,11 @@ def run(item: Run, tmp: Path, timeout: float) -> list[str]:
              f"`{shown}`: wall time {wall:.0f} s, load average (1/5/15 min) {load_before} before, "
              f"{_load()} after.", ""]
     if status != 0:
-        tail = "\n".join(clean(err).strip().splitlines()[-15:])
+        tail = "\n".join(clean(err, tmp).strip().splitlines()[-15:])
         lines += [f"**Failed** ({'timeout' if status is None else f'exit status {status}'}):", "",
                   "```text", tail, "```", ""]
     if out.strip():
-        lines += ["```text", clean(out).rstrip(), "```", ""]
+        lines += ["```text", clean(out, tmp).rstrip(), "```", ""]
     return lines
 
 
@@ -184,19 +201,20 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"--only: unknown run(s) {unknown}; known: {[r.name for r in RUNS]}")
     runs = [r for r in RUNS if not wanted or r.name in wanted]
-    started = dt.datetime.now(dt.timezone.utc)
+    cores = os.cpu_count() or 1
     head = [
         "# Benchmarks",
         "",
-        f"Generated by `make bench-docs` (`python benchmarks/docs_page.py docs/benchmarks.md`) on "
-        f"{started:%Y-%m-%d %H:%M} UTC: every benchmark under `benchmarks/` at its quick scale and two "
-        "end-to-end reproductions at a small scale, one after another, each in its own process under "
-        "`nice -n 5`. The output below is each script's, verbatim.",
+        "Generated by `make bench-docs` (`python benchmarks/docs_page.py docs/benchmarks.md`): every "
+        "benchmark under `benchmarks/` at its quick scale and two end-to-end reproductions at a small "
+        "scale, one after another, each in its own process under `nice -n 5`. The output below is each "
+        "script's (log lines with a time stamp left out). One section can be measured again on its own "
+        "(`python benchmarks/docs_page.py OUT --only NAME`, the names in `benchmarks/docs_page.py`).",
         "",
-        "!!! warning \"A shared machine\"",
-        "    These figures were measured on a machine shared with other engineers' jobs: check each run's "
-        "load average (2 logical cores, so a load above 2 means the runs waited for a core). Absolute rates are pessimistic and noisy; compare the ratios *within* one "
-        "benchmark, whose set-ups are interleaved in one run. The reproduction pages give the figures "
+        "!!! note \"Reading the figures\"",
+        f"    Each run's load average is printed with it: with {cores} logical cores, a load above {cores} "
+        "means the run waited for a core, and its absolute rates are then low. Compare the ratios *within* "
+        "one benchmark, whose set-ups are timed in one run. The reproduction pages give the figures "
         "measured for their own claims.",
         "",
         "## Machine",

@@ -14,18 +14,15 @@ Measures, in one run (the machine is shared: compare the ratios, not the absolut
   (``--collector-workers`` in the recipe); the 1-env, 2 × 1 and 2 × 3 layouts with the recipe's
   stack (:func:`~torchrl_subgoal.envs.fetch.make_fetch_envs` stepping its envs with
   :class:`~torchrl_subgoal.envs.fetch.LeanStep`, the shaping transform alone, the one-module
-  exploring policy), the same stack with gymnasium's own step (``make_fetch_envs(lean=False)``,
-  what the recipe used before ``LeanStep``), and the stack before that (a ``SerialEnv`` of
-  ``GymEnv`` s, a step counter and an episode return, TorchRL's exploration modules); and 2 workers
+  exploring policy) and with gymnasium's own step (``make_fetch_envs(lean=False)``); and 2 workers
   of 6 envs each (twice the ``paper`` preset's envs: what more envs per worker would give);
 * CPU time per env step (``time.process_time``, so a busy machine inflates it far less than the
   rates) of a ``Collector`` in this process over 3 envs (one ``paper`` worker's share) with
   ``LeanStep`` and with gymnasium's step, alternating with the raw env in the same process: on
   two idle cores, two such workers would step ``2 × raw / worker`` times the raw env's rate;
 * DDPG gradient steps per CPU second (critic + actor, batch 256 and the paper preset's
-  1,536, 3 × 256 hidden units, ``torch.set_num_threads(1)`` unless ``--threads``), beside the
-  update as it was before (``DDPGLoss.forward`` + a second actor pass for the L2 penalty,
-  single-tensor Adam) and a hand-written torch step of the same arithmetic (the floor);
+  1,536, 3 × 256 hidden units, ``torch.set_num_threads(1)`` unless ``--threads``), beside a
+  hand-written torch step of the same arithmetic (the floor in practice);
   the single-core matmul GFLOP/s of the layers' shape and the FLOPs of one step give the
   FLOP floor of the gradient steps of a learning;
 * from these, the projected wall time of one learning on one core, every part run one
@@ -39,10 +36,9 @@ gymnasium-robotics' own) and MuJoCo's ``mj_step``, as shares of the collector's 
 
 A collector that gives no batch for ``--timeout`` seconds (default 600) ends the run with a
 one-line error naming the layout, every thread's stack, and its worker processes killed (exit
-status 3): a ``MultiSyncCollector`` hung once on a fresh clone without using CPU, and a
-benchmark must not wait forever. Collectors are closed with ``close_collector``: after
-``shutdown()`` alone the run printed everything and then hung at interpreter exit, where no
-watchdog runs (TorchRL's weight-sync schemes; see ``close_collector``).
+status 3), so that a hung ``MultiSyncCollector`` never keeps the benchmark waiting. Collectors are
+closed with ``close_collector`` (``shutdown()`` alone can leave the process hanging at interpreter
+exit, where no watchdog runs: TorchRL's weight-sync schemes; see ``close_collector``).
 
 Every figure is the best of ``--repeats`` timings. The load average is printed
 before and after: it says how busy the shared cores were.
@@ -73,16 +69,14 @@ from functools import partial
 
 import torch
 from tensordict import TensorDict
-from tensordict.nn import TensorDictModule, TensorDictSequential
 from torch import nn
 from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.data import Bounded
-from torchrl.modules import AdditiveGaussianModule, EGreedyModule
 
 from torchrl_subgoal import NeuralPotential
 from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, mlp
 from torchrl_subgoal.envs import fetch
-from torchrl_subgoal.training import EnvFactory, Shaping, batched, close_collector, shaped_env
+from torchrl_subgoal.training import EnvFactory, Shaping, close_collector, shaped_env
 
 GRADIENT_STEPS = 200 * 50 * 40  # epochs x cycles x gradient steps per cycle, both presets
 TEST_STEPS = 200 * 10 * 50  # epochs x test episodes x steps
@@ -109,8 +103,8 @@ def raw_rate(steps: int) -> float:
     return rate
 
 
-#: Collection stacks: the recipe's; the same with gymnasium's step; the recipe's stack before both.
-STACKS = ("lean", "gymnasium step", "previous stack")
+#: Collection stacks: the recipe's (envs stepped by ``LeanStep``); the same with gymnasium's step.
+STACKS = ("lean", "gymnasium step")
 
 
 class Watchdog:
@@ -157,24 +151,16 @@ def make_collector(collector_workers: int, env_workers: int, envs: int, stack: s
 
     ``stack`` (:data:`STACKS`): ``"lean"``, the recipe's: :func:`fetch.make_fetch_envs` (each env stepped
     by :class:`fetch.LeanStep`), the shaping transform alone, the agent's one-module exploring policy;
-    ``"gymnasium step"``: the same with ``make_fetch_envs(lean=False)``; ``"previous stack"``: the stack
-    the recipe used before (a ``SerialEnv`` of ``GymEnv`` s, a step counter and an episode return beside
-    the shaping transform, TorchRL's ``AdditiveGaussianModule`` and ``EGreedyModule``), same networks
-    and potential.
+    ``"gymnasium step"``: the same with ``make_fetch_envs(lean=False)``.
     """
-    generic = stack == "previous stack"
     series = fetch.human_patterns()["participants"]
     shaping = Shaping([series], NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, (256, 256, 256))))
-    make_env = (batched(partial(fetch.make_fetch_env, 0)) if generic
-                else partial(fetch.make_fetch_envs, 0, lean=stack == "lean"))
+    make_env = partial(fetch.make_fetch_envs, 0, lean=stack == "lean")
     factory = EnvFactory(shaped_env, make_env=make_env, num_envs=envs, env_workers=env_workers, shaping=shaping,
-                         potential=shaping.potential, gamma=0.98, episode_stats=generic)
-    spec = fetch.make_fetch_env(0).action_spec_unbatched
-    agent = DDPGAgent(fetch.OBSERVATION_SIZE, spec, DDPGConfig(buffer_size=1000))
-    policy = agent.policy if not generic else TensorDictSequential(
-        TensorDictModule(agent.norm, in_keys=["observation"], out_keys=["observation_normalized"]), agent.actor,
-        AdditiveGaussianModule(spec, sigma_init=0.2, sigma_end=0.2, annealing_num_steps=1),
-        EGreedyModule(spec, eps_init=0.3, eps_end=0.3, annealing_num_steps=1))
+                         potential=shaping.potential, gamma=0.98, episode_stats=False)
+    agent = DDPGAgent(fetch.OBSERVATION_SIZE, fetch.make_fetch_env(0).action_spec_unbatched,
+                      DDPGConfig(buffer_size=1000))
+    policy = agent.policy
     frames = 50 * envs * max(collector_workers, 1)
     return (Collector(factory(), policy, frames_per_batch=frames, total_frames=-1,
                       auto_register_policy_transforms=False) if collector_workers == 0 else
@@ -247,7 +233,7 @@ def cpu_per_step(envs: int, steps: int, repeats: int) -> dict[str, float]:
     env.action_space.seed(0)
     actions = [env.action_space.sample() for _ in range(64)]
     WATCHDOG.beat("starting the collectors")
-    collectors = {stack: make_collector(0, 0, envs, stack) for stack in STACKS[:2]}
+    collectors = {stack: make_collector(0, 0, envs, stack) for stack in STACKS}
     iterators = {stack: iter(collector) for stack, collector in collectors.items()}
     for stack, batches in iterators.items():
         next_batch(batches, stack)
@@ -325,27 +311,6 @@ def _filled_agent(batch_size: int, spec: Bounded) -> DDPGAgent:
     return agent
 
 
-def _previous_update(agent: DDPGAgent) -> Callable[[], None]:
-    """The update as it was before (for the side-by-side timing): ``DDPGLoss.forward`` (actor and
-    critic losses), a second actor pass for the L2 penalty, single-tensor Adam."""
-    actor_opt = torch.optim.Adam(agent.loss.actor_network_params.values(True, True), lr=1e-3, foreach=False)
-    critic_opt = torch.optim.Adam(agent.loss.value_network_params.values(True, True), lr=1e-3, foreach=False)
-
-    def update() -> None:
-        batch = agent.replay.sample()
-        batch.set("observation_normalized", agent.norm(batch["observation"]))
-        batch.set(("next", "observation_normalized"), agent.norm(batch["next", "observation"]))
-        losses = agent.loss(batch)
-        action = agent.actor(batch.select("observation_normalized"))["action"]
-        critic_opt.zero_grad(set_to_none=True)
-        actor_opt.zero_grad(set_to_none=True)
-        (losses["loss_value"] + losses["loss_actor"] + action.square().mean()).backward()
-        critic_opt.step()
-        actor_opt.step()
-
-    return update
-
-
 def _hand_written_update(batch_size: int) -> Callable[[], None]:
     """The floor: the same networks, targets, clip, penalty and fused Adam in plain torch, no TorchRL."""
     def net(inputs: int, outputs: int) -> nn.Module:
@@ -380,17 +345,16 @@ def _hand_written_update(batch_size: int) -> Callable[[], None]:
 
 def update_rates(updates: int, repeats: int, batch_size: int, threads: int) -> dict[str, float]:
     """Gradient steps per CPU second (this process's CPU time: on a shared machine, what one core costs)
-    of the agent's update, the previous update and the hand-written floor, interleaved."""
+    of the agent's update and the hand-written floor, interleaved."""
     torch.set_num_threads(threads)  # a MultiSyncCollector's shutdown hands its workers' threads back
     spec = fetch.make_fetch_env(0).action_spec_unbatched
     agent = _filled_agent(batch_size, spec)
-    steps = {"agent.update": agent.update, "previous update": _previous_update(_filled_agent(batch_size, spec)),
-             "hand-written torch step": _hand_written_update(batch_size)}
+    steps = {"agent.update": agent.update, "hand-written torch step": _hand_written_update(batch_size)}
     rates: dict[str, float] = {}
     for step in steps.values():
         for _ in range(5):
             step()
-    for _ in range(repeats):  # interleaved, so that a change of load hits all three alike
+    for _ in range(repeats):  # interleaved, so that a change of load hits both alike
         for name, step in steps.items():
             start = time.process_time()
             for i in range(updates):
@@ -457,17 +421,14 @@ def main() -> None:
     for name, collector_workers, env_workers, envs, stack in (
         ("Collector, this process, 1 env", 0, 0, 1, "lean"),
         ("Collector, this process, 1 env, gymnasium step", 0, 0, 1, "gymnasium step"),
-        ("Collector, this process, 1 env, previous stack", 0, 0, 1, "previous stack"),
         ("Collector over ParallelEnv(2), shaping here", 0, 2, 2, "lean"),
         ("MultiSyncCollector, 1 worker x 1 env", 1, 0, 1, "lean"),
         ("MultiSyncCollector, 1 worker x 3 envs", 1, 0, 3, "lean"),
         ("MultiSyncCollector, 2 workers x 1 env", 2, 0, 1, "lean"),
         ("MultiSyncCollector, 2 workers x 1 env, gymnasium step", 2, 0, 1, "gymnasium step"),
-        ("MultiSyncCollector, 2 workers x 1 env, previous stack", 2, 0, 1, "previous stack"),
         ("Collector, this process, 6 envs", 0, 0, 6, "lean"),
         ("MultiSyncCollector, 2 workers x 3 envs", 2, 0, 3, "lean"),
         ("MultiSyncCollector, 2 workers x 3 envs, gymnasium step", 2, 0, 3, "gymnasium step"),
-        ("MultiSyncCollector, 2 workers x 3 envs, previous stack", 2, 0, 3, "previous stack"),
         ("MultiSyncCollector, 2 workers x 6 envs", 2, 0, 6, "lean"),
     ):
         rate = rates[name] = collector_rate(collector_workers, env_workers, envs, steps, args.repeats, stack)
@@ -489,8 +450,7 @@ def main() -> None:
         gflops = matmul_gflops(batch)
         print(f"DDPG gradient steps, batch {batch}, {args.threads} thread(s): " + "; ".join(
             f"{name} {1e3 / rate:.1f} ms" for name, rate in rates_b.items())
-            + f" (agent.update {rates_b['previous update'] / rates_b['agent.update']:.2f}x the previous "
-            f"time, {rates_b['hand-written torch step'] / rates_b['agent.update']:.2f}x the hand-written)")
+            + f" (agent.update {rates_b['hand-written torch step'] / rates_b['agent.update']:.2f}x the hand-written)")
         print(f"  FLOP floor: {flop / 1e9:.2f} GFLOP per step / {gflops:.0f} GFLOP/s single-thread matmul "
               f"[{batch}x256]@[256x256] = {1e3 * flop / gflops / 1e9:.1f} ms")
         floor_minutes = GRADIENT_STEPS * flop / gflops / 1e9 / 60
@@ -501,7 +461,7 @@ def main() -> None:
         update_seconds = GRADIENT_STEPS / updates[batch]
         print(f"projected {preset} learning on one core: {(env_seconds + update_seconds) / 60:.0f} min = "
               f"{env_seconds / 60:.0f} min collecting and testing ({env_steps:.0e} + {TEST_STEPS:.0e} steps) + "
-              f"{update_seconds / 60:.0f} min of {GRADIENT_STEPS:.0e} gradient steps of {batch}; goal <= 45 min")
+              f"{update_seconds / 60:.0f} min of {GRADIENT_STEPS:.0e} gradient steps of {batch}")
     print(f"load average after: {os.getloadavg()[0]:.2f}")
 
 

@@ -39,9 +39,11 @@ from torchrl_subgoal.experiments.cli import ConfigError, check, setting
 from torchrl_subgoal.experiments.recipe import (
     Plan,
     RecipeConfig,
+    check_methods,
     check_patterns,
     chunk_patterns,
     method_specs,
+    needs_random_patterns,
     pattern_config,
     pattern_sets,
     pattern_sources,
@@ -112,7 +114,8 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
             zero_terminal_potential=config["zero_terminal_potential"], start_potential=config["start_potential"],
         )
         shaping = Shaping(*parts) if parts is not None else None
-        logger = experiment_logger(Path(config["log_dir"]), f"{chunk.method}_{pattern}_{learning}")
+        # fresh: a learner run again after an interruption starts its log over, as its results do
+        logger = experiment_logger(Path(config["log_dir"]), f"{chunk.method}_{pattern}_{learning}", fresh=True)
         curve = train_a2c(domain.make_env, a2c, shaping=shaping, observation_key=domain.observation_key,
                           seed=chunk.seed + i, logger=logger, progress=progress)
         rows.append(curve)
@@ -125,10 +128,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
 def plan(cfg: Config) -> Plan:
     """The sweep of ``cfg``: one chunk per learner, the stored configuration, the report's thresholds."""
     domain = domains.part(cfg.domain, A2CDomain)
-    human = load_patterns(cfg.subgoals or domain.participants, domain=cfg.domain)
-    patterns = pattern_sets(human, domain.candidates(cfg.seed), cfg.random_patterns, cfg.seed)
-    check_patterns(patterns, domain.make_env(1), str(domain.subgoal_key))
-    specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
+    check_methods(METHODS, cfg.method_names)
     try:
         a2c = dataclasses.replace(
             domain.a2c, num_envs=cfg.num_envs, frames_per_batch=cfg.frames_per_batch,
@@ -139,6 +139,14 @@ def plan(cfg: Config) -> Plan:
         )
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
+    check(a2c.total_frames >= a2c.frames_per_batch, "total_frames",
+          f"{a2c.total_frames} is less than one batch of {a2c.frames_per_batch} frames (--frames-per-batch); "
+          f"give at least {a2c.frames_per_batch}")
+    human = load_patterns(cfg.subgoals or domain.participants, domain=cfg.domain)
+    patterns = pattern_sets(human, domain.candidates(cfg.seed), cfg.random_patterns, cfg.seed,
+                            random_needed=needs_random_patterns(METHODS, cfg.method_names))
+    check_patterns(patterns, domain.make_env(1), str(domain.subgoal_key))
+    specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
     results = cfg.results or f"results/a2c_{cfg.domain}"
     config = {
         "domain": cfg.domain,

@@ -45,9 +45,11 @@ from torchrl_subgoal.experiments.recipe import (
     PatternSets,
     Plan,
     ReproductionConfig,
+    check_methods,
     check_patterns,
     chunk_patterns,
     method_specs,
+    needs_random_patterns,
     pattern_sets,
     recipe_main,
     sweep_entries,
@@ -83,7 +85,8 @@ def build_patterns(cfg: Config) -> PatternSets:
     """The human patterns (from the file) and the seeded random ones, by kind."""
     human = load_patterns(cfg.subgoals, domain="four_rooms")
     candidates = [Cell(r, c) for r, c in free_cells() if (r, c) not in (START, GOAL)]
-    return pattern_sets(human, candidates, cfg.random_patterns, cfg.seed)
+    return pattern_sets(human, candidates, cfg.random_patterns, cfg.seed,
+                        random_needed=needs_random_patterns(METHODS, cfg.method_names))
 
 
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
@@ -112,6 +115,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
 
 def plan(cfg: Config) -> Plan:
     """The sweep of ``cfg``: every method's learners, the stored configuration, the report's thresholds."""
+    check_methods(METHODS, cfg.method_names)
     patterns = build_patterns(cfg)
     check_patterns(patterns, FourRoomsEnv(num_envs=1), OBSERVATION_KEY)
     specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)

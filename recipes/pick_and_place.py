@@ -27,9 +27,10 @@ curves, epochs to a success rate of 0.6 and the asymptotic success beside the pa
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import json
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -70,7 +71,10 @@ from torchrl_subgoal.experiments.recipe import (
     RECIPE_ERRORS,
     Plan,
     RecipeConfig,
+    check_device,
+    check_methods,
     chunk_patterns,
+    needs_random_patterns,
     pattern_config,
     pattern_sources,
     recipe_main,
@@ -78,10 +82,10 @@ from torchrl_subgoal.experiments.recipe import (
 from torchrl_subgoal.methods import paper_methods, shaping_parts
 from torchrl_subgoal.training import (
     EnvFactory,
+    PotentialTrainer,
     Shaping,
     close_collector,
     shaped_env,
-    smdp_transitions,
 )
 
 METHODS = paper_methods(baseline="DDPG")
@@ -152,23 +156,7 @@ class Config(RecipeConfig):
         except json.JSONDecodeError as exc:
             raise ConfigError(f"--shaping: not valid JSON: {exc}") from None
         check(isinstance(options, dict), "shaping", f"must be a JSON object, got {self.shaping!r}")
-
-
-@dataclass
-class PotentialTrainer:
-    """V(o; θ)'s training in this process: ``keeper`` reads the SMDP transitions out of collected data."""
-
-    keeper: SubgoalPotentialTransform
-    loss: SubgoalValueLoss
-    optimizer: torch.optim.Optimizer
-
-    def step(self, data: TensorDictBase) -> None:
-        """One step of ``SubgoalValueLoss`` on the real SMDP transitions closed in ``data`` (if any)."""
-        real = smdp_transitions(data, self.keeper)
-        if real.numel():
-            self.optimizer.zero_grad(set_to_none=True)
-            self.loss(real)["loss_value"].backward()
-            self.optimizer.step()
+        check_shaping(options)
 
 
 def make_shaping(method_name: str, series: SubgoalSeries | None, config: Mapping[str, Any],
@@ -311,29 +299,94 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
 
 
 def build_patterns(cfg: Config) -> dict[str, dict[str, Any]]:
-    """The human pattern(s) and one random pattern per learning (RRS)."""
+    """The human pattern(s) and one random pattern per learning (RRS; none when RRS does not run and the
+    first pattern's components are not ones random boxes are drawn over)."""
     human = fetch.human_patterns(cfg.subgoals)
     first = next(iter(human))
     try:
         rand = fetch.random_patterns(human[first], cfg.learnings, seed=cfg.seed)
     except ValueError as exc:
-        raise ConfigError(f"{cfg.subgoals}: pattern {first!r}: {exc}") from None
+        if needs_random_patterns(METHODS, cfg.method_names):
+            raise ConfigError(f"{cfg.subgoals}: pattern {first!r}: {exc}") from None
+        rand = []
     return {"human": dict(human), "random": {p.name: p for p in rand}, "none": {}}
 
 
 def build_specs(cfg: Config, patterns: dict[str, dict[str, Any]]) -> list[MethodSpec]:
     """``learnings`` learnings per method: of each human pattern, of one random pattern each (RRS),
     or without patterns."""
+    names = check_methods(METHODS, cfg.method_names)
     specs = [MethodSpec(name, list(patterns[m.subgoals]) or ["none"],
                         1 if m.subgoals == "random" else cfg.learnings) for name, m in METHODS.items()]
     try:
-        return select_methods(specs, cfg.method_names)
+        return select_methods(specs, names)
     except UnknownMethodError as exc:
         raise ConfigError(f"--methods: {exc}") from None
 
 
+#: What ``--shaping`` may not set: the recipe sets these itself for every learner.
+SHAPING_SET_BY_THE_RECIPE = ("gamma", "value_update")
+
+
+def check_shaping(options: Mapping[str, Any]) -> None:
+    """``--shaping`` checked against the options of :class:`~torchrl_subgoal.SubgoalPotentialTransform`:
+    each must be one of its keyword options that the recipe does not set, with a JSON value of the
+    option's kind (``true``/``false`` for a flag, a string for a name, a number for a number).
+
+    Args:
+        options: the parsed ``--shaping`` object.
+
+    Raises:
+        ConfigError: naming ``--shaping``, the option and what it takes.
+
+    Examples:
+        >>> check_shaping({"zero_terminal_potential": False})
+        >>> check_shaping({"foo": 1})
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --shaping: unknown option 'foo'; SubgoalPotentialTransform takes ...
+    """
+    parameters = {name: p for name, p in inspect.signature(SubgoalPotentialTransform).parameters.items()
+                  if p.kind is inspect.Parameter.KEYWORD_ONLY}
+    allowed = [name for name in parameters if name not in SHAPING_SET_BY_THE_RECIPE]
+    for name, value in options.items():
+        if name in SHAPING_SET_BY_THE_RECIPE:
+            raise ConfigError(f"--shaping: {name!r} is set by the recipe for every learner; leave it out")
+        if name not in parameters:
+            raise ConfigError(f"--shaping: unknown option {name!r}; SubgoalPotentialTransform takes "
+                              f"{', '.join(allowed)}")
+        default = parameters[name].default
+        kinds = {bool: ((bool,), "true or false"), str: ((str,), "a string"), float: ((int, float), "a number"),
+                 int: ((int,), "a whole number")}
+        if default is None or type(default) not in kinds:
+            continue  # the transform checks it (see check_shaping_builds)
+        accepted, wanted = kinds[type(default)]
+        if not isinstance(value, accepted) or (isinstance(value, bool) and bool not in accepted):
+            raise ConfigError(f"--shaping: {name!r} takes {wanted}, got {json.dumps(value)}")
+
+
+def check_shaping_builds(specs: Sequence[MethodSpec], config: Mapping[str, Any]) -> None:
+    """Build every shaped learner's transform once, as its chunk will: what ``--shaping`` sets that the
+    transform refuses (a bad ``start_potential``, ...) is a :class:`ConfigError` before anything runs.
+
+    Args:
+        specs: the sweep's methods.
+        config: the sweep's configuration (what ``run_chunk`` reads).
+    """
+    for spec in specs:
+        series, _ = chunk_patterns(Chunk(spec.name, 0, ((spec.patterns[0], 0),), seed=0), config)
+        try:
+            shaping, _ = make_shaping(spec.name, series[0] if series else None, config, config["ddpg"]["gamma"])
+            if shaping is not None:
+                shaping.transform(shaping.potential, config["ddpg"]["gamma"], None)
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"--shaping: {spec.name}: {' '.join(str(exc).split())}") from None
+
+
 def plan(cfg: Config) -> Plan:
     """The sweep of ``cfg``: one chunk per learning, the stored configuration, the report's threshold."""
+    check_methods(METHODS, cfg.method_names)
+    check_device(cfg.device)
     fetch.require_fetch()
     patterns = build_patterns(cfg)
     specs = build_specs(cfg, patterns)
@@ -354,6 +407,7 @@ def plan(cfg: Config) -> Plan:
         "report": {"metric": "success", "lower_is_better": False, "thresholds": [0.6], "window": 1,
                    "asymptotic_window": [max(0, epochs - 10), epochs], "log_scale": False, "unit": "epoch"},
     }
+    check_shaping_builds(specs, config)
     return Plan("fetch", specs, run_chunk, config, episodes=epochs, chunk_size=1)
 
 

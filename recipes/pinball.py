@@ -39,14 +39,16 @@ from torchrl_subgoal import Box, Circle, StateAggregation, load_patterns
 from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic, run_episodes
 from torchrl_subgoal.envs import PinBallEnv
 from torchrl_subgoal.experiments import Chunk, EpisodeTable, learner_seeds
-from torchrl_subgoal.experiments.cli import setting
+from torchrl_subgoal.experiments.cli import ConfigError, setting
 from torchrl_subgoal.experiments.recipe import (
     PatternSets,
     Plan,
     ReproductionConfig,
+    check_methods,
     check_patterns,
     chunk_patterns,
     method_specs,
+    needs_random_patterns,
     pattern_sets,
     recipe_main,
     sweep_entries,
@@ -89,13 +91,22 @@ def thirds_of_the_table() -> StateAggregation:
     return StateAggregation.from_regions([Box((c,), (1 / 6,), (0,)) for c in (1 / 6, 1 / 2, 5 / 6)], 4)
 
 
+def pinball_env(cfg: Config) -> PinBallEnv:
+    """One env on ``--map`` (a bad map name or file is a :class:`ConfigError` naming the flag)."""
+    try:
+        return PinBallEnv(1, cfg.map)
+    except (ValueError, OSError) as exc:
+        raise ConfigError(f"--map: {' '.join(str(exc).split())}") from None
+
+
 def build_patterns(cfg: Config) -> PatternSets:
     """The human patterns (from the file) and the seeded random ones, by kind."""
     human = load_patterns(cfg.subgoals, domain="pinball")
-    env = PinBallEnv(1, cfg.map)
+    env = pinball_env(cfg)
     points = env.sample_free_positions(500, torch.Generator().manual_seed(cfg.seed))
     candidates = [Circle((float(x), float(y)), SUBGOAL_RADIUS) for x, y in points.tolist()]
-    return pattern_sets(human, candidates, cfg.random_patterns, cfg.seed)
+    return pattern_sets(human, candidates, cfg.random_patterns, cfg.seed,
+                        random_needed=needs_random_patterns(METHODS, cfg.method_names))
 
 
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
@@ -122,8 +133,9 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
 
 def plan(cfg: Config) -> Plan:
     """The sweep of ``cfg``: every method's learners, the stored configuration, the report's thresholds."""
+    check_methods(METHODS, cfg.method_names)
     patterns = build_patterns(cfg)
-    check_patterns(patterns, PinBallEnv(1, cfg.map), OBSERVATION_KEY)
+    check_patterns(patterns, pinball_env(cfg), OBSERVATION_KEY)
     specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
     settings = dataclasses.asdict(cfg)
     config = {

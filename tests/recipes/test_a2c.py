@@ -48,3 +48,37 @@ def test_a2c_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFi
     assert a2c.main([flag, value, "--results", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error:") and len(err.strip().splitlines()) == 1
+
+
+def test_a_resumed_learner_logs_one_series(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A learner that was running when the sweep was killed (its logs written, its chunk not) is run again
+    from its start on resume: its CSV logs hold the new run only, as its Parquet data does."""
+    subgoals = tmp_path / "one.yaml"
+    subgoals.write_text("domain: four_rooms\npatterns:\n  p: {subgoals: [{cell: [3, 6]}, {cell: [7, 9]}]}\n")
+    results = tmp_path / "res"
+    args = ["--domain", "four_rooms", "--methods", "A2C,HRS", "--subgoals", str(subgoals), "--learnings", "1",
+            "--total-frames", "1024", "--workers", "0", "--results", str(results)]
+    a2c = recipe("a2c")
+    assert a2c.main(args) == 0
+    capsys.readouterr()
+    hrs, plain = results / "logs" / "HRS_p_0" / "scalars", results / "logs" / "A2C_none_0" / "scalars"
+    steps = [256, 512, 768, 1024]
+
+    def logged(scalars: Path) -> dict[str, list[int]]:
+        return {f.name: [int(line.split(",")[0]) for line in f.read_text().splitlines()]
+                for f in sorted(scalars.glob("*.csv"))}
+
+    first = logged(hrs)
+    assert set(first) >= {"episode_length.csv", "loss_potential.csv"} and first["episode_length.csv"] == steps
+    assert all(frames == sorted(set(frames)) and set(frames) <= set(steps) for frames in first.values()), first
+    finished = {f: f.read_bytes() for f in plain.glob("*.csv")}
+    # as if killed while the HRS learner ran: half its series logged, the last line torn, no chunk file
+    (results / "chunks" / "HRS" / "00000.parquet").unlink()
+    for log in hrs.glob("*.csv"):
+        log.write_text("".join(log.read_text().splitlines(keepends=True)[:2]) + "7")
+    (hrs.parent / "notes.txt").write_text("mine\n")
+    assert a2c.main(args) == 0
+    capsys.readouterr()
+    assert logged(hrs) == first  # one series per scalar, as the first run logged it
+    assert {f: f.read_bytes() for f in plain.glob("*.csv")} == finished  # a finished learner's log: untouched
+    assert (hrs.parent / "notes.txt").read_text() == "mine\n"

@@ -312,3 +312,166 @@ def test_the_command_line_prints_no_traceback(tmp_path: Path) -> None:
     assert done.returncode == 2 and done.stderr.strip().splitlines() == [
         f"error: {tmp_path / 'f'} is a file, not a results directory; choose a directory"
     ]
+
+
+# -- the whole configuration, checked before the first chunk ----------------------------------------
+
+
+def one_error_line(code: int, capsys: pytest.CaptureFixture[str]) -> str:
+    """The one line on stderr of a recipe that refused its settings (exit 2); the notice gymnasium_robotics
+    prints when the pick-and-place recipe first imports it is not the recipe's."""
+    lines = [line for line in capsys.readouterr().err.splitlines()
+             if line.strip() and "gymnasium-robotics==" not in line]
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("error: "), (code, lines)
+    return lines[0]
+
+
+PICK_AND_PLACE = ["--preset", "tiny", "--learnings", "1", "--workers", "0", "--collector-workers", "0"]
+A_METHOD_TWICE = [
+    ("four_rooms", [*QUICK, "--methods", "HRS,SARSA,HRS"], "HRS"),
+    ("pinball", ["--episodes", "2", "--learnings", "1", "--workers", "0", "--methods", "AC,AC"], "AC"),
+    ("a2c", ["--total-frames", "256", "--workers", "0", "--methods", "HRS,HRS,A2C,A2C"], "HRS and A2C"),
+    ("pick_and_place", [*PICK_AND_PLACE, "--methods", "DDPG,DDPG"], "DDPG"),
+]
+
+
+@pytest.mark.parametrize(("name", "flags", "twice"), A_METHOD_TWICE, ids=[m[0] for m in A_METHOD_TWICE])
+def test_a_method_named_twice_is_one_line_in_every_recipe(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, flags: list[str], twice: str
+) -> None:
+    code = recipe(name).main([*flags, "--results", str(tmp_path / "r")])
+    line = one_error_line(code, capsys)
+    verb = "are" if " and " in twice else "is"
+    assert line == f"error: --methods: {twice} {verb} named twice; name each method once"
+    assert not (tmp_path / "r").exists()
+
+
+SHAPING = [
+    ('{"foo": 1}', "--shaping: unknown option 'foo'; SubgoalPotentialTransform takes observation_key"),
+    ('{"zero_terminal_potential": "no"}', "--shaping: 'zero_terminal_potential' takes true or false, got \"no\""),
+    ('{"start_potential": 1}', "--shaping: 'start_potential' takes a string, got 1"),
+    ('{"start_potential": "high"}', "--shaping: HRS: start_potential must be one of"),
+    ('{"gamma": 0.5}', "--shaping: 'gamma' is set by the recipe for every learner; leave it out"),
+    ('{"backend": "fast"}', "--shaping: HRS: backend must be 'auto', 'compiled' or 'torch', got 'fast'"),
+]
+
+
+@pytest.mark.parametrize(("options", "message"), SHAPING, ids=[s[0] for s in SHAPING])
+def test_pick_and_place_shaping_options_are_checked_before_anything_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], options: str, message: str
+) -> None:
+    code = recipe("pick_and_place").main([*PICK_AND_PLACE, "--methods", "HRS", "--shaping", options,
+                                          "--results", str(tmp_path / "r")])
+    assert message in one_error_line(code, capsys)
+    assert not (tmp_path / "r").exists()  # refused before the sweep wrote anything
+
+
+def test_pick_and_place_shaping_options_that_fit_are_taken(tmp_path: Path) -> None:
+    pick_and_place = recipe("pick_and_place")
+    from torchrl_subgoal.experiments.cli import parse_config
+
+    cfg = parse_config(pick_and_place.Config, [*PICK_AND_PLACE, "--methods", "HRS,NRS,SARSA-RS", "--shaping",
+                                               '{"zero_terminal_potential": false, "backend": "torch"}',
+                                               "--results", str(tmp_path / "r")])
+    assert pick_and_place.plan(cfg).config["shaping"] == {"zero_terminal_potential": False, "backend": "torch"}
+
+
+@pytest.mark.parametrize("device", ["gpu0", "cuda:{unavailable}"])
+def test_pick_and_place_device_is_checked_before_anything_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], device: str
+) -> None:
+    import torch
+
+    device = device.format(unavailable=torch.cuda.device_count() + 7)  # the issue's cuda:7, on any machine
+    code = recipe("pick_and_place").main([*PICK_AND_PLACE, "--methods", "DDPG", "--device", device,
+                                          "--results", str(tmp_path / "r")])
+    line = one_error_line(code, capsys)
+    assert line.startswith(f"error: --device: {device}" if ":" in device else "error: --device: 'gpu0'")
+    assert ("is not available on this machine" in line) == (":" in device)
+    assert not (tmp_path / "r").exists()
+
+
+def long_pattern_file(tmp_path: Path, length: int = 1000) -> Path:
+    """A four-rooms file of one pattern of ``length`` subgoals (the loader's limit), longer than RRS can draw."""
+    from torchrl_subgoal.envs.four_rooms import GOAL, START, free_cells
+
+    cells = [list(c) for c in free_cells() if c not in (START, GOAL)]
+    path = tmp_path / "long.json"
+    path.write_text(json.dumps({"domain": "four_rooms", "patterns": {
+        "long": {"subgoals": [{"cell": cells[i % len(cells)]} for i in range(length)]}}}))
+    return path
+
+
+def test_a_limit_of_random_patterns_applies_only_when_rrs_runs(tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    path = long_pattern_file(tmp_path)
+    hrs = ["--subgoals", str(path), "--episodes", "2", "--learnings", "1", "--workers", "0"]
+    assert recipe("four_rooms").main([*hrs, "--methods", "HRS,SARSA", "--results", str(tmp_path / "hrs")]) == 0
+    capsys.readouterr()
+    config = json.loads((tmp_path / "hrs" / "config.json").read_text())
+    assert len(config["config"]["patterns"]["long"]["subgoals"]) == 1000
+    code = recipe("four_rooms").main([*hrs, "--methods", "HRS,RRS", "--results", str(tmp_path / "rrs")])
+    line = one_error_line(code, capsys)
+    assert line == (f"error: {path}: pattern 'long': has 1000 subgoals, more than the 102 candidate subgoals "
+                    "random patterns (RRS) of that length are drawn from")
+    assert not (tmp_path / "rrs").exists()
+
+
+def test_pick_and_place_rrs_ranges_apply_only_when_rrs_runs(tmp_path: Path) -> None:
+    """RRS draws boxes over positions and finger joints only; a pattern over the rotation is HRS's to use."""
+    from torchrl_subgoal.experiments.cli import ConfigError, parse_config
+
+    pick_and_place = recipe("pick_and_place")
+    path = tmp_path / "rotation.yaml"
+    path.write_text("domain: pick_and_place\npatterns:\n  turned:\n    subgoals:\n"
+                    "      - {box: {centre: [0.0, 0.0, 0.0], margin: 0.1, dims: [11, 12, 13]}}\n")
+    flags = [*PICK_AND_PLACE, "--subgoals", str(path), "--results", str(tmp_path / "r")]
+    sweep = pick_and_place.plan(parse_config(pick_and_place.Config, [*flags, "--methods", "HRS,NRS,DDPG"]))
+    assert [s.name for s in sweep.specs] == ["HRS", "NRS", "DDPG"]
+    with pytest.raises(ConfigError, match="pattern 'turned': RRS has no range to draw random centres from"):
+        pick_and_place.plan(parse_config(pick_and_place.Config, [*flags, "--methods", "HRS,RRS"]))
+
+
+@pytest.mark.parametrize(("flags", "message"), [
+    (["--total-frames", "1"], "--total-frames: 1 is less than one batch of 256 frames (--frames-per-batch); "
+                              "give at least 256"),
+    (["--total-frames", "255"], "--total-frames: 255 is less than one batch of 256 frames"),
+    (["--total-frames", "64", "--frames-per-batch", "128"], "--total-frames: 64 is less than one batch of 128"),
+])
+def test_a2c_budget_smaller_than_one_batch(tmp_path: Path, capsys: pytest.CaptureFixture[str], flags: list[str],
+                                          message: str) -> None:
+    code = recipe("a2c").main([*flags, "--methods", "A2C", "--workers", "0", "--results", str(tmp_path / "r")])
+    assert one_error_line(code, capsys).startswith(f"error: {message}")
+    assert not (tmp_path / "r").exists()
+
+
+def test_pinball_unknown_map_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = recipe("pinball").main(["--map", "moon", "--methods", "AC", "--workers", "0",
+                                   "--results", str(tmp_path / "r")])
+    assert one_error_line(code, capsys) == (
+        "error: --map: PinBall config 'moon' is neither one of ('simple', 'hard') nor an existing file")
+    assert not (tmp_path / "r").exists()
+
+
+# -- the report while a sweep runs ---------------------------------------------------------------------
+
+
+def test_the_report_refuses_a_directory_a_sweep_is_writing_into(finished: Path, tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    res = copy_of(finished, tmp_path)
+    for name in ("report.md", "summary.json"):
+        (res / name).unlink()
+    with ResultsStore(res).lock():  # as the sweep holds it while it runs
+        assert report_main([str(res), "--n-boot", "10"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == (f"error: a sweep is running into {res} (it holds {res / '.lock'}), so its results are not "
+                       "final; wait for it to finish, or pass --allow-incomplete to report on the chunks finished "
+                       "so far")
+        assert not (res / "report.md").exists() and not (res / "summary.json").exists()
+        assert report_main([str(res), "--n-boot", "10", "--allow-incomplete"]) == 0
+        err = capsys.readouterr().err
+        assert err.splitlines()[0] == (f"warning: a sweep is running into {res}; this report covers the chunks it "
+                                       "has finished so far")
+        assert (res / "report.md").exists()
+    assert report_main([str(res), "--n-boot", "10"]) == 0  # the sweep is over: no word about it
+    assert "sweep is running" not in capsys.readouterr().err

@@ -8,6 +8,7 @@ executable path: nothing downloads a browser build.
 from __future__ import annotations
 
 import os
+import secrets
 import tempfile
 import threading
 from collections.abc import Iterator
@@ -18,24 +19,31 @@ from typing import Any
 from torchrl_subgoal.studio.server import create_app, serve
 
 CHROMIUM = os.environ.get("STUDIO_CHROMIUM", "/usr/bin/chromium")
-#: Flags for a closed network and a root user (see the machine notes): no sandbox, no background traffic.
+#: A name of another site that the browser resolves to this machine, as after a DNS-rebinding attack
+#: (``.example`` is reserved: no real site is hidden).
+REBOUND_HOST = "evil.example"
+#: Flags for a closed network and a root user (see the machine notes): no sandbox, no background traffic;
+#: and :data:`REBOUND_HOST` resolving to the loopback address.
 CHROMIUM_ARGS = [
     "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
-    "--disable-component-update", "--disable-sync",
+    "--disable-component-update", "--disable-sync", f"--host-resolver-rules=MAP {REBOUND_HOST} 127.0.0.1",
 ]
 #: Generous: CI machines can be busy. Waits poll for a state; nothing sleeps for a fixed time.
 TIMEOUT_MS = 120_000
 
 
 @contextmanager
-def live_studio(folder: Path, **kwargs: Any) -> Iterator[tuple[str, Any]]:
-    """Serve a studio saving into ``folder`` on a free loopback port; yields ``(url, app)``."""
-    app = create_app(folder, **kwargs)
+def live_studio(folder: Path, *, token: bool = True, **kwargs: Any) -> Iterator[tuple[str, Any]]:
+    """Serve a studio saving into ``folder`` on a free loopback port with a token, as the command line
+    does (``token=False``: without); yields ``(url, app)``, the url with its ``?token=`` (add parameters
+    with ``&``)."""
+    secret = secrets.token_urlsafe(24) if token else None
+    app = create_app(folder, **({"token": secret} if secret else {}), **kwargs)
     server = serve(app, "127.0.0.1", 0)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     try:
-        yield f"http://127.0.0.1:{server.port}/", app
+        yield f"http://127.0.0.1:{server.port}/" + (f"?token={secret}" if secret else ""), app
     finally:
         server.shutdown()
         server.server_close()

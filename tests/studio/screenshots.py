@@ -21,7 +21,7 @@ from torchrl_subgoal.envs import fetch
 def pick_and_place(browser: Any, url: str, folder: Path, out: Path) -> None:
     """The form: the participants' file opened, a second pattern being written."""
     shutil.copy(fetch.PARTICIPANTS_FILE, folder / "pick_and_place_participants.yaml")
-    page = open_page(browser, f"{url}?file=pick_and_place_participants.yaml")
+    page = open_page(browser, f"{url}&file=pick_and_place_participants.yaml")
     expect(page.locator("#box-form .box-card")).to_have_count(2, timeout=TIMEOUT_MS)
     page.click("#add-pattern")
     page.fill("#pattern-name", "grasp_then_lift")

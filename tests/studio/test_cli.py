@@ -7,6 +7,7 @@ import signal
 import socket
 import subprocess
 import sys
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -27,10 +28,18 @@ def test_serves_on_loopback_and_stops_on_ctrl_c(tmp_path: Path) -> None:
         line = proc.stdout.readline()  # the address, once it listens (nothing if it failed)
         assert line.startswith("Subgoal studio at http://127.0.0.1:"), (line, proc.stderr and proc.stderr.read())
         url = line.split()[3]
-        with urllib.request.urlopen(f"{url}api/domains", timeout=60) as response:
+        base, _, query = url.partition("?")
+        token = query.removeprefix("token=")
+        assert query.startswith("token=") and len(token) >= 32  # a per-launch token, printed with the address
+        api = urllib.request.Request(f"{base}api/domains", headers={"X-Studio-Token": token})
+        with urllib.request.urlopen(api, timeout=60) as response:
             assert [d["name"] for d in json.load(response)] == ["four_rooms", "pinball", "pick_and_place"]
         with urllib.request.urlopen(url, timeout=60) as response:
             assert "<title>Subgoal studio" in response.read().decode()
+        for without in (f"{base}api/domains", base, f"{base}api/files?token=wrong"):
+            with pytest.raises(urllib.error.HTTPError) as refused:
+                urllib.request.urlopen(without, timeout=60)
+            assert refused.value.code == 403 and b"token is missing or wrong" in refused.value.read()
         assert (tmp_path / "files").is_dir()
     finally:
         proc.send_signal(signal.SIGINT)

@@ -32,15 +32,18 @@ from typing import Any
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule, TensorDictSequential
+from tensordict.utils import NestedKey
 from torch import nn
 from torchrl.data import Bounded, LazyTensorStorage, ReplayBuffer
 from torchrl.data.replay_buffers import RandomSampler
 from torchrl.envs.utils import ExplorationType, exploration_type
 from torchrl.modules import MLP, Actor, ValueOperator
-from torchrl.objectives import DDPGLoss, SoftUpdate
+from torchrl.objectives import DDPGLoss, SoftUpdate, TD3Loss
 from torchrl.objectives.value import TD0Estimator
 
-__all__ = ["ClippedTD0Estimator", "DDPGAgent", "DDPGConfig", "GaussianOrRandom", "RunningNorm", "mlp"]
+from torchrl_subgoal.agents.subgoal_input import SUBGOAL_INDEX, SubgoalInput
+
+__all__ = ["ClippedTD0Estimator", "DDPGAgent", "DDPGConfig", "GaussianOrRandom", "RunningNorm", "TD3Settings", "mlp"]
 
 OBSERVATION = "observation"
 NORMALIZED = "observation_normalized"
@@ -227,17 +230,47 @@ class ClippedTD0Estimator(TD0Estimator):
         self.low, self.high = low, high
 
     def value_estimate(self, tensordict: TensorDictBase, *args: Any, **kwargs: Any) -> torch.Tensor:
-        return super().value_estimate(tensordict, *args, **kwargs).clamp(self.low, self.high)
+        value = super().value_estimate(tensordict, *args, **kwargs)
+        return value if self.low is None and self.high is None else value.clamp(self.low, self.high)
+
+
+@dataclass(frozen=True)
+class TD3Settings:
+    """TD3's changes to DDPG (Fujimoto et al. 2018), through TorchRL's :class:`~torchrl.objectives.TD3Loss`:
+    two critics whose smaller target value is the TD target, smoothed target actions, delayed actor
+    (and target) updates. Defaults: TorchRL's TD3 example.
+
+    Attributes:
+        policy_delay: critic updates per actor and target update.
+        target_noise: s.d. of the Gaussian noise added to the target policy's action.
+        noise_clip: bound of that noise.
+
+    Examples:
+        >>> TD3Settings().policy_delay
+        2
+    """
+
+    policy_delay: int = 2
+    target_noise: float = 0.2
+    noise_clip: float = 0.5
 
 
 class DDPGAgent(nn.Module):
     """Actor, critic, their optimisers, target networks, exploration and replay buffer.
 
     Args:
-        observation_size: entries of the ``"observation"`` vector.
+        observation_size: entries of the observation vector.
         action_spec: the env's (unbatched) bounded action spec.
         config: hyper-parameters.
         device: where networks and replay buffer live.
+
+    Keyword Args:
+        observation_key: the observation entry the networks read.
+        subgoal_states: if positive, actor and critic also read ``"subgoal_index"`` (the abstract
+            state ``z`` of the shaping transform, one-hot over this many states), concatenated to the
+            normalised observation (:class:`~torchrl_subgoal.agents.subgoal_input.SubgoalInput`).
+        td3: TD3 instead of DDPG (``config.action_l2`` must then be 0).
+        keys: more entries the replay buffer keeps (e.g. what re-shaping a sample reads).
 
     Examples:
         >>> from torchrl.data import Bounded
@@ -251,6 +284,10 @@ class DDPGAgent(nn.Module):
         >>> agent.extend(data)
         >>> sorted(agent.update())
         ['loss_actor', 'loss_value']
+        >>> td3 = DDPGAgent(25, spec, DDPGConfig(hidden=(32,), batch_size=8, action_l2=0.0), td3=TD3Settings())
+        >>> td3.extend(data)
+        >>> sorted(td3.update())
+        ['loss_value']
     """
 
     def __init__(
@@ -259,39 +296,68 @@ class DDPGAgent(nn.Module):
         action_spec: Bounded,
         config: DDPGConfig,
         device: str | torch.device = "cpu",
+        *,
+        observation_key: NestedKey = OBSERVATION,
+        subgoal_states: int = 0,
+        td3: TD3Settings | None = None,
+        keys: Sequence[NestedKey] = (),
     ) -> None:
         super().__init__()
-        self.config = config
+        if td3 is not None and config.action_l2:
+            raise ValueError(f"action_l2 ({config.action_l2}) is DDPG's actor penalty; TD3 here has none: set it to 0")
+        if td3 is not None and td3.policy_delay < 1:
+            raise ValueError(f"policy_delay must be >= 1, got {td3.policy_delay}")
+        self.config, self.td3 = config, td3
         self.device = torch.device(device)
+        self.observation_key = observation_key
         action_size = int(action_spec.shape[-1])
+        z = [SUBGOAL_INDEX] if subgoal_states else []
+        self.keys: tuple[NestedKey, ...] = tuple(dict.fromkeys([
+            observation_key, "action", ("next", observation_key), ("next", "reward"), ("next", "done"),
+            ("next", "terminated"), *z, *(("next", k) for k in z), *keys]))
         self.norm = RunningNorm(observation_size, config.norm_eps, config.norm_clip)
-        normalize = TensorDictModule(self.norm, in_keys=[OBSERVATION], out_keys=[NORMALIZED])
-        self.actor = Actor(nn.Sequential(mlp(observation_size, action_size, config.hidden), nn.Tanh()),
-                           in_keys=[NORMALIZED], spec=action_spec)
-        self.critic = ValueOperator(_QNet(mlp(observation_size + action_size, 1, config.hidden)),
-                                    in_keys=[NORMALIZED, "action"])
+        normalize = TensorDictModule(self.norm, in_keys=[observation_key], out_keys=[NORMALIZED])
+        actor_net: nn.Module = nn.Sequential(mlp(observation_size + subgoal_states, action_size, config.hidden),
+                                             nn.Tanh())
+        if subgoal_states:
+            actor_net = SubgoalInput(subgoal_states, body=actor_net)
+        self.actor = Actor(actor_net, in_keys=[NORMALIZED, *z], spec=action_spec)
+        self.critic = ValueOperator(_QNet(mlp(observation_size + action_size + subgoal_states, 1, config.hidden),
+                                          subgoal_states), in_keys=[NORMALIZED, "action", *z])
         self.greedy = TensorDictSequential(normalize, self.actor)
         # one module call per step: normaliser, actor network and exploration on the observation
         explore = GaussianOrRandom(action_spec.space.low, action_spec.space.high, config.noise_eps,
                                    config.random_eps)
-        self.policy = TensorDictModule(nn.Sequential(self.norm, self.actor.module, explore),
-                                       in_keys=[OBSERVATION], out_keys=["action"])
-        self.loss = DDPGLoss(self.actor, self.critic, delay_actor=True, delay_value=True)
+        acting: nn.Module = (_Explore(self.norm, self.actor.module, explore) if subgoal_states
+                             else nn.Sequential(self.norm, self.actor.module, explore))
+        self.policy = TensorDictModule(acting, in_keys=[observation_key, *z], out_keys=["action"])
         high = 0.0 if config.clip_positive else None
         low = -config.clip_return if config.clip_return is not None else None
-        estimator = ClippedTD0Estimator(low=low, high=high, gamma=config.gamma,
-                                        value_network=self.loss.actor_critic)
-        # through the property's setter: nn.Module.__setattr__ would register a module assigned
-        # to `loss.value_estimator` under that name, and the property would still build its default
-        type(self.loss).value_estimator.fset(self.loss, estimator)
-        self.loss._forward_value_estimator_keys()
+        self.loss: DDPGLoss | TD3Loss
+        if td3 is None:
+            self.loss = DDPGLoss(self.actor, self.critic, delay_actor=True, delay_value=True)
+            estimator = ClippedTD0Estimator(low=low, high=high, gamma=config.gamma,
+                                            value_network=self.loss.actor_critic)
+            # through the property's setter: nn.Module.__setattr__ would register a module assigned
+            # to `loss.value_estimator` under that name, and the property would still build its default
+            type(self.loss).value_estimator.fset(self.loss, estimator)
+            self.loss._forward_value_estimator_keys()
+            critic_params = self.loss.value_network_params
+        else:
+            self.loss = TD3Loss(self.actor, self.critic, action_spec=action_spec, num_qvalue_nets=2,
+                                policy_noise=td3.target_noise, noise_clip=td3.noise_clip, loss_function="l2",
+                                delay_actor=True, delay_qvalue=True)
+            estimator = ClippedTD0Estimator(low=low, high=high, gamma=config.gamma, value_network=None)
+            estimator.set_keys(value=self.loss.tensor_keys.state_action_value)
+            self.loss.make_value_estimator(estimator)
+            critic_params = self.loss.qvalue_network_params
         self.target_updater = SoftUpdate(self.loss, eps=config.polyak)
+        self._updates, self._actor_stepped = 0, False
         # fused Adam (one kernel for all of a network's parameters): a third of the default's time on CPU
         fused = self.device.type in ("cpu", "cuda")
         self.actor_optimizer = torch.optim.Adam(self.loss.actor_network_params.values(True, True),
                                                 lr=config.actor_lr, fused=fused)
-        self.critic_optimizer = torch.optim.Adam(self.loss.value_network_params.values(True, True),
-                                                 lr=config.critic_lr, fused=fused)
+        self.critic_optimizer = torch.optim.Adam(critic_params.values(True, True), lr=config.critic_lr, fused=fused)
         # DDPGLoss trains the modules' own parameters (``loss.value_network_params`` are these tensors)
         self._critic_parameters = list(self.critic.module.named_parameters())
         self.replay = ReplayBuffer(
@@ -303,26 +369,34 @@ class DDPGAgent(nn.Module):
 
     def extend(self, data: TensorDictBase) -> None:
         """Store a collected batch (any batch shape) and add its observations to the normaliser."""
-        flat = data.select(*DDPG_KEYS).reshape(-1).to(self.device)
-        self.norm.update(flat[OBSERVATION])
+        flat = data.select(*self.keys).reshape(-1).to(self.device)
+        self.norm.update(flat[self.observation_key])
         self.replay.extend(flat)
 
     def update(self) -> dict[str, float]:
-        """One Adam step of critic and actor on a replay sample; returns the two losses.
+        """One Adam step of critic and actor on a replay sample; returns the losses (:meth:`update_on`)."""
+        return self.update_on(self.replay.sample())
 
-        The critic's loss is :class:`~torchrl.objectives.DDPGLoss`'s (its clipped TD(0)
+    def update_on(self, batch: TensorDictBase) -> dict[str, float]:
+        """One Adam step of critic and actor on ``batch`` (e.g. a replay sample re-shaped); returns the losses.
+
+        DDPG: the critic's loss is :class:`~torchrl.objectives.DDPGLoss`'s (its clipped TD(0)
         target through the target networks). The actor's loss is DDPGLoss's
         ``−mean Q(o, π(o))`` (the critic's parameters detached) plus the L2 penalty
         on the same ``π(o)``, computed here with one actor pass for both.
+        TD3: a step of both critics (:class:`~torchrl.objectives.TD3Loss`), and of the actor every
+        ``policy_delay`` updates (then ``"loss_actor"`` is returned too).
         """
-        batch = self.replay.sample()
-        observation = self.norm(batch[OBSERVATION])
+        observation = self.norm(batch[self.observation_key])
         batch.set(NORMALIZED, observation)
-        batch.set(("next", NORMALIZED), self.norm(batch["next", OBSERVATION]))
+        batch.set(("next", NORMALIZED), self.norm(batch["next", self.observation_key]))
+        if self.td3 is not None:
+            return self._td3_update(batch, self.td3)
+        extra = (batch[SUBGOAL_INDEX],) if SUBGOAL_INDEX in self.actor.in_keys else ()
         loss_value = self.loss.loss_value(batch)[0]
-        action = self.actor.module(observation)
+        action = self.actor.module(observation, *extra)
         detached = {name: p.detach() for name, p in self._critic_parameters}
-        loss_actor = -torch.func.functional_call(self.critic.module, detached, (observation, action)).mean()
+        loss_actor = -torch.func.functional_call(self.critic.module, detached, (observation, action, *extra)).mean()
         if self.config.action_l2:
             loss_actor = loss_actor + self.config.action_l2 * action.square().mean()
         # the actor's loss reads the critic through detached parameters and the critic's loss
@@ -334,8 +408,29 @@ class DDPGAgent(nn.Module):
         self.actor_optimizer.step()
         return {"loss_value": loss_value.item(), "loss_actor": loss_actor.item()}
 
+    def _td3_update(self, batch: TensorDictBase, td3: TD3Settings) -> dict[str, float]:
+        assert isinstance(self.loss, TD3Loss)
+        loss_value = self.loss.value_loss(batch)[0]
+        self.critic_optimizer.zero_grad(set_to_none=True)
+        loss_value.backward()
+        self.critic_optimizer.step()
+        self._updates += 1
+        out = {"loss_value": loss_value.item()}
+        if self._updates % td3.policy_delay == 0:
+            loss_actor = self.loss.actor_loss(batch)[0]
+            self.actor_optimizer.zero_grad(set_to_none=True)
+            loss_actor.backward()
+            self.actor_optimizer.step()
+            self._actor_stepped = True
+            out["loss_actor"] = loss_actor.item()
+        return out
+
     def soft_update(self) -> None:
-        """Move the target networks towards the online ones (Polyak averaging)."""
+        """Move the target networks towards the online ones (Polyak averaging); TD3: only if the actor
+        took a step since the last soft update (its targets move with the delayed actor updates)."""
+        if self.td3 is not None and not self._actor_stepped:
+            return
+        self._actor_stepped = False
         self.target_updater.step()
 
     def training_state(self) -> dict[str, Any]:
@@ -367,11 +462,27 @@ def _alias(key: str) -> bool:
 
 
 class _QNet(nn.Module):
-    """``Q(o, a)``: the MLP over the concatenated observation and action."""
+    """``Q(o, a)`` (or ``Q(o, a, z)``): the MLP over the concatenated observation, action (and one-hot ``z``)."""
 
-    def __init__(self, net: nn.Module) -> None:
+    def __init__(self, net: nn.Module, subgoal_states: int = 0) -> None:
         super().__init__()
         self.net = net
+        self.subgoal_states = subgoal_states
 
-    def forward(self, observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        return self.net(torch.cat([observation, action], -1))
+    def forward(self, observation: torch.Tensor, action: torch.Tensor,
+                subgoal_index: torch.Tensor | None = None) -> torch.Tensor:
+        if subgoal_index is None:
+            return self.net(torch.cat([observation, action], -1))
+        z = nn.functional.one_hot(subgoal_index.reshape(action.shape[:-1]).long(), self.subgoal_states)
+        return self.net(torch.cat([observation, action, z.to(action.dtype)], -1))
+
+
+class _Explore(nn.Module):
+    """The exploring policy over ``(o, z)``: normaliser, actor network, exploration."""
+
+    def __init__(self, norm: nn.Module, actor: nn.Module, explore: nn.Module) -> None:
+        super().__init__()
+        self.norm, self.actor, self.explore = norm, actor, explore
+
+    def forward(self, observation: torch.Tensor, subgoal_index: torch.Tensor) -> torch.Tensor:
+        return self.explore(self.actor(self.norm(observation), subgoal_index))

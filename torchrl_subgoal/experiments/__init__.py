@@ -27,6 +27,7 @@ from torchrl_subgoal.experiments.results import (
     MethodResults,
     Results,
     ResultsError,
+    SweepRunningError,
     UnknownMethodError,
 )
 from torchrl_subgoal.experiments.store import load_frame, load_results
@@ -60,6 +61,7 @@ __all__ = [
     "ResultsError",
     "RunChunk",
     "Sweep",
+    "SweepRunningError",
     "UnknownMethodError",
     "learner_seeds",
     "load_frame",

@@ -39,11 +39,14 @@ __all__ = [
     "Plan",
     "RecipeConfig",
     "ReproductionConfig",
+    "check_device",
+    "check_methods",
     "check_patterns",
     "chunk_patterns",
     "config_main",
     "fail",
     "method_specs",
+    "needs_random_patterns",
     "pattern_config",
     "pattern_sets",
     "pattern_sources",
@@ -74,9 +77,24 @@ def fail(exc: BaseException) -> int:
 
 
 def pattern_sets(
-    human: Mapping[str, SubgoalSeries], candidates: Sequence[Predicate], num_random: int, seed: int
+    human: Mapping[str, SubgoalSeries], candidates: Sequence[Predicate], num_random: int, seed: int,
+    *, random_needed: bool = True,
 ) -> PatternSets:
     """The patterns by kind: ``human`` (as given), ``random`` (RRS, seeded, as long as the longest human one).
+
+    Random patterns are drawn from ``candidates``; a human pattern longer than there are
+    candidates is an error only when they are needed (``random_needed``: RRS is among the
+    sweep's methods), else there are none.
+
+    Args:
+        human: the human patterns by name.
+        candidates: the subgoals random patterns are drawn from.
+        num_random: how many random patterns.
+        seed: their seed.
+        random_needed: whether the sweep runs RRS.
+
+    Raises:
+        SubgoalFileError: the longest human pattern is longer than the candidates and RRS runs.
 
     Examples:
         >>> from torchrl_subgoal.subgoals import Cell
@@ -84,9 +102,13 @@ def pattern_sets(
         >>> sets = pattern_sets(human, [Cell(1, 1), Cell(2, 2), Cell(3, 3)], num_random=2, seed=0)
         >>> list(sets["human"]), list(sets["random"]), len(sets["random"]["random_1"])
         (['alice'], ['random_1', 'random_2'], 2)
+        >>> pattern_sets(human, [Cell(1, 1)], num_random=2, seed=0, random_needed=False)["random"]
+        {}
     """
     num_subgoals = max(len(p) for p in human.values())
     if num_subgoals > len(candidates):
+        if not random_needed:
+            return {"human": dict(human), "random": {}, "none": {}}
         longest = max(human.values(), key=len)
         raise SubgoalFileError(
             f"{longest.source or '<subgoals>'}: pattern {longest.name!r}: has {num_subgoals} subgoals, more "
@@ -96,6 +118,86 @@ def pattern_sets(
     rand = [SubgoalSeries(p.predicates, name=p.name, source=source)
             for p in random_patterns(candidates, num_random, num_subgoals, seed=seed)]
     return {"human": dict(human), "random": {p.name: p for p in rand}, "none": {}}
+
+
+def check_methods(methods: Mapping[str, Method] | Sequence[str], names: Sequence[str]) -> list[str]:
+    """``--methods`` checked: at least one, each known and named once; the names, in order.
+
+    Args:
+        methods: the recipe's methods (or their names).
+        names: the names given.
+
+    Raises:
+        ConfigError: naming ``--methods`` and what to choose from.
+
+    Examples:
+        >>> check_methods(["HRS", "SARSA"], ["SARSA", "HRS"])
+        ['SARSA', 'HRS']
+        >>> check_methods(["HRS", "SARSA"], ["HRS", "HRS"])
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --methods: HRS is named twice; name each method once
+    """
+    known = list(methods)
+    if not names:
+        raise ConfigError(f"--methods: give at least one method; choose from {known}")
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ConfigError(f"--methods: unknown method(s) {unknown}; choose from {known}")
+    repeated = sorted({n for n in names if names.count(n) > 1}, key=list(names).index)
+    if repeated:
+        twice = " and ".join(repeated)
+        raise ConfigError(f"--methods: {twice} {'is' if len(repeated) == 1 else 'are'} named twice; "
+                          "name each method once")
+    return list(names)
+
+
+def needs_random_patterns(methods: Mapping[str, Method], names: Sequence[str]) -> bool:
+    """Whether any of the methods ``names`` learns with random patterns (RRS).
+
+    Args:
+        methods: the recipe's methods by name.
+        names: those the sweep runs.
+
+    Examples:
+        >>> from torchrl_subgoal.methods import paper_methods
+        >>> needs_random_patterns(paper_methods("SARSA"), ["HRS", "SARSA"])
+        False
+        >>> needs_random_patterns(paper_methods("SARSA"), ["RRS"])
+        True
+    """
+    return any(methods[n].subgoals == "random" for n in names if n in methods)
+
+
+def check_device(device: str, flag: str = "device") -> torch.device:
+    """``--device`` checked: a device torch knows and this machine has (``cuda:7`` on a machine without
+    eight GPUs is an error before anything runs).
+
+    Args:
+        device: the flag's value (``cpu``, ``cuda``, ``cuda:1``, ``mps``...).
+        flag: the flag's name, for the message.
+
+    Raises:
+        ConfigError: naming the flag and why.
+
+    Examples:
+        >>> check_device("cpu")
+        device(type='cpu')
+        >>> check_device("gpu0")
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --device: 'gpu0' is not a device; give e.g. cpu, cuda or cuda:1
+    """
+    try:
+        parsed = torch.device(device)
+    except (RuntimeError, ValueError, TypeError):
+        raise ConfigError(f"--{flag}: {device!r} is not a device; give e.g. cpu, cuda or cuda:1") from None
+    try:
+        torch.empty(0, device=parsed)
+    except (RuntimeError, AssertionError, ValueError) as exc:  # AssertionError: torch built without CUDA
+        reason = " ".join(str(exc).split()) or type(exc).__name__
+        raise ConfigError(f"--{flag}: {device} is not available on this machine ({reason})") from None
+    return parsed
 
 
 def pattern_config(patterns: PatternSets) -> dict[str, Any]:
@@ -151,7 +253,8 @@ def method_specs(
 ) -> list[MethodSpec]:
     """Learners of the methods ``names`` (a recipe's ``--methods``): every pattern
     ``learnings`` times; methods without patterns get as many learnings in all, of
-    one pseudo-pattern ``"none"``. An unknown name is a :class:`ConfigError`.
+    one pseudo-pattern ``"none"``. An unknown or repeated name is a :class:`ConfigError` (see
+    :func:`check_methods`).
 
     Examples:
         >>> from torchrl_subgoal.methods import paper_methods
@@ -161,13 +264,12 @@ def method_specs(
         >>> [(s.name, s.patterns, s.learnings_per_pattern) for s in specs]
         [('HRS', ('alice',), 3), ('SARSA', ('none',), 3)]
     """
+    names = check_methods(methods, names)
     specs = []
     for name, method in methods.items():
         kind = method.subgoals
         per_pattern = learnings if kind != "none" else learnings * len(patterns["human"])
         specs.append(MethodSpec(name, list(patterns[kind]) or ["none"], per_pattern))
-    if not names:
-        raise ConfigError(f"--methods: give at least one method; choose from {list(methods)}")
     try:
         return select_methods(specs, names)
     except UnknownMethodError as exc:

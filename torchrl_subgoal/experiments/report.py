@@ -45,8 +45,9 @@ from torchrl_subgoal.experiments.results import (
     IncompleteResultsError,
     Results,
     ResultsError,
+    SweepRunningError,
 )
-from torchrl_subgoal.experiments.store import ResultsStore, load_results
+from torchrl_subgoal.experiments.store import LOCK_FILE, ResultsStore, load_results
 
 SUMMARY_FILE = "summary.json"
 REPORT_FILE = "report.md"
@@ -461,7 +462,8 @@ def write_report(
         out_dir: where to write (default: ``results_dir``).
         n_boot: bootstrap samples for the IQM intervals.
         seed: bootstrap seed.
-        allow_incomplete: report on the finished chunks of an unfinished sweep.
+        allow_incomplete: report on the finished chunks of an unfinished sweep, or of one still
+            running; without it, a sweep holding the directory's lock is a :class:`SweepRunningError`.
 
     Examples:
         >>> out = write_report("results/four_rooms")  # doctest: +SKIP
@@ -469,6 +471,11 @@ def write_report(
     """
     if n_boot < 1:
         raise ValueError(f"n_boot must be >= 1, got {n_boot}")
+    if not allow_incomplete and ResultsStore(results_dir).sweep_running():
+        raise SweepRunningError(
+            f"a sweep is running into {results_dir} (it holds {Path(results_dir) / LOCK_FILE}), so its results "
+            "are not final; wait for it to finish, or pass --allow-incomplete to report on the chunks finished so far"
+        )
     results = load_results(results_dir, allow_incomplete=allow_incomplete)
     spec = ReportSpec.from_config(results.config)
     out = Path(out_dir) if out_dir is not None else results.root
@@ -558,6 +565,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.seed < 0:
         parser.error(f"--seed: must be >= 0, got {args.seed}")
     start = time.perf_counter()
+    if args.allow_incomplete and ResultsStore(args.results_dir).sweep_running():
+        print(f"warning: a sweep is running into {args.results_dir}; this report covers the chunks it has "
+              "finished so far", file=sys.stderr)
     try:
         output = write_report(
             args.results_dir,

@@ -84,6 +84,15 @@ class IncompleteResultsError(ResultsError):
     """
 
 
+class SweepRunningError(ResultsError):
+    """A sweep holds the results directory's lock: it is writing into it, so its results are not final.
+
+    Examples:
+        >>> issubclass(SweepRunningError, ResultsError)
+        True
+    """
+
+
 @dataclass(frozen=True)
 class Chunk:
     """A unit of work: consecutive learners of one method, run by one call of ``run_chunk``.

@@ -384,6 +384,37 @@ class ResultsStore:
                 self.chunks_dir.rmdir()
         return removed
 
+    def sweep_running(self) -> bool:
+        """Whether a process holds the directory's lock, i.e. a sweep is writing into it.
+
+        The lock is probed without waiting and released at once; a directory without a
+        lock file has no sweep running (nothing is created).
+
+        Examples:
+            >>> import tempfile
+            >>> store = ResultsStore(tempfile.mkdtemp())
+            >>> store.sweep_running()
+            False
+            >>> with store.lock():
+            ...     store.sweep_running()
+            True
+        """
+        import fcntl
+
+        try:
+            handle = open(self.root / LOCK_FILE, "rb")  # noqa: SIM115 (closed below)
+        except OSError:
+            return False
+        with handle:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return True
+            except OSError:
+                return False
+            fcntl.flock(handle, fcntl.LOCK_UN)
+            return False
+
     @contextlib.contextmanager
     def lock(self) -> Iterator[None]:
         """Hold an exclusive lock on the directory; the OS releases it if the process dies."""

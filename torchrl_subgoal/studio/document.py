@@ -19,8 +19,11 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import os
 import re
+import secrets
+import stat
 import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -32,15 +35,20 @@ import yaml
 from torchrl_subgoal.studio.domains import Domain, FormError
 from torchrl_subgoal.subgoals import (
     FORMAT,
+    MAX_FILE_BYTES,
     SubgoalFileError,
     SubgoalSeries,
     load_patterns,
     save_patterns,
 )
 
-__all__ = ["Drawing", "RequestError", "file_path", "parse_json", "read_drawing", "save_drawing", "to_document"]
+__all__ = [
+    "Drawing", "RequestError", "file_path", "parse_json", "read_drawing", "read_file", "save_drawing", "to_document",
+]
 
 MAX_REQUEST_BYTES = 256 * 1024
+#: Arrays and objects nested deeper than this are refused (a drawing needs about 7 levels).
+MAX_DEPTH = 32
 SUFFIXES = (".yaml", ".yml", ".json")
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,79}")
 
@@ -62,6 +70,14 @@ class RequestError(ValueError):
 def parse_json(body: bytes) -> Any:
     """Decode a request body; duplicate keys, NaN and bad UTF-8 are errors, not silently merged.
 
+    So are values nested deeper than :data:`MAX_DEPTH`, numbers that are not finite
+    (``1e400``) or too long to convert, and strings that cannot be written as UTF-8
+    (a lone surrogate such as ``"\\ud800"``): every malformed body is a
+    :class:`RequestError` (400), never an exception of the decoder.
+
+    Args:
+        body: the request's bytes.
+
     Examples:
         >>> parse_json(b'{"a": 1}')
         {'a': 1}
@@ -69,6 +85,10 @@ def parse_json(body: bytes) -> Any:
         Traceback (most recent call last):
         ...
         torchrl_subgoal.studio.document.RequestError: request: the key 'a' appears twice in one object
+        >>> parse_json(b"[" * 100 + b"]" * 100)
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.studio.document.RequestError: request: nested deeper than 32 levels
     """
     if len(body) > MAX_REQUEST_BYTES:
         raise RequestError(f"request: {len(body)} bytes, over the limit of {MAX_REQUEST_BYTES}", status=413)
@@ -85,11 +105,62 @@ def parse_json(body: bytes) -> Any:
         raise RequestError(f"request: {name} is not a JSON number")
 
     try:
-        return json.loads(body.decode("utf-8"), object_pairs_hook=unique, parse_constant=constant)
+        text = body.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise RequestError(f"request: the body is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    _check_nesting(text)
+    try:
+        data = json.loads(text, object_pairs_hook=unique, parse_constant=constant)
+    except RequestError:
+        raise
     except json.JSONDecodeError as exc:
         raise RequestError(f"request: not valid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
+    except (ValueError, RecursionError) as exc:  # e.g. an integer of more digits than Python converts
+        raise RequestError(f"request: not valid JSON: {' '.join(str(exc).split())}") from None
+    _check_values(data)
+    return data
+
+
+def _check_nesting(text: str) -> None:
+    """Refuse text whose brackets nest deeper than :data:`MAX_DEPTH`, before the decoder recurses into it."""
+    depth = 0
+    in_string = escaped = False
+    for char in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif char == "\\":
+                escaped = True
+            elif char == '"':
+                in_string = False
+        elif char == '"':
+            in_string = True
+        elif char in "[{":
+            depth += 1
+            if depth > MAX_DEPTH:
+                raise RequestError(f"request: nested deeper than {MAX_DEPTH} levels")
+        elif char in "]}":
+            depth -= 1
+
+
+def _check_values(data: Any) -> None:
+    """Refuse numbers that are not finite and strings that are not valid Unicode text (lone surrogates)."""
+    stack = [data]
+    while stack:
+        value = stack.pop()
+        if isinstance(value, dict):
+            stack.extend(value.keys())
+            stack.extend(value.values())
+        elif isinstance(value, list):
+            stack.extend(value)
+        elif isinstance(value, float) and not math.isfinite(value):
+            raise RequestError(f"request: a number is too large to be finite ({value})")
+        elif isinstance(value, str):
+            try:
+                value.encode("utf-8")
+            except UnicodeEncodeError as exc:
+                raise RequestError(f"request: a string holds {value[exc.start]!r}, which is not a character "
+                                   "(a lone surrogate)") from None
 
 
 def file_name(name: str) -> str:
@@ -111,7 +182,10 @@ def file_name(name: str) -> str:
 
 
 def file_path(folder: Path, name: str) -> Path:
-    """``folder / file_name(name)``, checked to lie inside ``folder``.
+    """``folder / file_name(name)``: a name directly in ``folder`` (resolved), whatever is there.
+
+    The last component is not resolved: a link of that name is the link itself, which
+    saving replaces (see :func:`save_drawing`) and reading follows only into ``folder``.
 
     Examples:
         >>> import tempfile
@@ -120,7 +194,7 @@ def file_path(folder: Path, name: str) -> Path:
         True
     """
     root = folder.resolve()
-    path = (root / file_name(name)).resolve()
+    path = root / file_name(name)
     if path.parent != root:
         raise RequestError(f"file name {name!r}: must name a file directly in the save folder")
     return path
@@ -226,7 +300,7 @@ def read_drawing(data: Any, domains: Mapping[str, Domain], *, source: str = "dra
     map_name = ""
     if domain.maps:
         map_name = data.get("map") or next(iter(domain.maps))
-        _expect(map_name in domain.maps, f"request: map: expected one of {list(domain.maps)}, got {map_name!r}")
+        _expect(isinstance(map_name, str) and map_name in domain.maps, f"request: map: expected one of {list(domain.maps)}, got {map_name!r}")
     raw = data.get("patterns")
     _expect(isinstance(raw, list) and len(raw) > 0, "request: patterns: expected a non-empty list of patterns")
     bodies: dict[str, Any] = {}
@@ -246,8 +320,23 @@ def read_drawing(data: Any, domains: Mapping[str, Domain], *, source: str = "dra
     return Drawing(domain, map_name, patterns, described.get("description"))
 
 
-def save_drawing(drawing: Drawing, path: Path) -> None:
-    """Write the drawing's patterns to ``path`` with :func:`save_patterns` (atomically).
+def save_drawing(drawing: Drawing, path: Path, *, overwrite: bool = False) -> None:
+    """Write the drawing's patterns to ``path`` with :func:`save_patterns`, atomically and never through a link.
+
+    The file is written to a new temporary file in ``path``'s folder, created
+    exclusively (``O_CREAT | O_EXCL | O_NOFOLLOW``, a random name), then renamed
+    over ``path``: a link planted at ``path`` or at any temporary name is replaced
+    or left alone, never written through.
+
+    Args:
+        drawing: what to save.
+        path: the file (in the save folder).
+        overwrite: replace an existing ``path``; without it an existing entry of that
+            name (a file, a link) is a conflict.
+
+    Raises:
+        RequestError: 409 if ``path`` exists (and not ``overwrite``) or is a directory;
+            500 naming the reason if the folder cannot be written.
 
     Examples:
         >>> from torchrl_subgoal.studio.domains import default_domains
@@ -258,10 +347,97 @@ def save_drawing(drawing: Drawing, path: Path) -> None:
         >>> save_drawing(drawing, path)
         >>> load_patterns(path)["alice"].to_dict()
         {'subgoals': [{'cell': [4, 9]}]}
+        >>> save_drawing(drawing, path)
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.studio.document.RequestError: alice.yaml exists in the save folder; choose another name, or confirm replacing it
     """
-    tmp = path.with_name(f".{path.name}.tmp")
-    save_patterns(tmp, drawing.patterns, domain=drawing.domain.name, description=drawing.description)
-    os.replace(tmp, path)
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        mode = None
+    if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISLNK(mode)):
+        raise RequestError(f"{path.name}: a directory (or another non-file) of that name is in the save folder; "
+                           "choose another name", status=409)
+    if mode is not None and not overwrite:
+        raise RequestError(f"{path.name} exists in the save folder; choose another name, or confirm replacing it",
+                           status=409)
+    with tempfile.TemporaryDirectory(prefix="studio-save-") as private:  # ours alone: nothing planted in it
+        rendered = Path(private) / path.name
+        save_patterns(rendered, drawing.patterns, domain=drawing.domain.name, description=drawing.description)
+        text = rendered.read_bytes()
+    try:
+        _write_new(path, text)
+    except OSError as exc:
+        raise RequestError(f"cannot write {path.name} in the save folder ({exc.strerror or exc})", status=500) \
+            from None
+
+
+def _write_new(path: Path, data: bytes) -> None:
+    """Write ``data`` to a fresh temporary file beside ``path`` (created exclusively), then rename it to ``path``."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    for _ in range(100):
+        tmp = path.with_name(f".{path.name}.{secrets.token_hex(8)}.tmp")
+        try:
+            fd = os.open(tmp, flags, 0o666)
+        except FileExistsError:  # taken (by chance, or planted): another name
+            continue
+        break
+    else:
+        raise FileExistsError(f"no free temporary name beside {path.name}")
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)  # replaces a link at path, never follows it
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def read_file(folder: Path, name: str) -> tuple[Path, bytes]:
+    """The bytes of the subgoal file ``name`` of ``folder``: a regular file there, or a link to one there.
+
+    The file is opened without following a last link (``O_NOFOLLOW``) after its real
+    path was checked to lie directly in ``folder``, so a link swapped in meanwhile is
+    refused rather than followed out of the folder. At most one byte more than a
+    subgoal file may hold is read (the loader then names the limit).
+
+    Args:
+        folder: the save folder.
+        name: the file's name in it (as in a request).
+
+    Raises:
+        RequestError: 400 for a bad name or a link out of the folder, 404 if there is no such file.
+
+    Examples:
+        >>> import tempfile
+        >>> folder = Path(tempfile.mkdtemp())
+        >>> _ = (folder / "alice.yaml").write_text("patterns: {}")
+        >>> read_file(folder, "alice.yaml")[1]
+        b'patterns: {}'
+    """
+    path = file_path(folder, name)
+    root = path.parent
+    missing = RequestError(f"{path.name}: no such file in the save folder", status=404)
+    try:
+        real = path.resolve(strict=True)
+    except (FileNotFoundError, NotADirectoryError, RuntimeError):  # RuntimeError: a loop of links
+        raise missing from None
+    if real.parent != root:
+        raise RequestError(f"file name {name!r}: must name a file directly in the save folder")
+    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(real, flags)
+    except FileNotFoundError:
+        raise missing from None
+    except OSError as exc:  # ELOOP: a link was put there after the check
+        raise RequestError(f"{path.name}: cannot open it ({exc.strerror or exc})", status=400) from None
+    with os.fdopen(fd, "rb") as handle:
+        if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
+            raise missing
+        return path, handle.read(MAX_FILE_BYTES + 1)
 
 
 def infer_domain(patterns: Mapping[str, SubgoalSeries], domains: Mapping[str, Domain], source: str) -> Domain:

@@ -1,11 +1,18 @@
-"""TorchRL-native training with subgoal shaping: the building blocks of the A2C recipe.
+"""TorchRL-native training with subgoal shaping: one building block per learner, and what they share.
 
+* :mod:`~torchrl_subgoal.training.common`: the shaped env (:func:`shaped_env`), the
+  collector, the potential's training (:class:`PotentialTrainer`), re-shaping replay
+  samples (:class:`SampleReshaper`), the learner seeing ``z`` (:func:`subgoal_states`)
+  and the records (:class:`LearningCurve`);
+* :mod:`~torchrl_subgoal.training.a2c` (:func:`train_a2c`),
+  :mod:`~torchrl_subgoal.training.ppo` (:func:`train_ppo`),
+  :mod:`~torchrl_subgoal.training.dqn` (:func:`train_dqn`) and
+  :mod:`~torchrl_subgoal.training.ddpg` (:func:`train_ddpg`, DDPG or TD3): one learner
+  each, ``train_<algo>(make_env, config, shaping=..., seed=...) -> LearningCurve``;
 * :mod:`~torchrl_subgoal.training.smdp`: keep only the real SMDP transitions
   (:func:`smdp_transitions`, :func:`extend_transitions` into a replay buffer);
 * :mod:`~torchrl_subgoal.training.shared`: :class:`EnvFactory`, one potential
   for envs in collector worker processes (shared memory);
-* :mod:`~torchrl_subgoal.training.a2c`: env, networks, collector and the A2C
-  loop (:func:`train_a2c`);
 * :mod:`~torchrl_subgoal.training.domains`: what a domain registers for the A2C recipe (:class:`A2CDomain`).
 """
 
@@ -16,52 +23,97 @@ from typing import Literal
 
 from torchrl.record.loggers import CSVLogger, Logger
 
-from torchrl_subgoal.training.a2c import (
-    A2CConfig,
+from torchrl_subgoal.training.a2c import A2CConfig, actor_critic, train_a2c
+from torchrl_subgoal.training.common import (
+    CurveRecorder,
+    EpisodeWindow,
     FourierFeatures,
+    LearnerSettings,
     LearningCurve,
+    PotentialTrainer,
+    SampleReshaper,
     Shaping,
-    actor_critic,
     batched,
+    check_settings,
     close_collector,
+    learner_env,
     make_collector,
     shaped_env,
-    train_a2c,
+    subgoal_states,
 )
+from torchrl_subgoal.training.ddpg import DDPGTrainConfig, ddpg_agent, train_ddpg
 from torchrl_subgoal.training.domains import A2CDomain
+from torchrl_subgoal.training.dqn import DQN_PRESETS, DQNConfig, q_network, train_dqn
+from torchrl_subgoal.training.ppo import PPOConfig, ppo_actor_critic, train_ppo
 from torchrl_subgoal.training.shared import EnvFactory
 from torchrl_subgoal.training.smdp import extend_transitions, smdp_transitions
 
 __all__ = [
+    "DQN_PRESETS",
     "A2CConfig",
     "A2CDomain",
+    "CurveRecorder",
+    "DDPGTrainConfig",
+    "DQNConfig",
     "EnvFactory",
+    "EpisodeWindow",
     "FourierFeatures",
+    "LearnerSettings",
     "LearningCurve",
+    "PPOConfig",
+    "PotentialTrainer",
+    "SampleReshaper",
     "Shaping",
     "actor_critic",
     "batched",
+    "check_settings",
     "close_collector",
+    "ddpg_agent",
     "experiment_logger",
     "extend_transitions",
+    "learner_env",
     "make_collector",
+    "ppo_actor_critic",
+    "q_network",
     "shaped_env",
     "smdp_transitions",
+    "subgoal_states",
     "train_a2c",
+    "train_ddpg",
+    "train_dqn",
+    "train_ppo",
 ]
 
 
 def experiment_logger(
-    log_dir: str | Path, name: str, backend: Literal["csv", "tensorboard", "none"] = "csv"
+    log_dir: str | Path, name: str, backend: Literal["csv", "tensorboard", "none"] = "csv", *, fresh: bool = False
 ) -> Logger | None:
     """A TorchRL logger writing under ``log_dir/name``: CSV (default), TensorBoard, or none.
+
+    Args:
+        log_dir: the directory of every learner's log.
+        name: this learner's (its subdirectory).
+        backend: ``"csv"``, ``"tensorboard"`` or ``"none"``.
+        fresh: start the learner's log afresh: remove what an earlier attempt of it logged (its
+            ``scalars/*.csv``, its TensorBoard event files), so a learner run again from its start
+            (a resumed sweep reruns the learners it had not finished) logs one series, not the
+            restarted one appended to the interrupted one. Nothing else in the directory is touched.
 
     Examples:
         >>> import tempfile
         >>> logger = experiment_logger(tempfile.mkdtemp(), "HRS_p1_0")
         >>> type(logger).__name__
         'CSVLogger'
+        >>> logger.log_scalar("episode_length", 30.0, step=256)
+        >>> again = experiment_logger(logger.log_dir, "HRS_p1_0", fresh=True)  # the learner starts over
+        >>> sorted(p.name for p in (Path(logger.log_dir) / "HRS_p1_0" / "scalars").iterdir())
+        []
     """
+    if fresh:
+        own = Path(log_dir) / name
+        for stale in [*own.glob("scalars/*.csv"), *own.glob("events.out.tfevents.*")]:
+            if stale.is_file() and not stale.is_symlink():
+                stale.unlink()
     if backend == "none":
         return None
     if backend == "tensorboard":

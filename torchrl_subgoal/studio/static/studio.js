@@ -28,10 +28,23 @@ class ApiError extends Error {
   constructor(message, status) { super(message); this.status = status; }
 }
 
+// The studio's per-launch token, from the address it printed (?token=...): every request carries it.
+const TOKEN = new URLSearchParams(location.search).get("token");
+
+// The page's address with ?file=NAME (or none), keeping the token.
+function pageUrl(file) {
+  const query = new URLSearchParams();
+  if (TOKEN) query.set("token", TOKEN);
+  if (file) query.set("file", file);
+  const text = query.toString();
+  return text ? `${location.pathname}?${text}` : location.pathname;
+}
+
 async function api(method, url, body) {
-  const options = { method, headers: {} };
+  const options = { method, headers: {}, credentials: "same-origin" };
+  if (TOKEN) options.headers["X-Studio-Token"] = TOKEN;
   if (body !== undefined) {
-    options.headers["Content-Type"] = "application/json";
+    options.headers["Content-Type"] = "application/json";  // the server refuses other bodies
     options.body = JSON.stringify(body);
   }
   const response = await fetch(url, options);
@@ -496,7 +509,10 @@ function renderPanels() {
   $("file-name").value = d.file;
   $("recipe").textContent = d.recipe ? `Train with it: ${d.recipe}` : "";
   $("download").hidden = !d.saved;
-  if (d.saved) $("download").href = `/files/${encodeURIComponent(d.saved)}`;
+  if (d.saved) {
+    const query = TOKEN ? `?${new URLSearchParams({ token: TOKEN })}` : "";
+    $("download").href = `/files/${encodeURIComponent(d.saved)}${query}`;
+  }
 
   const chips = $("patterns");
   chips.replaceChildren();
@@ -605,10 +621,24 @@ async function save() {
   S.validateSeq += 1; // a validation still in flight must not overwrite "Saved" (the server validates the save)
   const d = doc();
   d.file = $("file-name").value.trim();
+  const url = `/api/files/${encodeURIComponent(d.file)}`;
+  // the file this page opened or saved is saved over without asking; any other existing file is
+  // a conflict (409) that the user confirms
+  const own = Boolean(d.saved) && (d.file === d.saved || `${d.file}.yaml` === d.saved);
   try {
-    const data = await api("PUT", `/api/files/${encodeURIComponent(d.file)}`, drawing(d.patterns));
+    let data;
+    try {
+      data = await api("PUT", own ? `${url}?overwrite=1` : url, drawing(d.patterns));
+    } catch (e) {
+      if (!(e instanceof ApiError) || e.status !== 409 || own) throw e;
+      if (!window.confirm(`${e.message.split(";")[0]}. Replace it?`)) {
+        say(`Not saved: ${e.message}`, "error");
+        return;
+      }
+      data = await api("PUT", `${url}?overwrite=1`, drawing(d.patterns));
+    }
     Object.assign(d, { file: data.file, saved: data.file, recipe: data.recipe });
-    history.replaceState(null, "", `?file=${encodeURIComponent(data.file)}`);
+    history.replaceState(null, "", pageUrl(data.file));
     say(`Saved ${data.path} (${data.patterns.length} pattern${data.patterns.length > 1 ? "s" : ""}).`, "ok");
     await refreshFiles(data.file);
     renderPanels();
@@ -624,7 +654,7 @@ async function openFile(name) {
     S.docs[data.domain] = { file: data.file, patterns: data.patterns.map(fromDocument), current: 0,
       saved: data.file, recipe: data.recipe, description: data.description };
     S.selected = null;
-    history.replaceState(null, "", `?file=${encodeURIComponent(data.file)}`);
+    history.replaceState(null, "", pageUrl(data.file));
     render();
     await validate();
     if ($("message").className === "ok") say(`Opened ${data.file}: ${data.patterns.length} pattern(s).`, "ok");
@@ -870,7 +900,7 @@ function wire() {
   svg.addEventListener("contextmenu", onContextMenu);
   $("domain").addEventListener("change", async () => {
     await setDomain($("domain").value);
-    history.replaceState(null, "", location.pathname);
+    history.replaceState(null, "", pageUrl(null));
     changed();
   });
   $("map").addEventListener("change", async () => {
@@ -884,7 +914,7 @@ function wire() {
   $("new").addEventListener("click", () => {
     S.docs[S.domain] = newDoc(S.domain);
     S.selected = null;
-    history.replaceState(null, "", location.pathname);
+    history.replaceState(null, "", pageUrl(null));
     changed();
   });
   $("add-pattern").addEventListener("click", () => {

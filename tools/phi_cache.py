@@ -13,8 +13,8 @@ Prints, for ``V`` the recipe's way (``NeuralPotential`` of a 25 → 3 × 256 →
 CPU time (``process_time``) is what other processes disturb least on a shared machine. To compare two
 versions of the library, run this script with each on ``PYTHONPATH``, alternately::
 
-    python benchmarks/phi_cache.py
-    PYTHONPATH=/path/to/other/checkout python benchmarks/phi_cache.py
+    python tools/phi_cache.py
+    PYTHONPATH=/path/to/other/checkout python tools/phi_cache.py
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from torchrl_subgoal.transform.cache import ValueCache as _ValueCache
 
 try:
     from torchrl_subgoal.training import close_collector
-except ImportError:  # a version before close_collector (main 6154cd9 and older): a Collector needs no more
+except ImportError:  # a version of the library before close_collector: a Collector needs no more
     def close_collector(collector: Collector) -> None:
         collector.shutdown()
 

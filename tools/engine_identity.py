@@ -5,9 +5,9 @@ chunk, keeps the episode records, the learner's final tables (SARSA's Q; the
 actor-critic's ``w`` and ``θ``) and the shaping potential's table, then saves
 them to an ``.npz`` file. Two checkouts agree bit for bit when their files do::
 
-    python benchmarks/engine_identity.py /tmp/after.npz
-    PYTHONPATH=/tmp/before python benchmarks/engine_identity.py /tmp/before.npz
-    python benchmarks/engine_identity.py --compare /tmp/before.npz /tmp/after.npz
+    python tools/engine_identity.py /tmp/after.npz
+    PYTHONPATH=/tmp/before python tools/engine_identity.py /tmp/before.npz
+    python tools/engine_identity.py --compare /tmp/before.npz /tmp/after.npz
 
 ``--engine torchrl`` runs the TorchRL loop instead of the fused engine.
 """

@@ -28,9 +28,9 @@ reaches it), object to goal and gripper to object, to choose the seeds of a run.
 
 Usage::
 
-    python benchmarks/pick_and_place_reach.py --episodes 60
-    python benchmarks/pick_and_place_reach.py --tasks 16      # which sweep seeds put both goals on the table
-    python benchmarks/pick_and_place_reach.py --checkpoints results/pick_and_place/checkpoints/HRS --replay
+    python tools/pick_and_place_reach.py --episodes 60
+    python tools/pick_and_place_reach.py --tasks 16      # which sweep seeds put both goals on the table
+    python tools/pick_and_place_reach.py --checkpoints results/pick_and_place/checkpoints/HRS --replay
 """
 
 from __future__ import annotations

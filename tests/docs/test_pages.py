@@ -1,0 +1,71 @@
+"""The pages are written for users, and the benchmarks page shows every maintained benchmark.
+
+A page says what the package does and what was measured, with the command that reproduces each
+figure; the history of how it got there is CHANGELOG.md's. So no page names a work session, an
+issue number, a commit or a path of the machine a figure was measured on, nor a date or a time of
+day.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+import re
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+PAGES = sorted([ROOT / "README.md", *(ROOT / "docs").rglob("*.md")])
+#: what ties a page to the project's history or to one machine, with why
+HISTORY = {
+    r"\bsession [0-9]": "a work session",
+    r"\bthis session\b": "a work session",
+    r"\bissue #?[0-9]": "an issue number",
+    r"(?<![\w/])(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b": "a commit hash",
+    r"/[a-z]+/results/|/work/": "a path of the machine",
+    r"\bUTC\b|\b[0-2][0-9]:[0-5][0-9]\s?(?:UTC|h)\b": "a time of day",
+    r"\b20[0-9]{2}-[01][0-9]-[0-3][0-9]\b": "the date of a run",
+    r"\bearlier engineer|\bother engineers'": "who measured, not what",
+}
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_page_names_no_history(page: Path) -> None:
+    found = [f"{page.relative_to(ROOT)}:{number}: {why}: {line.strip()[:120]}"
+             for number, line in enumerate(page.read_text().splitlines(), 1)
+             for pattern, why in HISTORY.items() if re.search(pattern, line, re.IGNORECASE)]
+    assert not found, "history belongs in CHANGELOG.md:\n" + "\n".join(found)
+
+
+def _docs_page() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("docs_page", ROOT / "benchmarks" / "docs_page.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault(spec.name, module)  # its dataclasses look their module up
+    spec.loader.exec_module(sys.modules[spec.name])
+    return sys.modules[spec.name]
+
+
+def test_the_benchmarks_page_runs_every_benchmark() -> None:
+    """Every script in benchmarks/ is a maintained benchmark: `make bench-docs` runs it, and its
+    docstring says what it measures (checks and diagnostics live in tools/)."""
+    run = {item.args[0] for item in _docs_page().RUNS}
+    for script in sorted((ROOT / "benchmarks").glob("*.py")):
+        if script.name == "docs_page.py":
+            continue
+        assert f"benchmarks/{script.name}" in run, f"{script.name}: not run by benchmarks/docs_page.py"
+        assert ast.get_docstring(ast.parse(script.read_text())), f"{script.name}: no docstring"
+    for script in sorted((ROOT / "tools").glob("*.py")):
+        assert ast.get_docstring(ast.parse(script.read_text())), f"tools/{script.name}: no docstring"
+
+
+def test_the_benchmarks_page_keeps_no_time_stamp_or_temporary_path() -> None:
+    clean = _docs_page().clean
+    out = ("\x1b[32mraw\x1b[0m 994 env-steps/s\n"
+           "2026-01-02 03:04:05,678 [torchrl][INFO]    Initialized LazyTensorStorage\n"
+           "Results: `/tmp/bench-docs-x/four_rooms`, 1000 episodes per learner.\n")
+    assert clean(out, Path("/tmp/bench-docs-x")) == ("raw 994 env-steps/s\n"
+                                                    "Results: `RESULTS/four_rooms`, 1000 episodes per learner.\n")

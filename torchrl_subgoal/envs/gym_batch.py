@@ -1,0 +1,79 @@
+"""A batch of gymnasium envs stepped in one process, as one TorchRL env.
+
+TorchRL's ``GymEnv(name, num_envs=n)`` runs ``n`` envs in an
+``AsyncVectorEnv``: ``n`` processes, which on a machine of two cores cost more
+than the envs themselves for cheap tasks (MountainCar, a MuJoCo point mass).
+:func:`gym_batch` wraps gymnasium's ``SyncVectorEnv`` instead, in TorchRL's
+``GymWrapper`` (``GymEnv``'s base): the envs step in a loop in the calling
+process, with gymnasium's automatic reset disabled so that TorchRL resets the
+finished envs (``"_reset"``) as it does for any batched env.
+
+Needs ``gymnasium`` (``pip install gymnasium``, or the ``fetch`` extra).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from torchrl.envs import EnvBase
+
+__all__ = ["gym_batch", "require_gymnasium"]
+
+
+def require_gymnasium(what: str, *, robotics: bool = False) -> Any:
+    """Import gymnasium (with gymnasium-robotics' envs registered when ``robotics``), or say how to install it.
+
+    Args:
+        what: what needs it (for the message).
+        robotics: also import gymnasium-robotics and MuJoCo.
+
+    Raises:
+        ImportError: naming the install command.
+
+    Examples:
+        >>> require_gymnasium("MountainCar").__name__
+        'gymnasium'
+    """
+    try:
+        import gymnasium
+    except ImportError:
+        raise ImportError(f"{what} needs gymnasium: pip install gymnasium "
+                          "(or the fetch extra: pip install 'torchrl_subgoal[fetch]')") from None
+    if robotics:
+        try:
+            import gymnasium_robotics
+            import mujoco  # noqa: F401
+        except ImportError as exc:
+            raise ImportError(f"{what} needs MuJoCo and gymnasium-robotics ({exc.name} is missing): "
+                              "pip install 'torchrl_subgoal[fetch]'  (or `make install` in a checkout)") from None
+        gymnasium.register_envs(gymnasium_robotics)
+    return gymnasium
+
+
+def gym_batch(make_envs: Sequence[Callable[[], Any]], *, max_steps: int | None = None, **kwargs: Any) -> EnvBase:
+    """``len(make_envs)`` gymnasium envs stepped together in this process: TorchRL's ``GymWrapper`` over
+    gymnasium's ``SyncVectorEnv`` (automatic reset disabled; TorchRL resets finished envs).
+
+    Args:
+        make_envs: one function per env returning a gymnasium env.
+        max_steps: the envs' time limit, kept as the TorchRL env's ``max_steps`` attribute (the
+            episode length the training records report before any episode ended).
+        **kwargs: more keyword arguments of ``GymWrapper`` (``device``…); discrete actions are
+            categorical (an index) unless ``categorical_action_encoding=False`` (one-hot, ``GymEnv``'s default).
+
+    Examples:
+        >>> import functools, gymnasium
+        >>> env = gym_batch([functools.partial(gymnasium.make, "MountainCar-v0")] * 3, max_steps=200)
+        >>> env.batch_size, env.max_steps
+        (torch.Size([3]), 200)
+        >>> env.rollout(4)["next", "observation"].shape
+        torch.Size([3, 4, 2])
+    """
+    gymnasium = require_gymnasium("gym_batch")
+    from torchrl.envs import GymWrapper
+
+    vector = gymnasium.vector.SyncVectorEnv(list(make_envs), autoreset_mode=gymnasium.vector.AutoresetMode.DISABLED)
+    env = GymWrapper(vector, **{"categorical_action_encoding": True, **kwargs})
+    env.max_steps = max_steps
+    return env
