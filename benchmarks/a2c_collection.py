@@ -67,7 +67,7 @@ from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.methods import paper_methods, shaping_parts
 from torchrl_subgoal.training import (
     A2CConfig,
-    A2CDomain,
+    LearnerDomain,
     Shaping,
     actor_critic,
     shaped_env,
@@ -126,14 +126,14 @@ def call_counts(setups: dict[str, Callable[[], int]]) -> dict[str, float]:
     return counts
 
 
-def four_rooms_a2c() -> A2CDomain:
+def four_rooms_a2c() -> LearnerDomain:
     """The A2C recipe's four-rooms set-up (the four-rooms plugin's registration).
 
     Examples:
         >>> four_rooms_a2c().a2c.features
         'one_hot'
     """
-    return domains.part("four_rooms", A2CDomain)
+    return domains.part("four_rooms", LearnerDomain)
 
 
 def load_average() -> str:
@@ -166,14 +166,14 @@ def collector_batches(collector: Collector, batches: int) -> Callable[[], int]:
     return run
 
 
-def hrs_shaping(domain: A2CDomain) -> Shaping:
+def hrs_shaping(domain: LearnerDomain) -> Shaping:
     """The HRS shaping part 2 times: four-rooms, the two hallways (a tabular potential over 3
     states); PinBall, the recipe's HRS learner of the first participant's pattern.
 
     Examples:
-        >>> hrs_shaping(domains.part("four_rooms", A2CDomain)).options
+        >>> hrs_shaping(domains.part("four_rooms", LearnerDomain)).options
         {'observation_key': 'cell'}
-        >>> shaping = hrs_shaping(domains.part("pinball", A2CDomain))
+        >>> shaping = hrs_shaping(domains.part("pinball", LearnerDomain))
         >>> type(shaping.potential).__name__, shaping.options["start_potential"]
         ('TabularPotential', 'value')
     """
@@ -188,7 +188,7 @@ def hrs_shaping(domain: A2CDomain) -> Shaping:
 
 
 def a2c_iterations(
-    shaping: Shaping | None, domain: A2CDomain, config: A2CConfig, batches: int, online: bool,
+    shaping: Shaping | None, domain: LearnerDomain, config: A2CConfig, batches: int, online: bool,
     networks: tuple[TensorDictModuleBase, TensorDictModuleBase] | None = None, lr: float | None = None,
     keys_only: bool = False,
     kept: int = 3,
@@ -260,7 +260,7 @@ def main() -> None:
         parser.error(f"--repeats must be >= 0, got {args.repeats}")
     torch.set_num_threads(1)
     repeats, batches = (3, 10) if args.quick else (7, 30)
-    domain = domains.part(args.domain, A2CDomain)
+    domain = domains.part(args.domain, LearnerDomain)
 
     if args.part != "2":
         collector_throughput(args.repeats or repeats, batches)
@@ -291,7 +291,7 @@ def collector_throughput(repeats: int, batches: int) -> None:
 
 
 
-def transform_cost(domain: A2CDomain, repeats: int, batches: int, calls: bool = False) -> None:
+def transform_cost(domain: LearnerDomain, repeats: int, batches: int, calls: bool = False) -> None:
     """Part 2."""
     config = domain.a2c
     print(f"Part 2: A2C iteration (collect {config.frames_per_batch} frames + GAE + A2C step [+ potential step]), "

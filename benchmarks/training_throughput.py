@@ -47,9 +47,9 @@ from torchrl_subgoal import domains as registry
 from torchrl_subgoal.envs.point_maze import make_point_maze, point_maze_task
 from torchrl_subgoal.training import (
     A2CConfig,
-    A2CDomain,
     DDPGTrainConfig,
     DQNConfig,
+    LearnerDomain,
     PPOConfig,
     Shaping,
     train_a2c,
@@ -79,7 +79,7 @@ def domains() -> dict[str, Domain]:
     """Four-rooms and PinBall (their A2C set-ups), PointMaze UMaze (seed 0's task)."""
     out = {}
     for name in ("four_rooms", "pinball"):
-        d = registry.part(name, A2CDomain)
+        d = registry.part(name, LearnerDomain)
         series = next(iter(load_patterns(d.participants).values()))
         cap = float(getattr(d.make_env(1), "max_steps", 1000))
         out[name] = Domain(name, d.make_env, d.observation_key, d.subgoal_key, series, d.a2c.features,
@@ -99,7 +99,7 @@ def run_cell(block: str, domain: Domain, shaped: bool, batches: int) -> tuple[fl
     config: Any
     scale = domain.reward_scale
     if block == "a2c":
-        base = registry.part(domain.name, A2CDomain).a2c
+        base = registry.part(domain.name, LearnerDomain).a2c
         config = A2CConfig(**{**base.__dict__, "total_frames": batches * base.frames_per_batch})
         train: Callable[..., Any] = train_a2c
     elif block == "ppo":

@@ -155,6 +155,22 @@ def test_report_spec_reads_the_config_section() -> None:
         ReportSpec(metric="reward")
 
 
+def test_times_to_threshold_in_frames_when_the_config_gives_frames_per_column(four_rooms_dir: Path) -> None:
+    """A learner recipe's column is a batch of frames: the report gives each mean time in frames too."""
+    from torchrl_subgoal.experiments.report import render_markdown, summarize
+
+    results = load_results(four_rooms_dir)
+    plain = summarize(results, n_boot=50)
+    assert plain["frames_per_unit"] == 0 and "mean frames" not in render_markdown(plain, None, {})
+    spec = ReportSpec(thresholds=(500, 100), unit="update", frames_per_unit=256)
+    assert ReportSpec.from_config({"report": spec.to_dict()}) == spec
+    summary = summarize(results, spec, n_boot=50)
+    markdown = render_markdown(summary, None, {})
+    assert "One update is 256 frames" in markdown and "| mean frames |" in markdown
+    cell = summary["time_to_threshold"][1]["methods"]["NRS"]
+    assert f"| 100 | NRS | {cell['mean']:.3g} ({cell['sd']:.3g}) | {cell['mean'] * 256:.0f} |" in markdown
+
+
 def test_console_entry_point_prints_tables(four_rooms_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main([str(four_rooms_dir), "--out", str(tmp_path), "--n-boot", "100"]) == 0
     printed = capsys.readouterr().out

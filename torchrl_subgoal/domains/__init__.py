@@ -2,7 +2,7 @@
 
 A domain registers what the subgoal files need (its env factory and the check
 a subgoal must pass on its map) and, as *parts*, what each other layer needs:
-the training set-ups (:class:`~torchrl_subgoal.training.A2CDomain`), the
+the learners' set-ups (:class:`~torchrl_subgoal.training.LearnerDomain`), the
 report's paper numbers and map (:class:`~torchrl_subgoal.experiments.paper.PaperResults`,
 :class:`~torchrl_subgoal.experiments.plots.ReportMap`), the studio's map and
 "Try it" (:class:`~torchrl_subgoal.studio.domains.StudioDomain`). Each layer
@@ -15,7 +15,7 @@ when imported, as ``import torchrl_subgoal`` does).
 
 Domain plugins register themselves when imported. A package makes its plugin
 modules known by name under the ``torchrl_subgoal.domains`` entry-point group
-(the built-in four-rooms, PinBall and pick-and-place plugins are declared so in
+(the built-in four-rooms, PinBall, pick-and-place, PointMaze and MountainCar plugins are declared so in
 this package's ``pyproject.toml``): a lookup imports the module the first time
 its name is asked for, so a domain whose optional dependency is missing costs
 nothing until it is used. A script can also import its plugin module itself
@@ -53,7 +53,7 @@ class UnknownDomainError(ValueError):
         >>> get("no_such_domain")  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.domains.UnknownDomainError: unknown domain 'no_such_domain'; known: four_rooms, pick_and_place, pinball...
+        torchrl_subgoal.domains.UnknownDomainError: unknown domain 'no_such_domain'; known: four_rooms, mountain_car, pick_and_place, pinball...
     """
 
 
@@ -118,8 +118,8 @@ def names() -> list[str]:
     """The known domains' names: the declared plugins', then those registered since.
 
     Examples:
-        >>> names()[:3]
-        ['four_rooms', 'pick_and_place', 'pinball']
+        >>> names()[:4]
+        ['four_rooms', 'mountain_car', 'pick_and_place', 'pinball']
     """
     declared = list(_plugins())
     return [*declared, *(n for n in _REGISTRY if n not in declared)]
@@ -162,9 +162,9 @@ def having(kind: type) -> list[str]:
     """The known domains that registered a part of type ``kind`` (declared plugins are imported now).
 
     Examples:
-        >>> from torchrl_subgoal.training import A2CDomain
-        >>> having(A2CDomain)
-        ['four_rooms', 'pinball']
+        >>> from torchrl_subgoal.training import LearnerDomain
+        >>> having(LearnerDomain)
+        ['four_rooms', 'mountain_car', 'pinball', 'point_maze_medium', 'point_maze_umaze']
     """
     return [n for n in names() if (domain := find(n)) is not None and domain.part(kind) is not None]
 
@@ -176,13 +176,13 @@ def part(name: str, kind: type[T]) -> T:
         ValueError: the domain is unknown, or registered no such part; the message lists those that did.
 
     Examples:
-        >>> from torchrl_subgoal.training import A2CDomain
-        >>> part("four_rooms", A2CDomain).subgoal_key
+        >>> from torchrl_subgoal.training import LearnerDomain
+        >>> part("four_rooms", LearnerDomain).subgoal_key
         'cell'
-        >>> part("pick_and_place", A2CDomain)
+        >>> part("pick_and_place", LearnerDomain)  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        ValueError: domain 'pick_and_place' registered no A2CDomain; these did: four_rooms, pinball
+        ValueError: domain 'pick_and_place' registered no LearnerDomain; these did: four_rooms, mountain_car, pinball, ...
     """
     domain = find(name)
     found = domain.part(kind) if domain is not None else None

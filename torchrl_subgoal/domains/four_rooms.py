@@ -22,7 +22,7 @@ from torchrl_subgoal.experiments.paper import PaperResults, paper_table
 from torchrl_subgoal.experiments.plots import ReportMap
 from torchrl_subgoal.studio.domains import Limit, StudioDomain
 from torchrl_subgoal.subgoals import Cell, Predicate, State
-from torchrl_subgoal.training import A2CConfig, A2CDomain
+from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig
 
 __all__ = ["A2C", "DOMAIN", "PAPER", "STUDIO", "four_rooms_env"]
 
@@ -78,10 +78,18 @@ def _candidates(seed: int) -> list[Predicate]:
     return [Cell(r, c) for r, c in four_rooms.free_cells() if (r, c) not in (four_rooms.START, four_rooms.GOAL)]
 
 
-A2C = A2CDomain(
+A2C = LearnerDomain(
     "four_rooms", four_rooms_env, "observation", "cell", "observation",
     str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml"), eta=1.0, thresholds=(100.0, 50.0),
-    a2c=A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=100_000),
+    defaults={
+        "a2c": A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=100_000),
+        # the A2C set-up's tables for PPO and DQN (a starting point, not tuned)
+        "ppo": PPOConfig(features="one_hot", hidden=(), num_envs=16, frames_per_batch=256, minibatch_size=64,
+                         epochs=4, lr=1e-2, entropy_coeff=0.01, total_frames=100_000),
+        "dqn": DQNConfig(features="one_hot", hidden=(), num_envs=16, frames_per_batch=256, gradient_steps=16,
+                         lr=1e-2, learning_starts=2_560, exploration_frames=50_000, buffer_size=50_000,
+                         total_frames=100_000),
+    },
     aggregation=four_rooms.room_aggregation, candidates=_candidates,
 )
 

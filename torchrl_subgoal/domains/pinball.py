@@ -24,7 +24,7 @@ from torchrl_subgoal.experiments.paper import PaperResults, paper_table
 from torchrl_subgoal.experiments.plots import ReportMap
 from torchrl_subgoal.studio.domains import Limit, StudioDomain
 from torchrl_subgoal.subgoals import Box, Circle, Predicate, StateAggregation
-from torchrl_subgoal.training import A2CConfig, A2CDomain
+from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig
 
 __all__ = ["A2C", "DOMAIN", "PAPER", "STUDIO", "pinball_env"]
 
@@ -95,14 +95,22 @@ def _aggregation() -> StateAggregation:
     return StateAggregation.from_regions([Box((c,), (1 / 6,), (0,)) for c in (1 / 6, 1 / 2, 5 / 6)], 4)
 
 
-A2C = A2CDomain(
+A2C = LearnerDomain(
     "pinball", pinball_env, "observation", "observation", "observation",
     str(files("torchrl_subgoal") / "data" / "pinball_participants.yaml"), eta=1.0,
     thresholds=(3000.0, 2000.0, 1000.0, 500.0),
     # lr: the paper's 0.01 divided by the Fourier features' norm (‖φ‖ ≈ 11.3 for order 3 on PinBall's
     # states), as its actor-critic divides its steps; with 0.01 A2C learns, then collapses (docs/torchrl.md).
-    a2c=A2CConfig(features="fourier", hidden=(), fourier_order=3, lr=1e-3, reward_scale=1e-4,
-                  total_frames=2_000_000),
+    defaults={
+        "a2c": A2CConfig(features="fourier", hidden=(), fourier_order=3, lr=1e-3, reward_scale=1e-4,
+                         total_frames=2_000_000),
+        # the A2C set-up's features and reward scale for PPO and DQN (a starting point, not tuned)
+        "ppo": PPOConfig(features="fourier", hidden=(), fourier_order=3, num_envs=16, frames_per_batch=2048,
+                         lr=1e-3, reward_scale=1e-4, total_frames=2_000_000),
+        "dqn": DQNConfig(features="fourier", hidden=(), fourier_order=3, num_envs=16, frames_per_batch=256,
+                         gradient_steps=16, lr=1e-3, reward_scale=1e-4, learning_starts=10_240,
+                         exploration_frames=500_000, buffer_size=100_000, total_frames=2_000_000),
+    },
     aggregation=_aggregation, candidates=_candidates,
 )
 

@@ -12,10 +12,10 @@ the report its map panel (with a note saying why), never the whole report.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -23,6 +23,8 @@ from matplotlib.figure import Figure
 
 from torchrl_subgoal import domains
 from torchrl_subgoal.experiments.stats import mean_and_sem, moving_average
+
+T = TypeVar("T")
 
 #: ``draw_map(ax, patterns, options)``: draw the map and ``patterns`` (name -> SubgoalSeries) on a
 #: matplotlib ``Axes``; ``options`` is the ``report.map`` section of a sweep's config.
@@ -43,6 +45,26 @@ class ReportMap:
     """
 
     draw: MapHook
+
+
+def numbered_subgoals(patterns: Mapping[str, Any], kind: type[T]) -> Iterator[tuple[str, str, int, T]]:
+    """Every subgoal of every pattern, for a map hook: ``(pattern name, its colour, subgoal number from 1,
+    subgoal)``, one colour of matplotlib's cycle per pattern (``"C0"``, ``"C1"``…).
+
+    Raises:
+        ValueError: a subgoal is not a ``kind``; the message names the pattern.
+
+    Examples:
+        >>> from torchrl_subgoal import Cell, SubgoalSeries
+        >>> [(name, colour, number, cell.row) for name, colour, number, cell in
+        ...  numbered_subgoals({"alice": SubgoalSeries([Cell(4, 9)])}, Cell)]
+        [('alice', 'C0', 1, 4)]
+    """
+    for k, (name, series) in enumerate(patterns.items()):
+        for i, predicate in enumerate(series.predicates):
+            if not isinstance(predicate, kind):
+                raise ValueError(f"pattern {name}: a {type(predicate).__name__} is not a {kind.__name__.lower()}")
+            yield name, f"C{k % 10}", i + 1, predicate
 
 
 @dataclass(frozen=True)

@@ -72,7 +72,9 @@ class ReportSpec:
         log_scale: logarithmic y axis for the curves (default: for ``"steps"``).
         map: extra keyword arguments for the domain's map hook, e.g. ``{"config": "hard"}``.
         unit: what a column of the tables is, for labels: ``"episode"``, or ``"epoch"`` when a
-            recipe records one row per training epoch (pick-and-place).
+            recipe records one row per training epoch (pick-and-place), ``"update"`` per collected batch.
+        frames_per_unit: env frames per column (a learner recipe's frames per batch); when set, times
+            to threshold are also given in frames (0: not).
 
     Examples:
         >>> spec = ReportSpec(thresholds=(500, 300, 100, 50), asymptotic_window=(990, 1000))
@@ -88,6 +90,7 @@ class ReportSpec:
     log_scale: bool | None = None
     map: Mapping[str, Any] = field(default_factory=dict)
     unit: str = "episode"
+    frames_per_unit: int = 0
 
     def __post_init__(self) -> None:
         if self.metric not in METRICS:
@@ -120,6 +123,7 @@ class ReportSpec:
             "log_scale": self.log_scale,
             "map": dict(self.map),
             "unit": self.unit,
+            "frames_per_unit": self.frames_per_unit,
         }
 
     def final_window(self, n_episodes: int) -> tuple[int, int]:
@@ -255,6 +259,7 @@ def summarize(
         "lower_is_better": spec.lower_is_better,
         "n_episodes": n,
         "unit": spec.unit,
+        "frames_per_unit": spec.frames_per_unit,
         "window": spec.window,
         "methods": {
             name: {"learners": int(res.table.n_learners), "patterns": sorted(set(res.patterns.tolist()))}
@@ -381,6 +386,9 @@ def render_markdown(
             f"{unit.capitalize()}s until {level} first {direction} the threshold. Learners that never "
             f"do count as {summary['n_episodes']} (column *not reached*)."
         )
+        frames = summary.get("frames_per_unit") or 0
+        if frames:
+            out.append(f"One {unit} is {frames} frames; *mean frames* = mean {unit}s x {frames}.")
         if paper is not None and paper.time_to_threshold:
             shown = f"moving average of {paper.window}" if paper.window > 1 else "no moving average"
             out.append(f"Paper: Okudo & Yamada (2021), {shown}, mean (s.d.).")
@@ -397,12 +405,14 @@ def render_markdown(
                         _num(threshold),
                         name,
                         f"{_num(cell['mean'])} ({_num(cell['sd'])})",
+                        *([f"{cell['mean'] * frames:.0f}" if cell["mean"] is not None else "—"] if frames else []),
                         f"{cell['not_reached']}/{cell['n']}",
                         _ci(cell),
                         f"{_num(ref.mean)} ({_num(ref.sd)})" if ref else "—",
                     ]
                 )
-        header = ["threshold", "method", "mean (s.d.)", "not reached", "IQM [CI]", "paper mean (s.d.)"]
+        header = ["threshold", "method", "mean (s.d.)", *(["mean frames"] if frames else []), "not reached",
+                  "IQM [CI]", "paper mean (s.d.)"]
         out.append(_table(header, rows))
     asym = summary["asymptotic"]
     start, stop = asym["window"]

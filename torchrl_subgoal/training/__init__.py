@@ -13,7 +13,10 @@
   (:func:`smdp_transitions`, :func:`extend_transitions` into a replay buffer);
 * :mod:`~torchrl_subgoal.training.shared`: :class:`EnvFactory`, one potential
   for envs in collector worker processes (shared memory);
-* :mod:`~torchrl_subgoal.training.domains`: what a domain registers for the A2C recipe (:class:`A2CDomain`).
+* :mod:`~torchrl_subgoal.training.learners`: the building blocks by name (:data:`LEARNERS`) and the
+  check that an env's actions suit one (:func:`check_actions`);
+* :mod:`~torchrl_subgoal.training.domains`: what a domain registers for the learner recipes
+  (:class:`LearnerDomain`).
 """
 
 from __future__ import annotations
@@ -42,14 +45,16 @@ from torchrl_subgoal.training.common import (
     subgoal_states,
 )
 from torchrl_subgoal.training.ddpg import DDPGTrainConfig, ddpg_agent, train_ddpg
-from torchrl_subgoal.training.domains import A2CDomain
+from torchrl_subgoal.training.domains import A2CDomain, LearnerDomain
 from torchrl_subgoal.training.dqn import DQN_PRESETS, DQNConfig, q_network, train_dqn
+from torchrl_subgoal.training.learners import LEARNERS, Learner, action_kind, check_actions
 from torchrl_subgoal.training.ppo import PPOConfig, ppo_actor_critic, train_ppo
 from torchrl_subgoal.training.shared import EnvFactory
 from torchrl_subgoal.training.smdp import extend_transitions, smdp_transitions
 
 __all__ = [
     "DQN_PRESETS",
+    "LEARNERS",
     "A2CConfig",
     "A2CDomain",
     "CurveRecorder",
@@ -58,14 +63,18 @@ __all__ = [
     "EnvFactory",
     "EpisodeWindow",
     "FourierFeatures",
+    "Learner",
+    "LearnerDomain",
     "LearnerSettings",
     "LearningCurve",
     "PPOConfig",
     "PotentialTrainer",
     "SampleReshaper",
     "Shaping",
+    "action_kind",
     "actor_critic",
     "batched",
+    "check_actions",
     "check_settings",
     "close_collector",
     "ddpg_agent",

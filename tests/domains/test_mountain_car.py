@@ -1,0 +1,41 @@
+"""The MountainCar domain plugin: registration, subgoal check, the learners' defaults, the report map."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from torchrl_subgoal import Box, Cell, Circle, domains, load_patterns
+from torchrl_subgoal.experiments.plots import ReportMap, plot_pattern_maps
+from torchrl_subgoal.training import DQNConfig, LearnerDomain
+
+
+def test_mountain_car_registers_a_learner_set_up_and_a_map() -> None:
+    domain = domains.get("mountain_car")
+    learners = domain.part(LearnerDomain)
+    assert learners is not None and domain.part(ReportMap) is not None
+    assert learners.defaults["dqn"] == DQNConfig.preset("mountain_car")  # rl-baselines3-zoo's tuned DQN
+    assert set(learners.defaults) == {"a2c", "ppo", "dqn"}  # three discrete actions
+    assert learners.make_env(2).batch_size == (2,)
+    assert list(load_patterns(learners.participants, domain="mountain_car")) == ["swing_then_speed"]
+
+
+@pytest.mark.parametrize(("predicate", "message"), [
+    (Box((-1.025,), (0.175,), (0,)), None),
+    (Box((0.15, 0.0525), (0.45, 0.0175), (0, 1)), None),
+    (Box((2.0,), (0.1,), (0,)), "position: the box [1.9, 2.1] lies outside [-1.2, 0.6]"),
+    (Box((0.0, 0.5), (0.1, 0.1), (0, 1)), "velocity: the box [0.4, 0.6] lies outside [-0.07, 0.07]"),
+    (Box((0.0,), (0.1,), (2,)), "a MountainCar box covers position (0) and velocity (1), not dims [2]"),
+    (Circle((0.0, 0.0), 0.1), "MountainCar subgoals are boxes over (position, velocity), not circle"),
+    (Cell(1, 1), "MountainCar subgoals are boxes over (position, velocity), not cell"),
+])
+def test_subgoal_check(predicate: object, message: str | None) -> None:
+    assert domains.get("mountain_car").check_subgoal(predicate) == message  # type: ignore[misc,arg-type]
+
+
+def test_the_report_map_draws_the_boxes(tmp_path: Path) -> None:
+    learners = domains.part("mountain_car", LearnerDomain)
+    patterns = {n: s.to_dict() for n, s in load_patterns(learners.participants).items()}
+    figure = plot_pattern_maps("mountain_car", patterns, tmp_path / "maps.png")
+    assert figure.path is not None and figure.path.stat().st_size > 5_000, figure.note

@@ -1,0 +1,81 @@
+"""The MountainCar domain plugin: env, subgoal check, and each layer's part (the learners' set-up, report map).
+
+Everything the package knows about MountainCar beyond the env itself, in one
+place; :mod:`torchrl_subgoal.domains` imports this module the first time
+``"mountain_car"`` is looked up. Needs ``gymnasium`` only when an env is made.
+The report map draws the subgoals as boxes over ``(position, velocity)``. Not
+in the studio yet: its box form is pick-and-place's, built from that domain's
+named observation components.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from torchrl_subgoal import domains
+from torchrl_subgoal.envs import mountain_car
+from torchrl_subgoal.experiments.plots import ReportMap, numbered_subgoals
+from torchrl_subgoal.subgoals import Box, Predicate
+from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig
+
+__all__ = ["DOMAIN", "LEARNERS", "check_subgoal"]
+
+#: The observation's bounds: position, velocity.
+BOUNDS = ((-1.2, 0.6), (-0.07, 0.07))
+
+
+def check_subgoal(predicate: Predicate) -> str | None:
+    """Why ``predicate`` is not a valid MountainCar subgoal, or ``None``: a box over position (dim 0)
+    and/or velocity (dim 1) that overlaps the state space.
+
+    Examples:
+        >>> check_subgoal(Box((-1.025,), (0.175,), (0,))) is None
+        True
+        >>> check_subgoal(Box((2.0,), (0.1,), (0,)))
+        'position: the box [1.9, 2.1] lies outside [-1.2, 0.6]'
+    """
+    if not isinstance(predicate, Box):
+        return f"MountainCar subgoals are boxes over (position, velocity), not {predicate.kind}"
+    if not set(predicate.box_dims) <= {0, 1}:
+        return f"a MountainCar box covers position (0) and velocity (1), not dims {list(predicate.box_dims)}"
+    for dim, centre, margin in zip(predicate.box_dims, predicate.centre, predicate.margin, strict=True):
+        low, high = BOUNDS[dim]
+        if centre + margin < low or centre - margin > high:
+            name = ("position", "velocity")[dim]
+            return f"{name}: the box [{centre - margin:.3g}, {centre + margin:.3g}] lies outside [{low}, {high}]"
+    return None
+
+
+def _draw_map(ax: Any, patterns: Mapping[str, Any], options: Mapping[str, Any]) -> None:
+    from matplotlib.patches import Rectangle
+
+    for _name, colour, number, box in numbered_subgoals(patterns, Box):
+        span = [list(BOUNDS[0]), list(BOUNDS[1])]
+        for dim, centre, margin in zip(box.box_dims, box.centre, box.margin, strict=True):
+            span[dim] = [max(span[dim][0], centre - margin), min(span[dim][1], centre + margin)]
+        (x0, x1), (y0, y1) = span
+        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, color=colour, lw=2))
+        ax.annotate(str(number), ((x0 + x1) / 2, (y0 + y1) / 2), color=colour, ha="center", va="center")
+    ax.axvline(0.5, color="tab:red", ls="--")
+    ax.annotate("flag", (0.5, 0.0), color="tab:red", rotation=90, ha="right", va="center")
+    ax.set_xlim(*BOUNDS[0])
+    ax.set_ylim(*BOUNDS[1])
+    ax.set_xlabel("position")
+    ax.set_ylabel("velocity")
+
+
+LEARNERS = LearnerDomain(
+    "mountain_car", mountain_car.make_mountain_car, "observation", "observation", "observation",
+    mountain_car.SUBGOAL_FILE, eta=1.0, thresholds=(180.0, 150.0, 120.0),
+    defaults={
+        "dqn": DQNConfig.preset("mountain_car"),  # rl-baselines3-zoo's tuned DQN
+        "a2c": A2CConfig(num_envs=16, frames_per_batch=256, total_frames=500_000),
+        "ppo": PPOConfig(num_envs=16, frames_per_batch=256 * 16, minibatch_size=256, total_frames=500_000),
+    },
+)
+
+DOMAIN = domains.register(domains.Domain(
+    "mountain_car", "MountainCar", make_env=mountain_car.make_mountain_car, check_subgoal=check_subgoal,
+    parts=(LEARNERS, ReportMap(_draw_map)),
+))

@@ -1,0 +1,258 @@
+"""What the learner recipes share: a sweep of one TorchRL learner (A2C, PPO, DQN or DDPG) on a registered
+domain, unshaped and with the paper's shaping methods, through the experiment engine.
+
+``recipes/train.py`` (any learner, any domain with a
+:class:`~torchrl_subgoal.training.LearnerDomain`) and ``recipes/a2c.py`` (A2C on
+four-rooms and PinBall with the A2C flags) are :class:`LearnerRecipeConfig`
+subclasses whose ``plan`` is :func:`learner_plan`. Every setting is checked
+before the first chunk runs (the learner's settings, the learner against the
+domain's actions, the subgoal patterns against its observation), each failure
+one line naming the flag. One learner is one chunk (:func:`run_learner_chunk`):
+its env factory, its shaping from the method and pattern, one
+``train_<algo>`` call; one report column is one collected batch (an *update*),
+whose metric is the mean episode length (frames per finished episode over the
+last ``record_window`` batches), and the report gives times to threshold in
+updates and in frames.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+import torch
+
+from torchrl_subgoal import domains, load_patterns
+from torchrl_subgoal.experiments.cli import ConfigError, check, setting
+from torchrl_subgoal.experiments.recipe import (
+    Plan,
+    RecipeConfig,
+    check_methods,
+    check_patterns,
+    chunk_patterns,
+    method_specs,
+    needs_random_patterns,
+    pattern_config,
+    pattern_sets,
+    pattern_sources,
+)
+from torchrl_subgoal.experiments.results import Chunk, EpisodeTable
+from torchrl_subgoal.methods import Method, paper_methods, shaping_parts
+from torchrl_subgoal.training import (
+    LEARNERS,
+    LearnerDomain,
+    Shaping,
+    check_actions,
+    experiment_logger,
+)
+
+__all__ = ["LearnerRecipeConfig", "learner_methods", "learner_plan", "learner_settings", "run_learner_chunk"]
+
+
+@dataclass
+class LearnerRecipeConfig(RecipeConfig):
+    """The settings of a learner recipe: the domain, the methods, the budget and the shaping options.
+
+    A numeric setting left at 0 takes the learner's default for the domain
+    (:attr:`~torchrl_subgoal.training.LearnerDomain.defaults`).
+
+    Examples:
+        >>> LearnerRecipeConfig(value_lr=0.0)
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --value-lr: must be positive, got 0.0
+    """
+
+    domain: str = setting("four_rooms", "a domain with a learner set-up (four_rooms, pinball, point_maze_umaze, "
+                          "point_maze_medium, mountain_car)")
+    methods: str = setting("", "comma-separated methods: the learner's name for the unshaped learner (A2C, PPO, "
+                           "DQN, DDPG), HRS, NRS, RRS, SARSA-RS (default: unshaped, HRS, NRS)")
+    learnings: int = setting(1, "learnings per subgoal pattern (unshaped: as many per pattern of the file)")
+    subgoals: str = setting("", "subgoal file of the human patterns (default: the domain's)")
+    random_patterns: int = setting(10, "random subgoal patterns for RRS")
+    total_frames: int = setting(0, "frames per learner (0: the domain's default)")
+    num_envs: int = setting(0, "envs per learner (0: the domain's default)")
+    frames_per_batch: int = setting(0, "frames per collected batch (0: the domain's default)")
+    env_workers: int = setting(0, "ParallelEnv workers per learner (0: the batched env in the collector)")
+    collector_workers: int = setting(0, "0: Collector; k: MultiSyncCollector of k processes")
+    lr: float = setting(0.0, "the learner's learning rate (0: the domain's default)")
+    reward_scale: float = setting(0.0, "env reward x this, before shaping and learning (0: the domain's default)")
+    value_lr: float = setting(0.05, "learning rate of the potential's optimiser (Adam)")
+    online_potential: bool = setting(False, "train the potential in the transform every step instead")
+    sees_subgoal: bool = setting(False, "the shaped learners' networks also read the subgoal index z (one-hot)")
+    reshape_samples: bool = setting(False, "the shaped learners re-shape replay samples with the potential as it "
+                                    "is now (DQN, DDPG)")
+    zero_terminal_potential: bool = setting(True, "Φ = 0 at the goal (exact policy invariance)")
+    start_potential: str = setting("nonpositive", "level of Φ: nonpositive (the library default; "
+                                   "docs/shaping_defaults.md), zero or value (Φ = V)",
+                                   choices=["value", "zero", "nonpositive"])
+    seed: int = setting(0, "sweep seed (random patterns, learner seeds)")
+    results: str = setting("", "results directory (default results/<algo>_<domain>; re-run to resume)")
+    backend: Literal["local", "ray"] = setting("local", "where learners run")
+    workers: int = setting(2, "learners run at once (processes; 0: in this process)")
+
+    AT_LEAST_ONE: ClassVar[tuple[str, ...]] = ("learnings", "random_patterns")
+    AT_LEAST_ZERO: ClassVar[tuple[str, ...]] = ("total_frames", "num_envs", "frames_per_batch", "env_workers",
+                                                "collector_workers", "workers")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check(self.value_lr > 0, "value_lr", f"must be positive, got {self.value_lr}")
+        check(self.lr >= 0, "lr", f"must be >= 0, got {self.lr}")
+        check(self.reward_scale >= 0, "reward_scale", f"must be >= 0, got {self.reward_scale}")
+
+
+def learner_methods(algo: str) -> dict[str, Method]:
+    """The methods a sweep of learner ``algo`` compares: the paper's, the unshaped one named after the learner.
+
+    Examples:
+        >>> list(learner_methods("ppo"))
+        ['HRS', 'RRS', 'PPO', 'NRS', 'SARSA-RS']
+    """
+    return paper_methods(baseline=LEARNERS[algo].title)
+
+
+def learner_settings(cfg: LearnerRecipeConfig, algo: str, domain: LearnerDomain,
+                     extra: Mapping[str, Any] | None = None) -> Any:
+    """The learners' settings: the domain's defaults for ``algo`` with the recipe's flags (and ``extra``).
+
+    Raises:
+        ConfigError: a setting the learner refuses (the message names it), or a flag it does not have.
+
+    Examples:
+        >>> four_rooms = domains.part("four_rooms", LearnerDomain)
+        >>> learner_settings(LearnerRecipeConfig(total_frames=512), "dqn", four_rooms).total_frames
+        512
+        >>> learner_settings(LearnerRecipeConfig(reshape_samples=True), "ppo", four_rooms)
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --reshape-samples: ppo learns on-policy and keeps no replay samples; only dqn and ddpg re-shape them
+    """
+    learner = LEARNERS[algo]
+    base = domain.defaults.get(algo) or learner.config()
+    changes: dict[str, Any] = {name: value for name, value in (
+        ("total_frames", cfg.total_frames), ("num_envs", cfg.num_envs), ("frames_per_batch", cfg.frames_per_batch),
+        ("lr", cfg.lr), ("reward_scale", cfg.reward_scale)) if value}
+    changes.update(env_workers=cfg.env_workers, collector_workers=cfg.collector_workers, value_lr=cfg.value_lr,
+                   online_potential=cfg.online_potential, sees_subgoal=cfg.sees_subgoal, **(extra or {}))
+    if cfg.reshape_samples:
+        replaying = [name for name, one in LEARNERS.items() if one.has_setting("reshape_samples")]
+        check(learner.has_setting("reshape_samples"), "reshape_samples",
+              f"{algo} learns on-policy and keeps no replay samples; only {' and '.join(replaying)} re-shape them")
+        changes["reshape_samples"] = True
+    try:
+        settings = dataclasses.replace(base, **changes)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    check(settings.total_frames >= settings.frames_per_batch, "total_frames",
+          f"{settings.total_frames} is less than one batch of {settings.frames_per_batch} frames "
+          f"(--frames-per-batch); give at least {settings.frames_per_batch}")
+    return settings
+
+
+def learner_plan(cfg: LearnerRecipeConfig, algo: str, *, extra: Mapping[str, Any] | None = None,
+                 final_updates: int | None = None) -> Plan:
+    """The sweep of learner ``algo`` on ``cfg.domain``: one chunk per learner, the stored configuration,
+    the report's thresholds (episode lengths; times in updates and frames).
+
+    Args:
+        cfg: the recipe's settings.
+        algo: ``"a2c"``, ``"ppo"``, ``"dqn"`` or ``"ddpg"``.
+        extra: more of the learner's settings (a recipe's own flags).
+        final_updates: the updates the asymptotic performance averages (default: the last 5%, at least 10).
+
+    Raises:
+        ConfigError: naming the flag; SubgoalFileError: naming the file, the pattern and the field.
+
+    Examples:
+        >>> cfg = LearnerRecipeConfig(domain="four_rooms", methods="DDPG")
+        >>> learner_plan(cfg, "ddpg")
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --algo: ddpg needs continuous actions; four_rooms's are discrete: choose a2c, ppo or dqn
+    """
+    check(algo in LEARNERS, "algo", f"unknown learner {algo!r}; choose from {', '.join(LEARNERS)}")
+    try:
+        domain = domains.part(cfg.domain, LearnerDomain)
+    except ValueError as exc:
+        raise ConfigError(f"--domain: {exc}") from None
+    methods = learner_methods(algo)
+    names = check_methods(methods, cfg.method_names or [LEARNERS[algo].title, "HRS", "NRS"])
+    if "SARSA-RS" in names and domain.aggregation() is None:
+        raise ConfigError(f"--methods: SARSA-RS needs an aggregation g(s), which {cfg.domain} does not register")
+    settings = learner_settings(cfg, algo, domain, extra)
+    probe = domain.make_env(1)
+    try:
+        check_actions(algo, probe, cfg.domain)
+    except ValueError as exc:
+        raise ConfigError(f"--algo: {exc}") from None
+    subgoal_file = cfg.subgoals or domain.participants
+    human = load_patterns(subgoal_file, domain=cfg.domain)
+    if domain.pattern_env is not None:
+        for name in human:
+            try:
+                domain.env_for(name, 0)
+            except ValueError as exc:
+                raise ConfigError(f"--subgoals: {subgoal_file}: {exc}") from None
+    patterns = pattern_sets(human, domain.candidates(cfg.seed), cfg.random_patterns, cfg.seed,
+                            random_needed=needs_random_patterns(methods, names))
+    check_patterns(patterns, probe, str(domain.subgoal_key))
+    specs = method_specs(methods, names, patterns, cfg.learnings)
+    results = cfg.results or f"results/{algo}_{cfg.domain}"
+    iterations = settings.iterations
+    final = final_updates if final_updates is not None else max(10, iterations // 20)
+    config = {
+        "domain": cfg.domain,
+        "algo": algo,
+        "learner": dataclasses.asdict(settings),
+        "zero_terminal_potential": cfg.zero_terminal_potential,
+        "start_potential": cfg.start_potential,
+        "subgoal_file": subgoal_file,
+        "patterns": pattern_config(patterns),
+        "pattern_sources": pattern_sources(patterns),
+        "routes": list(human),
+        "log_dir": str(Path(results) / "logs"),
+        "report": {"metric": "steps", "thresholds": list(domain.thresholds), "unit": "update",
+                   "frames_per_unit": settings.frames_per_batch,
+                   "asymptotic_window": [max(0, iterations - final), iterations]},
+    }
+    return Plan(f"{algo}_{cfg.domain}", specs, run_learner_chunk, config, episodes=iterations, chunk_size=1,
+                results=results)
+
+
+def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
+    """Train the chunk's learners one after the other (each steps its own batch of envs); their records."""
+    torch.set_num_threads(1)
+    domain = domains.part(config["domain"], LearnerDomain)
+    learner = LEARNERS[config["algo"]]
+    method = learner_methods(config["algo"])[chunk.method]
+    patterns, pattern_index = chunk_patterns(chunk, config)
+    settings = learner.config(**config["learner"])
+    if method.shaping == "none":  # no transform, so no z to see and no potential to re-shape with
+        settings = dataclasses.replace(settings, sees_subgoal=False,
+                                       **({"reshape_samples": False} if learner.has_setting("reshape_samples") else {}))
+    routes = config["routes"]
+    curves = []
+    for i, (pattern, learning) in enumerate(chunk.learners):
+        index = int(pattern_index[i])
+        parts = shaping_parts(
+            method, (), patterns=patterns[index:index + 1] if patterns else None, aggregation=domain.aggregation(),
+            eta=domain.eta, observation_key=domain.subgoal_key, aggregation_key=domain.aggregation_key,
+            zero_terminal_potential=config["zero_terminal_potential"], start_potential=config["start_potential"],
+        )
+        seed = chunk.seed + i
+        # a pattern-less learner (unshaped, SARSA-RS) runs the task its learning number picks
+        make_env = domain.env_for(pattern if pattern in routes else routes[learning % len(routes)], seed)
+        # fresh: a learner run again after an interruption starts its log over, as its results do
+        logger = experiment_logger(Path(config["log_dir"]), f"{chunk.method}_{pattern}_{learning}", fresh=True)
+        curves.append(learner.train(make_env, settings, shaping=Shaping(*parts) if parts is not None else None,
+                                    observation_key=domain.observation_key, seed=seed, logger=logger,
+                                    progress=progress))
+    steps = np.array([np.round(c.episode_length) for c in curves], dtype=np.int64)
+    returns = np.array([c.episode_return for c in curves])
+    success = np.array([c.success for c in curves])
+    return EpisodeTable(steps, returns, success)

@@ -1,0 +1,114 @@
+"""The learners by name: each building block's settings class, its training function and the actions it needs.
+
+``LEARNERS["ppo"].train(make_env, config, shaping=..., seed=...)`` is
+:func:`~torchrl_subgoal.training.train_ppo`; a sweep over learners (the
+``recipes/train.py`` recipe) reads its algorithm here and checks, before
+anything runs, that the env's actions suit it (:func:`check_actions`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from torchrl.data import Bounded, Categorical, OneHot
+from torchrl.envs import EnvBase
+
+from torchrl_subgoal.training.a2c import A2CConfig, train_a2c
+from torchrl_subgoal.training.common import LearningCurve
+from torchrl_subgoal.training.ddpg import DDPGTrainConfig, train_ddpg
+from torchrl_subgoal.training.dqn import DQNConfig, train_dqn
+from torchrl_subgoal.training.ppo import PPOConfig, train_ppo
+
+__all__ = ["LEARNERS", "Actions", "Learner", "action_kind", "check_actions"]
+
+Actions = Literal["discrete", "continuous"]
+
+
+@dataclass(frozen=True)
+class Learner:
+    """One building block, by name.
+
+    Attributes:
+        name: ``"a2c"``, ``"ppo"``, ``"dqn"`` or ``"ddpg"``.
+        config: its settings class (:class:`~torchrl_subgoal.training.A2CConfig`, …).
+        train: ``train(make_env, config, *, shaping, observation_key, seed, logger, progress) -> LearningCurve``.
+        actions: the action kinds it handles.
+
+    Examples:
+        >>> LEARNERS["dqn"].actions, LEARNERS["ppo"].actions
+        (('discrete',), ('discrete', 'continuous'))
+    """
+
+    name: str
+    config: type
+    train: Callable[..., LearningCurve]
+    actions: tuple[Actions, ...]
+
+    def has_setting(self, name: str) -> bool:
+        """Whether the learner's settings have a field ``name``.
+
+        Examples:
+            >>> LEARNERS["dqn"].has_setting("reshape_samples"), LEARNERS["ppo"].has_setting("reshape_samples")
+            (True, False)
+        """
+        return name in {f.name for f in dataclasses.fields(self.config)}
+
+    @property
+    def title(self) -> str:
+        """The name the results and reports give the unshaped learner (``"PPO"``)."""
+        return self.name.upper()
+
+
+#: Every building block, by the name ``recipes/train.py --algo`` takes.
+LEARNERS: dict[str, Learner] = {
+    learner.name: learner for learner in (
+        Learner("a2c", A2CConfig, train_a2c, ("discrete",)),
+        Learner("ppo", PPOConfig, train_ppo, ("discrete", "continuous")),
+        Learner("dqn", DQNConfig, train_dqn, ("discrete",)),
+        Learner("ddpg", DDPGTrainConfig, train_ddpg, ("continuous",)),
+    )
+}
+
+
+def action_kind(env: EnvBase) -> Actions | None:
+    """``"discrete"`` (``Categorical``, ``OneHot``), ``"continuous"`` (``Bounded`` floats) or ``None``.
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> action_kind(FourRoomsEnv(1))
+        'discrete'
+    """
+    spec: Any = env.full_action_spec_unbatched[env.action_key]
+    if isinstance(spec, Categorical | OneHot):
+        return "discrete"
+    if isinstance(spec, Bounded) and spec.dtype.is_floating_point:
+        return "continuous"
+    return None
+
+
+def check_actions(algo: str, env: EnvBase, domain: str) -> None:
+    """Refuse a learner whose action kind ``env`` does not have, in one line naming the learners that fit.
+
+    Raises:
+        ValueError: ``algo`` is unknown, or the env's actions do not suit it.
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> check_actions("ddpg", FourRoomsEnv(1), "four_rooms")
+        Traceback (most recent call last):
+        ...
+        ValueError: ddpg needs continuous actions; four_rooms's are discrete: choose a2c, ppo or dqn
+    """
+    if algo not in LEARNERS:
+        raise ValueError(f"unknown learner {algo!r}; known: {', '.join(LEARNERS)}")
+    kind = action_kind(env)
+    if kind in LEARNERS[algo].actions:
+        return
+    fits = [name for name, learner in LEARNERS.items() if kind in learner.actions]
+    choose = f"choose {', '.join(fits[:-1])} or {fits[-1]}" if len(fits) > 1 else \
+        (f"choose {fits[0]}" if fits else "no learner here handles them")
+    raise ValueError(f"{algo} needs {' or '.join(LEARNERS[algo].actions)} actions; {domain}'s are "
+                     f"{kind or 'neither discrete nor bounded continuous'}: {choose}")
