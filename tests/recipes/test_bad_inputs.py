@@ -331,6 +331,7 @@ A_METHOD_TWICE = [
     ("four_rooms", [*QUICK, "--methods", "HRS,SARSA,HRS"], "HRS"),
     ("pinball", ["--episodes", "2", "--learnings", "1", "--workers", "0", "--methods", "AC,AC"], "AC"),
     ("a2c", ["--total-frames", "256", "--workers", "0", "--methods", "HRS,HRS,A2C,A2C"], "HRS and A2C"),
+    ("train", ["--algo", "dqn", "--total-frames", "256", "--workers", "0", "--methods", "DQN,NRS,DQN"], "DQN"),
     ("pick_and_place", [*PICK_AND_PLACE, "--methods", "DDPG,DDPG"], "DDPG"),
 ]
 

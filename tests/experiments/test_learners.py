@@ -1,0 +1,53 @@
+"""The learner recipes' machinery: settings from the domain's defaults and the flags, the methods' names,
+and the plan's stored configuration."""
+
+from __future__ import annotations
+
+import pytest
+
+from torchrl_subgoal import domains
+from torchrl_subgoal.experiments.cli import ConfigError
+from torchrl_subgoal.experiments.learners import (
+    LearnerRecipeConfig,
+    learner_methods,
+    learner_plan,
+    learner_settings,
+)
+from torchrl_subgoal.training import DQNConfig, LearnerDomain
+
+
+def test_flags_left_at_zero_keep_the_domains_defaults() -> None:
+    mountain_car = domains.part("mountain_car", LearnerDomain)
+    settings = learner_settings(LearnerRecipeConfig(), "dqn", mountain_car)
+    assert settings == DQNConfig.preset("mountain_car")  # value_lr 0.05 and the rest as the preset's
+    changed = learner_settings(LearnerRecipeConfig(total_frames=3200, lr=1e-3, sees_subgoal=True,
+                                                   reshape_samples=True), "dqn", mountain_car)
+    assert (changed.total_frames, changed.lr, changed.sees_subgoal, changed.reshape_samples) == (3200, 1e-3, True, True)
+    assert changed.gradient_steps == 8  # the preset's, untouched
+
+
+def test_a_learner_without_defaults_for_the_domain_takes_its_own() -> None:
+    umaze = domains.part("point_maze_umaze", LearnerDomain)
+    assert "a2c" not in umaze.defaults
+    assert learner_settings(LearnerRecipeConfig(), "a2c", umaze).frames_per_batch == 256  # A2CConfig's
+
+
+def test_a_setting_the_learner_refuses_is_a_config_error() -> None:
+    four_rooms = domains.part("four_rooms", LearnerDomain)
+    with pytest.raises(ConfigError, match=r"^minibatch_size \(64\) must divide frames_per_batch \(96\)$"):
+        learner_settings(LearnerRecipeConfig(frames_per_batch=96, num_envs=16), "ppo", four_rooms)
+    with pytest.raises(ConfigError, match=r"^--total-frames: 128 is less than one batch of 256 frames"):
+        learner_settings(LearnerRecipeConfig(total_frames=128), "ppo", four_rooms)
+
+
+def test_the_unshaped_method_is_named_after_the_learner() -> None:
+    assert [list(learner_methods(algo))[2] for algo in ("a2c", "ppo", "dqn", "ddpg")] == ["A2C", "PPO", "DQN", "DDPG"]
+
+
+def test_the_plan_stores_the_learner_and_reports_frames() -> None:
+    plan = learner_plan(LearnerRecipeConfig(domain="mountain_car", total_frames=1600, results="r"), "dqn")
+    assert plan.domain == "dqn_mountain_car" and plan.episodes == 100 and plan.chunk_size == 1
+    assert [spec.name for spec in plan.specs] == ["DQN", "HRS", "NRS"]  # in --methods order
+    config = plan.config
+    assert config["algo"] == "dqn" and config["learner"]["total_frames"] == 1600 and config["routes"] == ["swing_then_speed"]
+    assert config["report"]["frames_per_unit"] == 16 and config["report"]["asymptotic_window"] == [90, 100]
