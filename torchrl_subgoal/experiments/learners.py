@@ -225,7 +225,16 @@ def learner_plan(cfg: LearnerRecipeConfig, algo: str, *, extra: Mapping[str, Any
 
 
 def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
-    """Train the chunk's learners one after the other (each steps its own batch of envs); their records."""
+    """Train the chunk's learners one after the other (each steps its own batch of envs); their records.
+
+    Examples:
+        >>> import tempfile
+        >>> cfg = LearnerRecipeConfig(domain="four_rooms", methods="A2C", total_frames=512, results=tempfile.mkdtemp())
+        >>> plan = learner_plan(cfg, "a2c")
+        >>> table = run_learner_chunk(Chunk("A2C", 0, (("none", 0),), seed=1), plan.config, lambda done: None)
+        >>> table.n_learners, table.n_episodes  # one learner, one column per batch of 256 frames
+        (1, 2)
+    """
     torch.set_num_threads(1)
     domain = domains.part(config["domain"], LearnerDomain)
     learner = LEARNERS[config["algo"]]
