@@ -47,9 +47,12 @@ class Config(LearnerRecipeConfig):
     frames_per_batch: int = setting(256, "frames per A2C update")
     lr: float = setting(0.0, "A2C learning rate (0: the domain's default)")
     normalize_advantage: bool = setting(False, "standardise GAE advantages per batch")
-    start_potential: str = setting("value", "level of Φ: value (Φ = V; docs/torchrl.md's figures), zero or "
-                                   "nonpositive (the library default; docs/shaping_defaults.md)",
-                                   choices=["value", "zero", "nonpositive"])
+    start_potential: str = setting(
+        "value",
+        "level of Φ: value (Φ = V; docs/torchrl.md's figures), zero or "
+        "nonpositive (the library default; docs/shaping_defaults.md)",
+        choices=["value", "zero", "nonpositive"],
+    )
     results: str = setting("", "results directory (default results/a2c_<domain>; re-run to resume)")
 
     AT_LEAST_ONE: ClassVar[tuple[str, ...]] = ("learnings", "random_patterns", "num_envs", "frames_per_batch")

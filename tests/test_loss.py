@@ -97,8 +97,12 @@ def test_neural_potential_learns_a_constant_target() -> None:
             "subgoal_anchor": torch.randn(n, 2),
             "steps_to_next_obs": torch.ones(n, 1, dtype=torch.long),
             "mask": torch.ones(n, 1, dtype=torch.bool),
-            "next": {"subgoal_anchor": torch.randn(n, 2), "reward": torch.full((n, 1), 2.0),
-                     "terminated": torch.ones(n, 1, dtype=torch.bool), "done": torch.ones(n, 1, dtype=torch.bool)},
+            "next": {
+                "subgoal_anchor": torch.randn(n, 2),
+                "reward": torch.full((n, 1), 2.0),
+                "terminated": torch.ones(n, 1, dtype=torch.bool),
+                "done": torch.ones(n, 1, dtype=torch.bool),
+            },
         },
         batch_size=[n],
     )
@@ -133,9 +137,18 @@ def test_misuse_gives_clear_errors() -> None:
     with pytest.raises(TypeError, match="TensorDict module"):
         SubgoalValueLoss(torch.nn.Linear(2, 1))  # type: ignore[arg-type]
     wide = NeuralPotential(torch.nn.Linear(2, 3))
-    data = TensorDict({"subgoal_anchor": torch.zeros(4, 2), "steps_to_next_obs": torch.ones(4, 1, dtype=torch.long),
-                       "next": {"subgoal_anchor": torch.zeros(4, 2), "reward": torch.zeros(4, 1),
-                                "terminated": torch.zeros(4, 1, dtype=torch.bool)}}, [4])
+    data = TensorDict(
+        {
+            "subgoal_anchor": torch.zeros(4, 2),
+            "steps_to_next_obs": torch.ones(4, 1, dtype=torch.long),
+            "next": {
+                "subgoal_anchor": torch.zeros(4, 2),
+                "reward": torch.zeros(4, 1),
+                "terminated": torch.zeros(4, 1, dtype=torch.bool),
+            },
+        },
+        [4],
+    )
     with pytest.raises(ValueError, match=r"returned values of shape \(4, 3\)"):
         SubgoalValueLoss(wide).make_value_estimator(gamma=0.9)(data)
 
@@ -161,7 +174,9 @@ def test_any_tensordict_module_with_a_make_value_estimator_hook() -> None:
 
 def test_gamma_goes_through_make_value_estimator() -> None:
     v = TabularPotential(3)
-    with pytest.raises(TypeError, match=r"make_value_estimator: SubgoalValueLoss\(potential\)\.make_value_estimator\(gamma=0\.9\)"):
+    with pytest.raises(
+        TypeError, match=r"make_value_estimator: SubgoalValueLoss\(potential\)\.make_value_estimator\(gamma=0\.9\)"
+    ):
         SubgoalValueLoss(v, gamma=0.9)
     loss = SubgoalValueLoss(v)  # TorchRL's default discount until one is made
     assert loss.gamma == pytest.approx(0.99)
@@ -201,5 +216,8 @@ def test_set_keys_value_takes_effect() -> None:
     z, z2 = data["subgoal_index"].float(), data["next", "subgoal_index"].float()
     target = data["next", "reward"] + 0.9 ** data["steps_to_next_obs"] * z2 * ~data["next", "terminated"]
     assert torch.allclose(small, target - z, atol=1e-5)
-    assert torch.allclose(big, data["next", "reward"] + 0.9 ** data["steps_to_next_obs"] * 10 * z2
-                          * ~data["next", "terminated"] - 10 * z, atol=1e-4)
+    assert torch.allclose(
+        big,
+        data["next", "reward"] + 0.9 ** data["steps_to_next_obs"] * 10 * z2 * ~data["next", "terminated"] - 10 * z,
+        atol=1e-4,
+    )

@@ -114,8 +114,10 @@ class SubgoalValueLoss(LossModule):
         gamma: float | None = None,
     ) -> None:
         if gamma is not None:
-            raise TypeError(f"SubgoalValueLoss takes gamma through make_value_estimator: "
-                            f"SubgoalValueLoss(potential).make_value_estimator(gamma={gamma})")
+            raise TypeError(
+                f"SubgoalValueLoss takes gamma through make_value_estimator: "
+                f"SubgoalValueLoss(potential).make_value_estimator(gamma={gamma})"
+            )
         super().__init__()
         if not isinstance(potential, TensorDictModuleBase) or not potential.out_keys:
             raise TypeError(
@@ -176,7 +178,10 @@ class SubgoalValueLoss(LossModule):
         self.loss_mask_key = keys.mask  # TorchRL's reduction masks with it
         if self._value_estimator is not None:
             self._value_estimator.set_keys(
-                value=keys.value, reward=keys.reward, done=keys.done, terminated=keys.terminated,
+                value=keys.value,
+                reward=keys.reward,
+                done=keys.done,
+                terminated=keys.terminated,
                 steps_to_next_obs=keys.steps_to_next_obs,
             )
 
@@ -213,10 +218,14 @@ class SubgoalValueLoss(LossModule):
             next_value = self._value(tensordict.get("next"))
             terminated = tensordict.get(("next", keys.terminated))
             estimate = TensorDict(
-                {keys.steps_to_next_obs: tensordict.get(keys.steps_to_next_obs),
-                 "next": {keys.reward: tensordict.get(("next", keys.reward)),
-                          keys.done: tensordict.get(("next", keys.done), terminated),
-                          keys.terminated: terminated}},
+                {
+                    keys.steps_to_next_obs: tensordict.get(keys.steps_to_next_obs),
+                    "next": {
+                        keys.reward: tensordict.get(("next", keys.reward)),
+                        keys.done: tensordict.get(("next", keys.done), terminated),
+                        keys.terminated: terminated,
+                    },
+                },
                 batch_size=batch,
             )
             target = self.value_estimator.value_estimate(estimate, next_value=next_value).to(value.dtype)

@@ -34,9 +34,12 @@ HISTORY = {
 
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
 def test_page_names_no_history(page: Path) -> None:
-    found = [f"{page.relative_to(ROOT)}:{number}: {why}: {line.strip()[:120]}"
-             for number, line in enumerate(page.read_text().splitlines(), 1)
-             for pattern, why in HISTORY.items() if re.search(pattern, line, re.IGNORECASE)]
+    found = [
+        f"{page.relative_to(ROOT)}:{number}: {why}: {line.strip()[:120]}"
+        for number, line in enumerate(page.read_text().splitlines(), 1)
+        for pattern, why in HISTORY.items()
+        if re.search(pattern, line, re.IGNORECASE)
+    ]
     assert not found, "history belongs in CHANGELOG.md:\n" + "\n".join(found)
 
 
@@ -64,8 +67,11 @@ def test_the_benchmarks_page_runs_every_benchmark() -> None:
 
 def test_the_benchmarks_page_keeps_no_time_stamp_or_temporary_path() -> None:
     clean = _docs_page().clean
-    out = ("\x1b[32mraw\x1b[0m 994 env-steps/s\n"
-           "2026-01-02 03:04:05,678 [torchrl][INFO]    Initialized LazyTensorStorage\n"
-           "Results: `/tmp/bench-docs-x/four_rooms`, 1000 episodes per learner.\n")
-    assert clean(out, Path("/tmp/bench-docs-x")) == ("raw 994 env-steps/s\n"
-                                                    "Results: `RESULTS/four_rooms`, 1000 episodes per learner.\n")
+    out = (
+        "\x1b[32mraw\x1b[0m 994 env-steps/s\n"
+        "2026-01-02 03:04:05,678 [torchrl][INFO]    Initialized LazyTensorStorage\n"
+        "Results: `/tmp/bench-docs-x/four_rooms`, 1000 episodes per learner.\n"
+    )
+    assert clean(out, Path("/tmp/bench-docs-x")) == (
+        "raw 994 env-steps/s\nResults: `RESULTS/four_rooms`, 1000 episodes per learner.\n"
+    )

@@ -21,15 +21,18 @@ def test_mountain_car_registers_a_learner_set_up_and_a_map() -> None:
     assert list(load_patterns(learners.participants, domain="mountain_car")) == ["swing_then_speed"]
 
 
-@pytest.mark.parametrize(("predicate", "message"), [
-    (Box((-1.025,), (0.175,), (0,)), None),
-    (Box((0.15, 0.0525), (0.45, 0.0175), (0, 1)), None),
-    (Box((2.0,), (0.1,), (0,)), "position: the box [1.9, 2.1] lies outside [-1.2, 0.6]"),
-    (Box((0.0, 0.5), (0.1, 0.1), (0, 1)), "velocity: the box [0.4, 0.6] lies outside [-0.07, 0.07]"),
-    (Box((0.0,), (0.1,), (2,)), "a MountainCar box covers position (0) and velocity (1), not dims [2]"),
-    (Circle((0.0, 0.0), 0.1), "MountainCar subgoals are boxes over (position, velocity), not circle"),
-    (Cell(1, 1), "MountainCar subgoals are boxes over (position, velocity), not cell"),
-])
+@pytest.mark.parametrize(
+    ("predicate", "message"),
+    [
+        (Box((-1.025,), (0.175,), (0,)), None),
+        (Box((0.15, 0.0525), (0.45, 0.0175), (0, 1)), None),
+        (Box((2.0,), (0.1,), (0,)), "position: the box [1.9, 2.1] lies outside [-1.2, 0.6]"),
+        (Box((0.0, 0.5), (0.1, 0.1), (0, 1)), "velocity: the box [0.4, 0.6] lies outside [-0.07, 0.07]"),
+        (Box((0.0,), (0.1,), (2,)), "a MountainCar box covers position (0) and velocity (1), not dims [2]"),
+        (Circle((0.0, 0.0), 0.1), "MountainCar subgoals are boxes over (position, velocity), not circle"),
+        (Cell(1, 1), "MountainCar subgoals are boxes over (position, velocity), not cell"),
+    ],
+)
 def test_subgoal_check(predicate: object, message: str | None) -> None:
     assert domains.get("mountain_car").check_subgoal(predicate) == message  # type: ignore[misc,arg-type]
 

@@ -43,23 +43,30 @@ def test_the_seed_draws_different_points_for_one_route() -> None:
     assert bool((first == again).all()) and not bool((first == other).all())
 
 
-@pytest.mark.parametrize(("predicate", "message"), [
-    (Circle((1.0, -1.0), 0.65), None),
-    (Circle((0.0, 0.0), 0.65), "centre (0, 0) lies in a wall cell (2, 2) of the umaze maze; move it to where "
-                               "the ball can go"),
-    (Circle((3.0, 0.0), 0.5), "centre (3, 0) is outside the umaze maze"),
-    (Circle((1.0, -1.0), 0.0), "radius must be positive, got 0.0"),
-    (Circle((1.0, -1.0, 0.0), 0.5), "a PointMaze subgoal circle covers (x, y), dims [0, 1], not [0, 1, 2]"),
-    (Box((1.0,), (0.5,), (0,)), "PointMaze subgoals are circles over the ball's (x, y), not box"),
-])
+@pytest.mark.parametrize(
+    ("predicate", "message"),
+    [
+        (Circle((1.0, -1.0), 0.65), None),
+        (
+            Circle((0.0, 0.0), 0.65),
+            "centre (0, 0) lies in a wall cell (2, 2) of the umaze maze; move it to where the ball can go",
+        ),
+        (Circle((3.0, 0.0), 0.5), "centre (3, 0) is outside the umaze maze"),
+        (Circle((1.0, -1.0), 0.0), "radius must be positive, got 0.0"),
+        (Circle((1.0, -1.0, 0.0), 0.5), "a PointMaze subgoal circle covers (x, y), dims [0, 1], not [0, 1, 2]"),
+        (Box((1.0,), (0.5,), (0,)), "PointMaze subgoals are circles over the ball's (x, y), not box"),
+    ],
+)
 def test_subgoal_check(predicate: object, message: str | None) -> None:
     assert domains.get("point_maze_umaze").check_subgoal(predicate) == message  # type: ignore[misc,arg-type]
 
 
 def test_a_subgoal_file_with_a_circle_in_a_wall_is_refused(tmp_path: Path) -> None:
     path = tmp_path / "walls.yaml"
-    path.write_text("domain: point_maze_umaze\npatterns:\n  p:\n    subgoals:\n"
-                    "      - {circle: {centre: [0.0, 0.0], radius: 0.5}}\n")
+    path.write_text(
+        "domain: point_maze_umaze\npatterns:\n  p:\n    subgoals:\n"
+        "      - {circle: {centre: [0.0, 0.0], radius: 0.5}}\n"
+    )
     with pytest.raises(ValueError, match=r"wall cell \(2, 2\)"):
         load_patterns(path)
 

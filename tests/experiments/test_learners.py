@@ -20,8 +20,9 @@ def test_flags_left_at_zero_keep_the_domains_defaults() -> None:
     mountain_car = domains.part("mountain_car", LearnerDomain)
     settings = learner_settings(LearnerRecipeConfig(), "dqn", mountain_car)
     assert settings == DQNConfig.preset("mountain_car")  # value_lr 0.05 and the rest as the preset's
-    changed = learner_settings(LearnerRecipeConfig(total_frames=3200, lr=1e-3, sees_subgoal=True,
-                                                   reshape_samples=True), "dqn", mountain_car)
+    changed = learner_settings(
+        LearnerRecipeConfig(total_frames=3200, lr=1e-3, sees_subgoal=True, reshape_samples=True), "dqn", mountain_car
+    )
     assert (changed.total_frames, changed.lr, changed.sees_subgoal, changed.reshape_samples) == (3200, 1e-3, True, True)
     assert changed.gradient_steps == 8  # the preset's, untouched
 
@@ -49,5 +50,9 @@ def test_the_plan_stores_the_learner_and_reports_frames() -> None:
     assert plan.domain == "dqn_mountain_car" and plan.episodes == 100 and plan.chunk_size == 1
     assert [spec.name for spec in plan.specs] == ["DQN", "HRS", "NRS"]  # in --methods order
     config = plan.config
-    assert config["algo"] == "dqn" and config["learner"]["total_frames"] == 1600 and config["routes"] == ["swing_then_speed"]
+    assert (
+        config["algo"] == "dqn"
+        and config["learner"]["total_frames"] == 1600
+        and config["routes"] == ["swing_then_speed"]
+    )
     assert config["report"]["frames_per_unit"] == 16 and config["report"]["asymptotic_window"] == [90, 100]

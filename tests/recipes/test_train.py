@@ -34,8 +34,19 @@ def test_dqn_on_mountain_car_reports_frames_and_resumes(tmp_path: Path, capsys: 
 
 @pytest.mark.parametrize("algo", ["a2c", "ppo"])
 def test_on_policy_learners_on_four_rooms(tmp_path: Path, algo: str) -> None:
-    args = ["--algo", algo, "--domain", "four_rooms", "--methods", f"{algo.upper()},HRS,SARSA-RS",
-            "--learnings", "1", "--total-frames", "512", "--sees-subgoal"]
+    args = [
+        "--algo",
+        algo,
+        "--domain",
+        "four_rooms",
+        "--methods",
+        f"{algo.upper()},HRS,SARSA-RS",
+        "--learnings",
+        "1",
+        "--total-frames",
+        "512",
+        "--sees-subgoal",
+    ]
     assert run(tmp_path, *args) == 0
     summary = json.loads((tmp_path / "res" / "summary.json").read_text())
     assert summary["methods"]["HRS"]["learners"] == 10 and summary["n_episodes"] == 2  # 10 patterns; 2 x 256
@@ -45,37 +56,63 @@ def test_on_policy_learners_on_four_rooms(tmp_path: Path, algo: str) -> None:
 def test_continuous_learners_on_point_maze(tmp_path: Path, algo: str) -> None:
     """Each pattern of the maze is one direction of its route: HRS runs one learner per pattern, the unshaped
     learner as many, the directions picked by learning number."""
-    args = ["--algo", algo, "--domain", "point_maze_umaze", "--methods", f"{algo.upper()},HRS",
-            "--total-frames", "256", "--frames-per-batch", "128", "--num-envs", "2",
-            *(["--reshape-samples"] if algo == "ddpg" else [])]
+    args = [
+        "--algo",
+        algo,
+        "--domain",
+        "point_maze_umaze",
+        "--methods",
+        f"{algo.upper()},HRS",
+        "--total-frames",
+        "256",
+        "--frames-per-batch",
+        "128",
+        "--num-envs",
+        "2",
+        *(["--reshape-samples"] if algo == "ddpg" else []),
+    ]
     assert run(tmp_path, *args) == 0
     summary = json.loads((tmp_path / "res" / "summary.json").read_text())
     assert summary["methods"]["HRS"]["patterns"] == ["bottom_to_top", "top_to_bottom"]
     assert summary["methods"][algo.upper()]["learners"] == 2 and summary["n_episodes"] == 2
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["--algo", "ddpg", "--domain", "four_rooms"],
-     "--algo: ddpg needs continuous actions; four_rooms's are discrete: choose a2c, ppo or dqn"),
-    (["--algo", "dqn", "--domain", "point_maze_umaze"],
-     "--algo: dqn needs discrete actions; point_maze_umaze's are continuous: choose ppo or ddpg"),
-    (["--algo", "a2c", "--domain", "point_maze_medium"],
-     "--algo: a2c needs discrete actions; point_maze_medium's are continuous: choose ppo or ddpg"),
-    (["--algo", "ppo", "--reshape-samples"],
-     "--reshape-samples: ppo learns on-policy and keeps no replay samples; only dqn and ddpg re-shape them"),
-    (["--domain", "pick_and_place"], "--domain: domain 'pick_and_place' registered no LearnerDomain; these did: "),
-    (["--domain", "chess"], "--domain: unknown domain 'chess'; these did: "),
-    (["--algo", "dqn", "--domain", "mountain_car", "--methods", "DQN,SARSA-RS"],
-     "--methods: SARSA-RS needs an aggregation g(s), which mountain_car does not register"),
-    (["--algo", "dqn", "--methods", "PPO"], "--methods: unknown method(s) ['PPO']"),
-    (["--algo", "ppo", "--num-envs", "3"], "frames_per_batch (256) must be a multiple of num_envs"),
-    (["--algo", "ppo", "--total-frames", "100"], "--total-frames: 100 is less than one batch of 256 frames"),
-    (["--algo", "dqn", "--value-lr", "0"], "--value-lr: must be positive, got 0.0"),
-    (["--algo", "dqn", "--learnings", "0"], "--learnings: must be >= 1, got 0"),
-    (["--algo", "sac"], "argument --algo: invalid choice: 'sac'"),
-])
-def test_bad_settings_are_one_line_before_anything_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                        args: list[str], message: str) -> None:
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (
+            ["--algo", "ddpg", "--domain", "four_rooms"],
+            "--algo: ddpg needs continuous actions; four_rooms's are discrete: choose a2c, ppo or dqn",
+        ),
+        (
+            ["--algo", "dqn", "--domain", "point_maze_umaze"],
+            "--algo: dqn needs discrete actions; point_maze_umaze's are continuous: choose ppo or ddpg",
+        ),
+        (
+            ["--algo", "a2c", "--domain", "point_maze_medium"],
+            "--algo: a2c needs discrete actions; point_maze_medium's are continuous: choose ppo or ddpg",
+        ),
+        (
+            ["--algo", "ppo", "--reshape-samples"],
+            "--reshape-samples: ppo learns on-policy and keeps no replay samples; only dqn and ddpg re-shape them",
+        ),
+        (["--domain", "pick_and_place"], "--domain: domain 'pick_and_place' registered no LearnerDomain; these did: "),
+        (["--domain", "chess"], "--domain: unknown domain 'chess'; these did: "),
+        (
+            ["--algo", "dqn", "--domain", "mountain_car", "--methods", "DQN,SARSA-RS"],
+            "--methods: SARSA-RS needs an aggregation g(s), which mountain_car does not register",
+        ),
+        (["--algo", "dqn", "--methods", "PPO"], "--methods: unknown method(s) ['PPO']"),
+        (["--algo", "ppo", "--num-envs", "3"], "frames_per_batch (256) must be a multiple of num_envs"),
+        (["--algo", "ppo", "--total-frames", "100"], "--total-frames: 100 is less than one batch of 256 frames"),
+        (["--algo", "dqn", "--value-lr", "0"], "--value-lr: must be positive, got 0.0"),
+        (["--algo", "dqn", "--learnings", "0"], "--learnings: must be >= 1, got 0"),
+        (["--algo", "sac"], "argument --algo: invalid choice: 'sac'"),
+    ],
+)
+def test_bad_settings_are_one_line_before_anything_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], message: str
+) -> None:
     try:
         code = run(tmp_path, *args)
     except SystemExit as exit_:  # a flag the parser refuses exits as argparse does

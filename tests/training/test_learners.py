@@ -26,8 +26,11 @@ from torchrl_subgoal.training import (
 
 def test_each_learner_is_its_building_block() -> None:
     assert [(n, lrn.config, lrn.train) for n, lrn in LEARNERS.items()] == [
-        ("a2c", A2CConfig, train_a2c), ("ppo", PPOConfig, train_ppo), ("dqn", DQNConfig, train_dqn),
-        ("ddpg", DDPGTrainConfig, train_ddpg)]
+        ("a2c", A2CConfig, train_a2c),
+        ("ppo", PPOConfig, train_ppo),
+        ("dqn", DQNConfig, train_dqn),
+        ("ddpg", DDPGTrainConfig, train_ddpg),
+    ]
     assert [lrn.title for lrn in LEARNERS.values()] == ["A2C", "PPO", "DQN", "DDPG"]
 
 
@@ -43,11 +46,17 @@ def test_discrete_learners_accept_four_rooms(algo: str) -> None:
 
 def test_a_mismatch_is_one_line_naming_what_fits() -> None:
     pendulum = batched(functools.partial(GymEnv, "Pendulum-v1"))(1)
-    with pytest.raises(ValueError, match=r"^dqn needs discrete actions; pendulum's are continuous: choose ppo or "
-                                         r"ddpg$"):
+    with pytest.raises(
+        ValueError,
+        match=r"^dqn needs discrete actions; pendulum's are continuous: choose ppo or "
+        r"ddpg$",
+    ):
         check_actions("dqn", pendulum, "pendulum")
-    with pytest.raises(ValueError, match=r"^ddpg needs continuous actions; four_rooms's are discrete: choose a2c, "
-                                         r"ppo or dqn$"):
+    with pytest.raises(
+        ValueError,
+        match=r"^ddpg needs continuous actions; four_rooms's are discrete: choose a2c, "
+        r"ppo or dqn$",
+    ):
         check_actions("ddpg", FourRoomsEnv(1), "four_rooms")
     with pytest.raises(ValueError, match=r"^unknown learner 'sac'; known: a2c, ppo, dqn, ddpg$"):
         check_actions("sac", FourRoomsEnv(1), "four_rooms")

@@ -66,8 +66,14 @@ def _draw_map(ax: Any, patterns: Mapping[str, Any], options: Mapping[str, Any]) 
 
 
 LEARNERS = LearnerDomain(
-    "mountain_car", mountain_car.make_mountain_car, "observation", "observation", "observation",
-    mountain_car.SUBGOAL_FILE, eta=1.0, thresholds=(180.0, 150.0, 120.0),
+    "mountain_car",
+    mountain_car.make_mountain_car,
+    "observation",
+    "observation",
+    "observation",
+    mountain_car.SUBGOAL_FILE,
+    eta=1.0,
+    thresholds=(180.0, 150.0, 120.0),
     defaults={
         "dqn": DQNConfig.preset("mountain_car"),  # rl-baselines3-zoo's tuned DQN
         "a2c": A2CConfig(num_envs=16, frames_per_batch=256, total_frames=500_000),
@@ -75,7 +81,12 @@ LEARNERS = LearnerDomain(
     },
 )
 
-DOMAIN = domains.register(domains.Domain(
-    "mountain_car", "MountainCar", make_env=mountain_car.make_mountain_car, check_subgoal=check_subgoal,
-    parts=(LEARNERS, ReportMap(_draw_map)),
-))
+DOMAIN = domains.register(
+    domains.Domain(
+        "mountain_car",
+        "MountainCar",
+        make_env=mountain_car.make_mountain_car,
+        check_subgoal=check_subgoal,
+        parts=(LEARNERS, ReportMap(_draw_map)),
+    )
+)

@@ -46,8 +46,9 @@ def _route_seed(maze: str, route: str, seed: int) -> int:
     """``seed`` with its residue set to ``route``'s index (``point_maze_task`` runs route ``seed mod 2``)."""
     names = [r.name for r in point_maze.ROUTES[maze]]
     if route not in names:
-        raise ValueError(f"pattern {route!r} names no route of the {maze} maze; its patterns are the routes "
-                         f"{', '.join(names)}")
+        raise ValueError(
+            f"pattern {route!r} names no route of the {maze} maze; its patterns are the routes {', '.join(names)}"
+        )
     seed = abs(int(seed)) % 2**62
     return seed - seed % len(names) + names.index(route)
 
@@ -82,12 +83,17 @@ def check_subgoal(maze: str, predicate: Predicate) -> str | None:
     x, y = (float(v) for v in predicate.centre)
     layout = point_maze.MAZES[maze]
     row, col = int(len(layout) / 2 - y), int(x + len(layout[0]) / 2)
-    if not (0 <= row < len(layout) and 0 <= col < len(layout[0])) or x + len(layout[0]) / 2 < 0 or \
-            len(layout) / 2 - y < 0:
+    if (
+        not (0 <= row < len(layout) and 0 <= col < len(layout[0]))
+        or x + len(layout[0]) / 2 < 0
+        or len(layout) / 2 - y < 0
+    ):
         return f"centre ({x:g}, {y:g}) is outside the {maze} maze"
     if layout[row][col] == 1:
-        return f"centre ({x:g}, {y:g}) lies in a wall cell ({row}, {col}) of the {maze} maze; " \
-               "move it to where the ball can go"
+        return (
+            f"centre ({x:g}, {y:g}) lies in a wall cell ({row}, {col}) of the {maze} maze; "
+            "move it to where the ball can go"
+        )
     return None
 
 
@@ -118,13 +124,24 @@ def _learners(maze: str) -> LearnerDomain:
     cap = point_maze.MAX_EPISODE_STEPS[maze]
     scale = 1 if maze == "umaze" else 2
     return LearnerDomain(
-        f"point_maze_{maze}", functools.partial(maze_env, maze), "observation", "observation", "observation",
-        point_maze.SUBGOAL_FILES[maze], eta=1.0, thresholds=(cap * 2 / 3, cap / 3),
+        f"point_maze_{maze}",
+        functools.partial(maze_env, maze),
+        "observation",
+        "observation",
+        "observation",
+        point_maze.SUBGOAL_FILES[maze],
+        eta=1.0,
+        thresholds=(cap * 2 / 3, cap / 3),
         defaults={
             # TorchRL's examples' settings at a budget this machine affords (not tuned here)
             "ppo": PPOConfig(num_envs=8, frames_per_batch=2048, total_frames=200_000 * scale),
-            "ddpg": DDPGTrainConfig(total_frames=100_000 * scale, learning_starts=5_000, frames_per_batch=1000,
-                                    updates_per_batch=250, buffer_size=200_000),
+            "ddpg": DDPGTrainConfig(
+                total_frames=100_000 * scale,
+                learning_starts=5_000,
+                frames_per_batch=1000,
+                updates_per_batch=250,
+                buffer_size=200_000,
+            ),
         },
         pattern_env=functools.partial(route_env, maze),
     )
@@ -133,8 +150,15 @@ def _learners(maze: str) -> LearnerDomain:
 #: Each maze's learner set-up.
 LEARNERS = {maze: _learners(maze) for maze in point_maze.MAZES}
 
-DOMAINS = {maze: domains.register(domains.Domain(
-    f"point_maze_{maze}", f"PointMaze {maze.capitalize()}", make_env=functools.partial(maze_env, maze),
-    check_subgoal=functools.partial(check_subgoal, maze),
-    parts=(LEARNERS[maze], ReportMap(functools.partial(_draw_map, maze))),
-)) for maze in point_maze.MAZES}
+DOMAINS = {
+    maze: domains.register(
+        domains.Domain(
+            f"point_maze_{maze}",
+            f"PointMaze {maze.capitalize()}",
+            make_env=functools.partial(maze_env, maze),
+            check_subgoal=functools.partial(check_subgoal, maze),
+            parts=(LEARNERS[maze], ReportMap(functools.partial(_draw_map, maze))),
+        )
+    )
+    for maze in point_maze.MAZES
+}

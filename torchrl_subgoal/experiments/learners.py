@@ -67,10 +67,15 @@ class LearnerRecipeConfig(RecipeConfig):
         torchrl_subgoal.experiments.cli.ConfigError: --value-lr: must be positive, got 0.0
     """
 
-    domain: str = setting("four_rooms", "a domain with a learner set-up (four_rooms, pinball, point_maze_umaze, "
-                          "point_maze_medium, mountain_car)")
-    methods: str = setting("", "comma-separated methods: the learner's name for the unshaped learner (A2C, PPO, "
-                           "DQN, DDPG), HRS, NRS, RRS, SARSA-RS (default: unshaped, HRS, NRS)")
+    domain: str = setting(
+        "four_rooms",
+        "a domain with a learner set-up (four_rooms, pinball, point_maze_umaze, point_maze_medium, mountain_car)",
+    )
+    methods: str = setting(
+        "",
+        "comma-separated methods: the learner's name for the unshaped learner (A2C, PPO, "
+        "DQN, DDPG), HRS, NRS, RRS, SARSA-RS (default: unshaped, HRS, NRS)",
+    )
     learnings: int = setting(1, "learnings per subgoal pattern (unshaped: as many per pattern of the file)")
     subgoals: str = setting("", "subgoal file of the human patterns (default: the domain's)")
     random_patterns: int = setting(10, "random subgoal patterns for RRS")
@@ -84,20 +89,29 @@ class LearnerRecipeConfig(RecipeConfig):
     value_lr: float = setting(0.05, "learning rate of the potential's optimiser (Adam)")
     online_potential: bool = setting(False, "train the potential in the transform every step instead")
     sees_subgoal: bool = setting(False, "the shaped learners' networks also read the subgoal index z (one-hot)")
-    reshape_samples: bool = setting(False, "the shaped learners re-shape replay samples with the potential as it "
-                                    "is now (DQN, DDPG)")
+    reshape_samples: bool = setting(
+        False, "the shaped learners re-shape replay samples with the potential as it is now (DQN, DDPG)"
+    )
     zero_terminal_potential: bool = setting(True, "Φ = 0 at the goal (exact policy invariance)")
-    start_potential: str = setting("nonpositive", "level of Φ: nonpositive (the library default; "
-                                   "docs/shaping_defaults.md), zero or value (Φ = V)",
-                                   choices=["value", "zero", "nonpositive"])
+    start_potential: str = setting(
+        "nonpositive",
+        "level of Φ: nonpositive (the library default; docs/shaping_defaults.md), zero or value (Φ = V)",
+        choices=["value", "zero", "nonpositive"],
+    )
     seed: int = setting(0, "sweep seed (random patterns, learner seeds)")
     results: str = setting("", "results directory (default results/<algo>_<domain>; re-run to resume)")
     backend: Literal["local", "ray"] = setting("local", "where learners run")
     workers: int = setting(2, "learners run at once (processes; 0: in this process)")
 
     AT_LEAST_ONE: ClassVar[tuple[str, ...]] = ("learnings", "random_patterns")
-    AT_LEAST_ZERO: ClassVar[tuple[str, ...]] = ("total_frames", "num_envs", "frames_per_batch", "env_workers",
-                                                "collector_workers", "workers")
+    AT_LEAST_ZERO: ClassVar[tuple[str, ...]] = (
+        "total_frames",
+        "num_envs",
+        "frames_per_batch",
+        "env_workers",
+        "collector_workers",
+        "workers",
+    )
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -116,8 +130,9 @@ def learner_methods(algo: str) -> dict[str, Method]:
     return paper_methods(baseline=LEARNERS[algo].title)
 
 
-def learner_settings(cfg: LearnerRecipeConfig, algo: str, domain: LearnerDomain,
-                     extra: Mapping[str, Any] | None = None) -> Any:
+def learner_settings(
+    cfg: LearnerRecipeConfig, algo: str, domain: LearnerDomain, extra: Mapping[str, Any] | None = None
+) -> Any:
     """The learners' settings: the domain's defaults for ``algo`` with the recipe's flags (and ``extra``).
 
     Raises:
@@ -134,28 +149,49 @@ def learner_settings(cfg: LearnerRecipeConfig, algo: str, domain: LearnerDomain,
     """
     learner = LEARNERS[algo]
     base = domain.defaults.get(algo) or learner.config()
-    changes: dict[str, Any] = {name: value for name, value in (
-        ("total_frames", cfg.total_frames), ("num_envs", cfg.num_envs), ("frames_per_batch", cfg.frames_per_batch),
-        ("lr", cfg.lr), ("reward_scale", cfg.reward_scale)) if value}
-    changes.update(env_workers=cfg.env_workers, collector_workers=cfg.collector_workers, value_lr=cfg.value_lr,
-                   online_potential=cfg.online_potential, sees_subgoal=cfg.sees_subgoal, **(extra or {}))
+    changes: dict[str, Any] = {
+        name: value
+        for name, value in (
+            ("total_frames", cfg.total_frames),
+            ("num_envs", cfg.num_envs),
+            ("frames_per_batch", cfg.frames_per_batch),
+            ("lr", cfg.lr),
+            ("reward_scale", cfg.reward_scale),
+        )
+        if value
+    }
+    changes.update(
+        env_workers=cfg.env_workers,
+        collector_workers=cfg.collector_workers,
+        value_lr=cfg.value_lr,
+        online_potential=cfg.online_potential,
+        sees_subgoal=cfg.sees_subgoal,
+        **(extra or {}),
+    )
     if cfg.reshape_samples:
         replaying = [name for name, one in LEARNERS.items() if one.has_setting("reshape_samples")]
-        check(learner.has_setting("reshape_samples"), "reshape_samples",
-              f"{algo} learns on-policy and keeps no replay samples; only {' and '.join(replaying)} re-shape them")
+        check(
+            learner.has_setting("reshape_samples"),
+            "reshape_samples",
+            f"{algo} learns on-policy and keeps no replay samples; only {' and '.join(replaying)} re-shape them",
+        )
         changes["reshape_samples"] = True
     try:
         settings = dataclasses.replace(base, **changes)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
-    check(settings.total_frames >= settings.frames_per_batch, "total_frames",
-          f"{settings.total_frames} is less than one batch of {settings.frames_per_batch} frames "
-          f"(--frames-per-batch); give at least {settings.frames_per_batch}")
+    check(
+        settings.total_frames >= settings.frames_per_batch,
+        "total_frames",
+        f"{settings.total_frames} is less than one batch of {settings.frames_per_batch} frames "
+        f"(--frames-per-batch); give at least {settings.frames_per_batch}",
+    )
     return settings
 
 
-def learner_plan(cfg: LearnerRecipeConfig, algo: str, *, extra: Mapping[str, Any] | None = None,
-                 final_updates: int | None = None) -> Plan:
+def learner_plan(
+    cfg: LearnerRecipeConfig, algo: str, *, extra: Mapping[str, Any] | None = None, final_updates: int | None = None
+) -> Plan:
     """The sweep of learner ``algo`` on ``cfg.domain``: one chunk per learner, the stored configuration,
     the report's thresholds (episode lengths; times in updates and frames).
 
@@ -198,8 +234,13 @@ def learner_plan(cfg: LearnerRecipeConfig, algo: str, *, extra: Mapping[str, Any
                 domain.env_for(name, 0)
             except ValueError as exc:
                 raise ConfigError(f"--subgoals: {subgoal_file}: {exc}") from None
-    patterns = pattern_sets(human, domain.candidates(cfg.seed), cfg.random_patterns, cfg.seed,
-                            random_needed=needs_random_patterns(methods, names))
+    patterns = pattern_sets(
+        human,
+        domain.candidates(cfg.seed),
+        cfg.random_patterns,
+        cfg.seed,
+        random_needed=needs_random_patterns(methods, names),
+    )
     check_patterns(patterns, probe, str(domain.subgoal_key))
     specs = method_specs(methods, names, patterns, cfg.learnings)
     results = cfg.results or f"results/{algo}_{cfg.domain}"
@@ -216,12 +257,17 @@ def learner_plan(cfg: LearnerRecipeConfig, algo: str, *, extra: Mapping[str, Any
         "pattern_sources": pattern_sources(patterns),
         "routes": list(human),
         "log_dir": str(Path(results) / "logs"),
-        "report": {"metric": "steps", "thresholds": list(domain.thresholds), "unit": "update",
-                   "frames_per_unit": settings.frames_per_batch,
-                   "asymptotic_window": [max(0, iterations - final), iterations]},
+        "report": {
+            "metric": "steps",
+            "thresholds": list(domain.thresholds),
+            "unit": "update",
+            "frames_per_unit": settings.frames_per_batch,
+            "asymptotic_window": [max(0, iterations - final), iterations],
+        },
     }
-    return Plan(f"{algo}_{cfg.domain}", specs, run_learner_chunk, config, episodes=iterations, chunk_size=1,
-                results=results)
+    return Plan(
+        f"{algo}_{cfg.domain}", specs, run_learner_chunk, config, episodes=iterations, chunk_size=1, results=results
+    )
 
 
 def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
@@ -242,25 +288,42 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
     patterns, pattern_index = chunk_patterns(chunk, config)
     settings = learner.config(**config["learner"])
     if method.shaping == "none":  # no transform, so no z to see and no potential to re-shape with
-        settings = dataclasses.replace(settings, sees_subgoal=False,
-                                       **({"reshape_samples": False} if learner.has_setting("reshape_samples") else {}))
+        settings = dataclasses.replace(
+            settings,
+            sees_subgoal=False,
+            **({"reshape_samples": False} if learner.has_setting("reshape_samples") else {}),
+        )
     routes = config["routes"]
     curves = []
     for i, (pattern, learning) in enumerate(chunk.learners):
         index = int(pattern_index[i])
         parts = shaping_parts(
-            method, (), patterns=patterns[index:index + 1] if patterns else None, aggregation=domain.aggregation(),
-            eta=domain.eta, observation_key=domain.subgoal_key, aggregation_key=domain.aggregation_key,
-            zero_terminal_potential=config["zero_terminal_potential"], start_potential=config["start_potential"],
+            method,
+            (),
+            patterns=patterns[index : index + 1] if patterns else None,
+            aggregation=domain.aggregation(),
+            eta=domain.eta,
+            observation_key=domain.subgoal_key,
+            aggregation_key=domain.aggregation_key,
+            zero_terminal_potential=config["zero_terminal_potential"],
+            start_potential=config["start_potential"],
         )
         seed = chunk.seed + i
         # a pattern-less learner (unshaped, SARSA-RS) runs the task its learning number picks
         make_env = domain.env_for(pattern if pattern in routes else routes[learning % len(routes)], seed)
         # fresh: a learner run again after an interruption starts its log over, as its results do
         logger = experiment_logger(Path(config["log_dir"]), f"{chunk.method}_{pattern}_{learning}", fresh=True)
-        curves.append(learner.train(make_env, settings, shaping=Shaping(*parts) if parts is not None else None,
-                                    observation_key=domain.observation_key, seed=seed, logger=logger,
-                                    progress=progress))
+        curves.append(
+            learner.train(
+                make_env,
+                settings,
+                shaping=Shaping(*parts) if parts is not None else None,
+                observation_key=domain.observation_key,
+                seed=seed,
+                logger=logger,
+                progress=progress,
+            )
+        )
     steps = np.array([np.round(c.episode_length) for c in curves], dtype=np.int64)
     returns = np.array([c.episode_return for c in curves])
     success = np.array([c.success for c in curves])

@@ -64,7 +64,8 @@ class Learner:
 
 #: Every building block, by the name ``recipes/train.py --algo`` takes.
 LEARNERS: dict[str, Learner] = {
-    learner.name: learner for learner in (
+    learner.name: learner
+    for learner in (
         Learner("a2c", A2CConfig, train_a2c, ("discrete",)),
         Learner("ppo", PPOConfig, train_ppo, ("discrete", "continuous")),
         Learner("dqn", DQNConfig, train_dqn, ("discrete",)),
@@ -108,7 +109,12 @@ def check_actions(algo: str, env: EnvBase, domain: str) -> None:
     if kind in LEARNERS[algo].actions:
         return
     fits = [name for name, learner in LEARNERS.items() if kind in learner.actions]
-    choose = f"choose {', '.join(fits[:-1])} or {fits[-1]}" if len(fits) > 1 else \
-        (f"choose {fits[0]}" if fits else "no learner here handles them")
-    raise ValueError(f"{algo} needs {' or '.join(LEARNERS[algo].actions)} actions; {domain}'s are "
-                     f"{kind or 'neither discrete nor bounded continuous'}: {choose}")
+    choose = (
+        f"choose {', '.join(fits[:-1])} or {fits[-1]}"
+        if len(fits) > 1
+        else (f"choose {fits[0]}" if fits else "no learner here handles them")
+    )
+    raise ValueError(
+        f"{algo} needs {' or '.join(LEARNERS[algo].actions)} actions; {domain}'s are "
+        f"{kind or 'neither discrete nor bounded continuous'}: {choose}"
+    )

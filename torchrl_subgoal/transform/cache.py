@@ -71,5 +71,4 @@ def _equal(a: torch.Tensor, b: torch.Tensor) -> bool:
     return torch.equal(a, b)
 
 
-
 _NUMPY_DTYPES = (torch.float32, torch.float64, torch.int64, torch.bool)

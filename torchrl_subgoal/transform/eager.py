@@ -27,7 +27,10 @@ __all__ = ["potential_value", "start_entries", "torch_step"]
 
 
 def potential_value(
-    potential: TensorDictModuleBase, cache: ValueCache, entries: dict[str, torch.Tensor], batch_shape: torch.Size,
+    potential: TensorDictModuleBase,
+    cache: ValueCache,
+    entries: dict[str, torch.Tensor],
+    batch_shape: torch.Size,
     slot: str,
 ) -> torch.Tensor:
     """``Φ`` of abstract-state entries, ``[*B, 1]``: given back by ``cache`` (under ``slot``) while the
@@ -96,9 +99,16 @@ def torch_step(
             nxt[carried] = current[carried]
     smdp = None
     if update is not None or settings.transitions:
-        smdp = transition(batch_shape, {key: current[key] for key in settings.inputs},
-                          {key: nxt[key] for key in settings.inputs},
-                          r_h, k, closed, step.done, step.terminated)
+        smdp = transition(
+            batch_shape,
+            {key: current[key] for key in settings.inputs},
+            {key: nxt[key] for key in settings.inputs},
+            r_h,
+            k,
+            closed,
+            step.done,
+            step.terminated,
+        )
     if update is not None and bool(closed.any()):
         assert smdp is not None
         update(smdp)
@@ -110,8 +120,10 @@ def torch_step(
         phi = potential_value(potential, cache, current, batch_shape, "z")
         phi_next = potential_value(potential, cache, nxt, batch_shape, "z")
         if settings.start != "value" and not isinstance(potential, NaivePotential):
-            level = start_level(potential_value(potential, cache, start_entries(current, settings), batch_shape,
-                                                "start"), settings.start)
+            level = start_level(
+                potential_value(potential, cache, start_entries(current, settings), batch_shape, "start"),
+                settings.start,
+            )
             assert level is not None
             phi, phi_next = phi - level, phi_next - level
     shaped = shaped_reward(step.reward, phi, phi_next, step.terminated, settings.gamma, settings.zero_terminal)

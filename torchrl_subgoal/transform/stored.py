@@ -66,8 +66,10 @@ def learners_of(
     if not per_learner:
         return torch.zeros((*batch_shape, 1), dtype=torch.long), 1
     n_learners = (
-        env_learners if env_learners is not None
-        else potential.learners if isinstance(potential, TabularPotential) and potential.batch_shape
+        env_learners
+        if env_learners is not None
+        else potential.learners
+        if isinstance(potential, TabularPotential) and potential.batch_shape
         else subgoals.envs or 1
     )
     if stored is not None:
@@ -113,16 +115,24 @@ def shape_stored(
     time = time_dim(data)
     nxt = data.get("next", None)
     stored_reward = nxt is not None and read(nxt, env.env_reward) is not None  # then the one shaped
-    missing = [("next", key) for key in in_keys if key != env.env_reward and not (key == env.reward and stored_reward)
-               and (nxt is None or read(nxt, key) is None)]
+    missing = [
+        ("next", key)
+        for key in in_keys
+        if key != env.env_reward
+        and not (key == env.reward and stored_reward)
+        and (nxt is None or read(nxt, key) is None)
+    ]
     if missing:
-        raise KeyError(f"SubgoalPotentialTransform: the stored data has no {missing}; store the steps' entries the "
-                       "transform reads (in_keys)")
+        raise KeyError(
+            f"SubgoalPotentialTransform: the stored data has no {missing}; store the steps' entries the "
+            "transform reads (in_keys)"
+        )
     steps = data.unbind(time)
     group: Callable[[TensorDictBase], TensorDictBase] = lambda td: td.get(env.group) if env.group else td  # noqa: E731
     first, keys, kept = group(steps[0]), settings.keys, settings.kept
-    setup = set_up(first.batch_size, group(data).get(keys.learner, None), time,
-                   read(steps[0], settings.observation_key))
+    setup = set_up(
+        first.batch_size, group(data).get(keys.learner, None), time, read(steps[0], settings.observation_key)
+    )
     if all(first.get(name, None) is not None for name in kept):  # a slice from the middle of an episode
         current = {name: first.get(name) for name in kept}
         if keys.learner in current:
@@ -136,8 +146,9 @@ def shape_stored(
         reward = read(step_next, env.reward) if reward is None else reward
         done, terminated = read(step_next, env.done), read(step_next, env.terminated)
         obs = read(step_next, settings.observation_key) if settings.reads_observation else None
-        out = advance(setup, current, StepInputs(obs, reward, reward, done, done if terminated is None else terminated,
-                                                 step_next))
+        out = advance(
+            setup, current, StepInputs(obs, reward, reward, done, done if terminated is None else terminated, step_next)
+        )
         outs.append({**out, ENV_REWARD: reward})
         if t + 1 < len(steps):
             restart = initial_state(setup, settings, read(steps[t + 1], settings.observation_key))

@@ -52,8 +52,9 @@ def empty_transition(
     """
     at_reset = {k: state[k] for k in inputs}
     false = torch.zeros_like(state[keys.index], dtype=torch.bool)
-    return transition(batch_shape, at_reset, at_reset, torch.zeros_like(state[keys.ret]), state[keys.steps], false,
-                      false, false)
+    return transition(
+        batch_shape, at_reset, at_reset, torch.zeros_like(state[keys.ret]), state[keys.steps], false, false, false
+    )
 
 
 def rebuild(
@@ -80,8 +81,10 @@ def rebuild(
     missing: list[NestedKey] = [k for k in (index, ret, steps) if data.get(k, None) is None]
     missing += [("next", k) for k in (index, env.done) if nxt is None or nxt.get(k, None) is None]
     if missing:
-        raise KeyError(f"SubgoalPotentialTransform.transitions: the data has no {missing}; pass data collected "
-                       "through the transform (or shaped by it)")
+        raise KeyError(
+            f"SubgoalPotentialTransform.transitions: the data has no {missing}; pass data collected "
+            "through the transform (or shaped by it)"
+        )
     group = data.get(env.group) if env.group else data
     n, dims = group.batch_size.numel(), group.batch_dims
     nxt_group = nxt.get(env.group) if env.group else nxt
@@ -102,5 +105,13 @@ def rebuild(
     inputs = {key: v.index_select(0, rows) for key in in_keys if (v := flat(group, key)) is not None}
     next_inputs = {key: v.index_select(0, rows) for key in in_keys if (v := flat(nxt_group, key)) is not None}
     done = done.index_select(0, rows)
-    return transition(torch.Size([done.shape[0]]), inputs, next_inputs, r_h.to(torch.float32), k,
-                      torch.ones_like(done), done, done if terminated is None else terminated.index_select(0, rows))
+    return transition(
+        torch.Size([done.shape[0]]),
+        inputs,
+        next_inputs,
+        r_h.to(torch.float32),
+        k,
+        torch.ones_like(done),
+        done,
+        done if terminated is None else terminated.index_select(0, rows),
+    )
