@@ -103,6 +103,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
         eta=config["eta"], observation_key=OBSERVATION_KEY,
         zero_terminal_potential=config["zero_terminal_potential"],
         start_potential=config["start_potential"],
+        expectile=config.get("expectile", 0.5), bootstrap_truncated=config.get("bootstrap_truncated", True),
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     subgoal_aware = config["agent_state"] == "s,z" and method.shaping in ("subgoals", "naive")
@@ -122,7 +123,8 @@ def plan(cfg: Config) -> Plan:
     settings = dataclasses.asdict(cfg)
     config = {
         **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential",
-                                    "start_potential", "reward", "engine", "agent_state")},
+                                    "start_potential", "reward", "engine", "agent_state",
+                                    "expectile", "bootstrap_truncated")},
         "sarsa": dataclasses.asdict(SARSA_PRESETS[cfg.preset]),
         **sweep_entries(cfg, cfg.subgoals, patterns),
         "report": {"metric": "steps", "thresholds": [500, 300, 100, 50],

@@ -84,6 +84,7 @@ def run(cfg: Config) -> int:
             paper_methods("SARSA")["HRS"], env.batch_size, gamma=sarsa.gamma, value_lr=sarsa.value_lr,
             patterns=patterns, pattern_index=torch.arange(n) % len(patterns), observation_key="cell",
             zero_terminal_potential=zero_terminal, start_potential=start,  # type: ignore[arg-type]
+            expectile=0.5, bootstrap_truncated=True,  # the paper's mean target: the conventions alone differ
         )
         agent = SoftmaxSarsa(n, env.num_states, 4, sarsa, seed=cfg.seed)
         records = run_episodes(TransformedEnv(env, shaping), agent, cfg.episodes, engine="fused")

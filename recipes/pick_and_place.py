@@ -175,7 +175,8 @@ def make_shaping(method_name: str, series: SubgoalSeries | None, config: Mapping
         return shaping, None
     shaping.potential = NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, config["ddpg"]["hidden"]))
     trainer = PotentialTrainer(shaping.transform(shaping.potential, gamma, None),
-                               SubgoalValueLoss(shaping.potential, reduction="mean").make_value_estimator(gamma=gamma),
+                               SubgoalValueLoss(shaping.potential, reduction="mean", expectile=0.5,  # the paper's mean target
+                                                bootstrap_truncated=True).make_value_estimator(gamma=gamma),
                                torch.optim.Adam(shaping.potential.parameters(), lr=config["value_lr"]))
     return shaping, trainer
 

@@ -123,6 +123,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
         pattern_index=pattern_index, aggregation=thirds_of_the_table(), eta=config["eta"],
         zero_terminal_potential=config["zero_terminal_potential"], observation_key=OBSERVATION_KEY,
         start_potential=config["start_potential"],
+        expectile=config.get("expectile", 0.5), bootstrap_truncated=config.get("bootstrap_truncated", True),
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     spec = env.observation_spec["observation"]
@@ -140,7 +141,8 @@ def plan(cfg: Config) -> Plan:
     settings = dataclasses.asdict(cfg)
     config = {
         **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential", "start_potential",
-                                    "step_penalty", "thrust_penalty", "map", "max_steps", "engine")},
+                                    "step_penalty", "thrust_penalty", "map", "max_steps", "engine",
+                                    "expectile", "bootstrap_truncated")},
         "actor_critic": dataclasses.asdict(AC_PRESETS[cfg.preset]),
         **sweep_entries(cfg, cfg.subgoals, patterns),
         "report": {"metric": "steps", "thresholds": [3000, 2000, 1000, 500], "window": min(10, cfg.episodes),

@@ -234,6 +234,7 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
     shared, zero_terminal = data.draw(st.booleans()), data.draw(st.booleans())
     start, lr = data.draw(st.sampled_from(sorted(START_MODES))), data.draw(st.sampled_from([0.0, 0.25, 1.0]))
     gamma, value_gamma = data.draw(st.sampled_from([0.9, 0.99, 1.0])), data.draw(st.sampled_from([0.5, 0.95]))
+    expectile, bootstrap = data.draw(st.sampled_from([0.5, 0.9, 0.3])), data.draw(st.booleans())
     col = (n, 1)
 
     def ints(high: int) -> torch.Tensor:
@@ -251,7 +252,8 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
     kernel_table = table.numpy().copy()
     outputs = [np.empty(col, np.float32), np.empty(col, np.int64), np.empty(col, np.float32),
                np.empty(col, np.float32), np.empty(col, np.int64), np.empty(col, np.bool_)]
-    potential = PotentialKernelState(kernel_table, 0.0, gamma, value_gamma, lr, zero_terminal, START_MODES[start])
+    potential = PotentialKernelState(kernel_table, 0.0, gamma, value_gamma, lr, zero_terminal, START_MODES[start],
+                                     expectile, bootstrap)
     shape_step(potential, shared, z.numpy(), z_next.numpy(), z.numpy(), r_h.numpy(), k.numpy(), reward.numpy(),
                done.numpy(), terminated.numpy(), np.zeros(col, np.int64), *outputs)
     # the torch reference
@@ -262,9 +264,10 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
     closed = closes(z, z_next, done)
     learner = {} if shared else {"subgoal_learner": torch.arange(n).reshape(col)}
     if lr:
-        loss = SubgoalValueLoss(v).make_value_estimator(gamma=value_gamma)
+        loss = SubgoalValueLoss(v, expectile=expectile, bootstrap_truncated=bootstrap).make_value_estimator(
+            gamma=value_gamma)
         loss(transition(torch.Size([n]), {INDEX: z, **learner}, {INDEX: z_next, **learner}, r_acc, k_acc, closed,
-                        done, terminated))["loss_value"].backward()
+                        done, terminated, z_next != z))["loss_value"].backward()
         with torch.no_grad():
             v.table -= lr * v.table.grad
     rows = torch.zeros(n, dtype=torch.long) if shared else torch.arange(n)

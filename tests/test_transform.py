@@ -19,7 +19,9 @@ from torchrl_subgoal import (
     SubgoalFileError,
     SubgoalPotentialTransform,
     SubgoalSeries,
+    SubgoalValueLoss,
     TabularPotential,
+    ValueUpdate,
 )
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import room_aggregation
@@ -54,8 +56,9 @@ def test_smdp_arithmetic_by_hand(backend: str, start: str) -> None:
     v = TabularPotential(3)
     with torch.no_grad():
         v.table.copy_(torch.tensor([0.1, 0.2, 0.3]))
+    paper = ValueUpdate(0.5, SubgoalValueLoss(v, expectile=0.5).make_value_estimator(gamma=0.9))
     t = SubgoalPotentialTransform(
-        SubgoalSeries([State(1), State(3)]), v, gamma=0.9, value_update=0.5, transitions_key="smdp",
+        SubgoalSeries([State(1), State(3)]), v, gamma=0.9, value_update=paper, transitions_key="smdp",
         start_potential=start, backend=backend,  # type: ignore[arg-type]
     )
     env = TransformedEnv(LineEnv(1), t)
@@ -620,7 +623,9 @@ def test_arbitrary_tensordict_module_as_the_potential() -> None:
                             out_keys=["subgoal_value"])
     potential = TensorDictSequential(embed, head)
     before = [p.detach().clone() for p in potential.parameters()]
-    t = SubgoalPotentialTransform(HALLWAYS, potential, gamma=0.9, observation_key="cell", value_update=0.01)
+    # random walks of 40 steps mostly time out inside z: bootstrapped, they train the module too
+    update = ValueUpdate(0.01, SubgoalValueLoss(potential, bootstrap_truncated=True).make_value_estimator(gamma=0.9))
+    t = SubgoalPotentialTransform(HALLWAYS, potential, gamma=0.9, observation_key="cell", value_update=update)
     env = TransformedEnv(FourRoomsEnv(4, max_steps=40), t)
     check_env_specs(env)
     data = env.rollout(100, break_when_any_done=False)

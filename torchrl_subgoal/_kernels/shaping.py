@@ -32,6 +32,22 @@ def _td_error(table, row, zb, znb, terminated, r, discount, value_gamma):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _learns_from(bootstrap_truncated, zb, znb, terminated):
+    """Whether a closed transition trains ``V``: always, except a time-out inside ``z`` when
+    ``bootstrap_truncated`` is off (it says how long the episode was allowed, not what ``z`` is worth)."""
+    return bootstrap_truncated or terminated or znb != zb
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _expectile_weight(expectile, delta):
+    """The expectile loss's weight of a TD error: ``2τ`` above the value, ``2(1 − τ)`` below; exactly 1
+    for the mean (``τ = 0.5``), so that the mean's update is unchanged bit for bit."""
+    if expectile == 0.5:
+        return 1.0
+    return 2.0 * expectile if delta > 0.0 else 2.0 * (1.0 - expectile)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _shaped_reward(table, row, zb, znb, achieved_prev, terminated, z_start, reward, eta, gamma, zero_terminal,
                    start_mode):
     """``r + γ Φ(z') − Φ(z)`` with the potential as it is now (see :func:`shape_step`)."""
@@ -66,10 +82,11 @@ def _shape_learner(potential, row, zb, znb, achieved_prev, r_h, k, reward, done,
     """
     emit, r, discount, kb = _smdp_accumulate(zb, znb, r_h, k, reward, done, potential.value_gamma)
     table = potential.table
-    if emit and potential.value_lr > 0.0 and table.shape[0] > 0:
+    if (emit and potential.value_lr > 0.0 and table.shape[0] > 0
+            and _learns_from(potential.bootstrap_truncated, zb, znb, terminated)):
         delta = _td_error(table, row, zb, znb, terminated, r, discount, potential.value_gamma)
         if delta != 0.0:
-            table[row, zb] += potential.value_lr * delta
+            table[row, zb] += potential.value_lr * _expectile_weight(potential.expectile, delta) * delta
     shaped = _shaped_reward(table, row, zb, znb, achieved_prev, terminated, z_start, reward, potential.eta,
                             potential.gamma, potential.zero_terminal, potential.start_mode)
     return shaped, r, kb, emit
@@ -130,7 +147,7 @@ def _shape_shared(
     for b in range(n):
         emit, r, discount, kb = _smdp_accumulate(z[b, 0], z_next[b, 0], r_h[b, 0], k[b, 0], reward[b, 0],
                                                  done[b, 0], potential.value_gamma)
-        if emit and learn:
+        if emit and learn and _learns_from(potential.bootstrap_truncated, z[b, 0], z_next[b, 0], terminated[b, 0]):
             delta[b] = _td_error(table, 0, z[b, 0], z_next[b, 0], terminated[b, 0], r, discount,
                                  potential.value_gamma)
         rh_out[b, 0] = 0.0 if emit else r
@@ -142,7 +159,7 @@ def _shape_shared(
     if learn:
         for b in range(n):
             if delta[b] != 0.0:
-                table[0, z[b, 0]] += potential.value_lr * delta[b]
+                table[0, z[b, 0]] += potential.value_lr * _expectile_weight(potential.expectile, delta[b]) * delta[b]
     for b in range(n):
         reward_out[b, 0] = _shaped_reward(table, 0, z[b, 0], z_next[b, 0], achieved_prev[b, 0], terminated[b, 0],
                                           z_start[b, 0], reward[b, 0], potential.eta, potential.gamma,

@@ -411,6 +411,10 @@ class ReproductionConfig(RecipeConfig):
     start_potential: str = setting("value", "level of Φ: value (Φ = V, the authors), zero (Φ(z_0) = 0) or "
                                    "nonpositive (Φ(z_0) = min(V(z_0), 0), the library default)",
                                    choices=["value", "zero", "nonpositive"])
+    expectile: float = setting(0.5, "τ of the learned potential's TD target: 0.5 the mean (the authors), 0.9 the "
+                               "library default")
+    bootstrap_truncated: bool = setting(True, "train V(z) on a time-out inside z (this engine's reproductions; the "
+                                        "library default skips it)")
     engine: str = setting("fused", "fused: one compiled loop; torchrl: step_and_maybe_reset (identical results)",
                           choices=["fused", "torchrl"])
     chunk_size: int = setting(100, "learners per batch (results do not depend on it; small chunks keep both "
@@ -421,6 +425,7 @@ class ReproductionConfig(RecipeConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         check(self.eta >= 0, "eta", f"must be >= 0, got {self.eta}")
+        check(0.0 < self.expectile < 1.0, "expectile", f"must lie strictly between 0 and 1, got {self.expectile}")
 
 
 def sweep_entries(cfg: RecipeConfig, subgoal_file: str, patterns: PatternSets) -> dict[str, Any]:

@@ -221,7 +221,10 @@ class SubgoalTables:
             shape = tuple(mask.shape) if isinstance(mask, torch.Tensor) else type(mask).__name__
             raise ValueError(f"subgoal condition {pred!r} returned {shape}; expected a boolean mask of shape "
                              f"{tuple(self.batch_shape)} (or with a trailing 1)")
-        return mask.reshape(n).to(device=self.lo.device, dtype=torch.bool)
+        if mask.dtype != torch.bool:  # a number is not a truth value: 2 would silently read as achieved
+            raise ValueError(f"subgoal condition {pred!r} returned a {mask.dtype} tensor; expected a boolean mask "
+                             "(a comparison such as `td['passenger'] == 4`)")
+        return mask.reshape(n).to(device=self.lo.device)
 
     def advance(
         self, z: torch.Tensor, observation: torch.Tensor | None, tensordict: TensorDictBase | None = None
@@ -273,9 +276,9 @@ class SubgoalTables:
                 raise type(exc)(f"subgoal condition {self.conditions[c][0]!r} failed on the step's TensorDict: "
                                 f"{exc}") from exc
             if not isinstance(mask, torch.Tensor) or mask.shape[:self._dims] != self.batch_shape \
-                    or mask.numel() != n:
+                    or mask.numel() != n or mask.dtype is not torch.bool:
                 self._mask(self.conditions[c][0], tensordict)  # raises, saying what was expected
-            masks[c] = mask.reshape(n) if mask.dtype is torch.bool else mask.reshape(n).bool()
+            masks[c] = mask.reshape(n)
         return torch.stack(masks, -1).numpy()
 
     def advance_eager(

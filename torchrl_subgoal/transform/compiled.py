@@ -155,7 +155,7 @@ def compiled_step(
     if settings.transitions:
         out["transition"] = transition(setup.batch_shape, {key: current[key] for key in settings.inputs},
                                        {key: out[key] for key in settings.inputs}, r_acc, k_acc, closed, step.done,
-                                       step.terminated)
+                                       step.terminated, z_next != z)
     return out
 
 

@@ -98,7 +98,7 @@ def torch_step(
     if update is not None or settings.transitions:
         smdp = transition(batch_shape, {key: current[key] for key in settings.inputs},
                           {key: nxt[key] for key in settings.inputs},
-                          r_h, k, closed, step.done, step.terminated)
+                          r_h, k, closed, step.done, step.terminated, achieved)
     if update is not None and bool(closed.any()):
         assert smdp is not None
         update(smdp)

@@ -198,7 +198,8 @@ def transition_spec(inputs: dict[str, TensorSpec], shape: torch.Size) -> Composi
     nxt = Composite(**{k: s.clone() for k, s in inputs.items()}, reward=Unbounded(shape=col, dtype=torch.float32),
                     done=flag.clone(), terminated=flag.clone(), shape=shape)
     return Composite(**{k: s.clone() for k, s in inputs.items()},
-                     steps_to_next_obs=Unbounded(shape=col, dtype=torch.long), mask=flag.clone(), next=nxt, shape=shape)
+                     steps_to_next_obs=Unbounded(shape=col, dtype=torch.long), mask=flag.clone(),
+                     achieved=flag.clone(), next=nxt, shape=shape)
 
 
 def observation(spec: Composite, key: NestedKey, what: str) -> TensorSpec:
