@@ -24,7 +24,12 @@ import numpy as np
 import torch
 from torchrl.envs import TransformedEnv
 
-from torchrl_subgoal import SubgoalPotentialTransform, SubgoalValueLoss, TabularPotential, ValueUpdate
+from torchrl_subgoal import (
+    SubgoalPotentialTransform,
+    SubgoalValueLoss,
+    TabularPotential,
+    ValueUpdate,
+)
 from torchrl_subgoal.envs.gym_batch import require_gymnasium
 from torchrl_subgoal.envs.taxi import ENV_ID, STANDS, make_taxi, taxi_subgoals
 from torchrl_subgoal.training.qlearning import QLearningConfig, train_qlearning
@@ -73,9 +78,9 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     gamma = 0.99
     optimal = optimal_values(gamma)
-    print(f"Taxi, {opts.learners} tabular Q-learners over (s, z) per target, {opts.episodes} episodes, γ = {gamma}, "
-          f"α_v = {opts.value_lr}\n")
-    print("| target | z | optimal V*(z) | learned V(z) | (γ − 1)Φ(z) per step inside z | last 50: success, steps |")
+    print(f"Taxi, {opts.learners} tabular Q-learners over (s, z) per target, {opts.episodes} episodes, "
+          f"gamma = {gamma}, alpha_v = {opts.value_lr}\n")
+    print("| target | z | optimal V*(z) | learned V(z) | (gamma - 1) Phi(z) per step inside z | last 50: success, steps |")
     print("|---|---|---|---|---|---|")
     for name, target in TARGETS.items():
         series = taxi_subgoals()

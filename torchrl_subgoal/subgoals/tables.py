@@ -418,6 +418,9 @@ class StateAggregation:
             raise ValueError("a state aggregation needs the observation it reads")
         if self.regions is not None and z.device.type == "cpu":
             n = z.numel()
+            if n and not 0 <= int(z.min()) <= int(z.max()) < self.num_states:  # the kernel indexes by z unchecked
+                raise ValueError(f"abstract states must lie in [0, {self.num_states}) for this aggregation, got "
+                                 f"{int(z.min())}..{int(z.max())}")
             out = np.empty((n, 1), dtype=np.int64)
             advance_regions(self.regions, z.numpy().reshape(n, 1), observation.numpy().reshape(n, -1), out)
             return torch.from_numpy(out).view(z.shape)

@@ -25,7 +25,6 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from tensordict.utils import NestedKey
-from torch import nn
 from torchrl.collectors import Collector
 from torchrl.data import Categorical, OneHot
 from torchrl.envs import EnvBase
@@ -195,7 +194,7 @@ def train_qlearning(
     if not isinstance(act_spec, Categorical):
         raise ValueError(f"tabular Q-learning needs categorical actions, got {type(act_spec).__name__}")
     abstract = 1
-    if config.sees_subgoal and "subgoal_index" in env.observation_spec.keys():
+    if config.sees_subgoal and "subgoal_index" in env.observation_spec:
         abstract = int(env.observation_spec["subgoal_index"].space.high.max()) + 1
     generator = torch.Generator().manual_seed(seed)
     policy = EpsilonGreedyQ(n, int(obs_spec.space.n), int(act_spec.space.n), abstract, config.epsilon, config.init,
