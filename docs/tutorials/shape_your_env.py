@@ -140,7 +140,7 @@ def train(shaped: bool, frames: int, seed: int, num_envs: int = 16, frames_per_b
         potential = TabularPotential(series.num_abstract_states)  # Φ(z): one table for the batch
         transform = SubgoalPotentialTransform(  # reward ← r + γΦ(z') − Φ(z); r stays under "env_reward"
             series, potential, gamma=GAMMA, observation_key="observation",
-            value_update=VALUE_LR,  # train Φ online: the paper's tabular SMDP update, before shaping each step
+            value_update=VALUE_LR,  # train Φ online (the tabular SMDP update, optimistic target), before shaping each step
         )
     env = make_env_with(transform, num_envs, seed)
     actor, update = a2c_agent()
