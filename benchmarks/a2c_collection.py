@@ -100,7 +100,7 @@ def paired_costs(
     base_times: dict[str, list[float]] = {"cpu": [], "wall": []}
     for r in range(repeats):
         per_frame: dict[str, tuple[float, float]] = {}
-        for name in names[r % len(names):] + names[:r % len(names)]:
+        for name in names[r % len(names) :] + names[: r % len(names)]:
             cpu, wall = time.process_time(), time.perf_counter()
             frames = setups[name]()
             per_frame[name] = ((time.process_time() - cpu) / frames, (time.perf_counter() - wall) / frames)
@@ -180,16 +180,27 @@ def hrs_shaping(domain: A2CDomain) -> Shaping:
     if domain.name == "four_rooms":
         return Shaping(HALLWAYS, TabularPotential(3), {"observation_key": "cell"})
     patterns = list(load_patterns(domain.participants, domain=domain.name).values())[:1]
-    parts = shaping_parts(paper_methods(baseline="A2C")["HRS"], (), patterns=patterns, eta=domain.eta,
-                          observation_key=domain.subgoal_key, aggregation_key=domain.aggregation_key,
-                          start_potential="value")  # recipes/a2c.py's default
+    parts = shaping_parts(
+        paper_methods(baseline="A2C")["HRS"],
+        (),
+        patterns=patterns,
+        eta=domain.eta,
+        observation_key=domain.subgoal_key,
+        aggregation_key=domain.aggregation_key,
+        start_potential="value",
+    )  # recipes/a2c.py's default
     assert parts is not None
     return Shaping(*parts)
 
 
 def a2c_iterations(
-    shaping: Shaping | None, domain: A2CDomain, config: A2CConfig, batches: int, online: bool,
-    networks: tuple[TensorDictModuleBase, TensorDictModuleBase] | None = None, lr: float | None = None,
+    shaping: Shaping | None,
+    domain: A2CDomain,
+    config: A2CConfig,
+    batches: int,
+    online: bool,
+    networks: tuple[TensorDictModuleBase, TensorDictModuleBase] | None = None,
+    lr: float | None = None,
     keys_only: bool = False,
     kept: int = 3,
 ) -> tuple[Callable[[], int], tuple[TensorDictModuleBase, TensorDictModuleBase]]:
@@ -201,27 +212,43 @@ def a2c_iterations(
     computing them: what TorchRL's per-entry bookkeeping costs any such transform (``kept``: how many of
     the three carried entries it writes).
     """
-    env = shaped_env(domain.make_env, config.num_envs, shaping=shaping, gamma=config.gamma,
-                     value_lr=config.value_lr if online else None, reward_scale=config.reward_scale)
+    env = shaped_env(
+        domain.make_env,
+        config.num_envs,
+        shaping=shaping,
+        gamma=config.gamma,
+        value_lr=config.value_lr if online else None,
+        reward_scale=config.reward_scale,
+    )
     if keys_only:
         sys.path.insert(0, str(Path(__file__).resolve().parent))
         from four_rooms_step import KeysOnly
 
         env.transform.insert(1, KeysOnly(kept))
-    actor, critic = (copy.deepcopy(networks[0]), copy.deepcopy(networks[1])) if networks else actor_critic(
-        env, domain.observation_key, features=config.features, hidden=config.hidden,
-        fourier_order=config.fourier_order)
+    actor, critic = (
+        (copy.deepcopy(networks[0]), copy.deepcopy(networks[1]))
+        if networks
+        else actor_critic(
+            env,
+            domain.observation_key,
+            features=config.features,
+            hidden=config.hidden,
+            fourier_order=config.fourier_order,
+        )
+    )
     advantage = GAE(gamma=config.gamma, lmbda=config.gae_lambda, value_network=critic)
-    loss = A2CLoss(actor, critic, entropy_coeff=config.entropy_coeff, critic_coeff=config.critic_coeff,
-                   loss_critic_type="l2")
+    loss = A2CLoss(
+        actor, critic, entropy_coeff=config.entropy_coeff, critic_coeff=config.critic_coeff, loss_critic_type="l2"
+    )
     optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr if lr is None else lr)
     keeper, value_loss, value_optimizer = None, None, None
     if shaping is not None and not online:
         keeper = shaping.transform(shaping.potential, config.gamma, None)
         value_loss = SubgoalValueLoss(shaping.potential, reduction="mean").make_value_estimator(gamma=config.gamma)
         value_optimizer = torch.optim.Adam(shaping.potential.parameters(), lr=config.value_lr)
-    collector = Collector(env, actor, frames_per_batch=config.frames_per_batch, total_frames=-1,
-                          auto_register_policy_transforms=False)
+    collector = Collector(
+        env, actor, frames_per_batch=config.frames_per_batch, total_frames=-1, auto_register_policy_transforms=False
+    )
     iterator = iter(collector)
 
     def run() -> int:
@@ -251,10 +278,17 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer repeats")
     parser.add_argument("--part", choices=["1", "2", "both"], default="both", help="which part to run")
     parser.add_argument("--repeats", type=int, default=0, help="rounds (default 7, --quick 3; part 2: 11 / 5)")
-    parser.add_argument("--domain", choices=["four_rooms", "pinball"], default="four_rooms",
-                        help="part 2: the A2C recipe's domain whose settings are timed")
-    parser.add_argument("--calls", action="store_true",
-                        help="part 2: also count Python function calls per iteration (independent of the load)")
+    parser.add_argument(
+        "--domain",
+        choices=["four_rooms", "pinball"],
+        default="four_rooms",
+        help="part 2: the A2C recipe's domain whose settings are timed",
+    )
+    parser.add_argument(
+        "--calls",
+        action="store_true",
+        help="part 2: also count Python function calls per iteration (independent of the load)",
+    )
     args = parser.parse_args()
     if args.repeats < 0:
         parser.error(f"--repeats must be >= 0, got {args.repeats}")
@@ -276,8 +310,10 @@ def collector_throughput(repeats: int, batches: int) -> None:
         "Collector, ParallelEnv 1 worker": ParallelEnv(1, functools.partial(FourRoomsEnv, 16), mp_start_method="spawn"),
         "Collector, ParallelEnv 2 workers": ParallelEnv(2, functools.partial(FourRoomsEnv, 8), mp_start_method="spawn"),
     }
-    collectors = {name: Collector(env, None, frames_per_batch=256, total_frames=-1,
-                                  auto_register_policy_transforms=False) for name, env in envs.items()}
+    collectors = {
+        name: Collector(env, None, frames_per_batch=256, total_frames=-1, auto_register_policy_transforms=False)
+        for name, env in envs.items()
+    }
     try:
         setups = {"bare batched env": bare_env_steps(FourRoomsEnv(16), 16 * batches)}
         setups |= {name: collector_batches(c, batches) for name, c in collectors.items()}
@@ -290,40 +326,53 @@ def collector_throughput(repeats: int, batches: int) -> None:
         print(f"  {name:34s} {rate:9.0f} frames/s   {rate / base:5.2f} x bare")
 
 
-
 def transform_cost(domain: A2CDomain, repeats: int, batches: int, calls: bool = False) -> None:
     """Part 2."""
     config = domain.a2c
-    print(f"Part 2: A2C iteration (collect {config.frames_per_batch} frames + GAE + A2C step [+ potential step]), "
-          f"recipe settings of {domain.name} ({config.num_envs} envs, {config.features} features),")
+    print(
+        f"Part 2: A2C iteration (collect {config.frames_per_batch} frames + GAE + A2C step [+ potential step]), "
+        f"recipe settings of {domain.name} ({config.num_envs} envs, {config.features} features),"
+    )
     print("        every set-up with the same policy (trained briefly by plain A2C, then kept: lr 0)")
     torch.manual_seed(0)
     pretrain, networks = a2c_iterations(None, domain, config, 120, online=False)
     pretrain()  # ~30k frames (four-rooms: episodes of ~50-100 steps, so resets happen as in training)
     setups = {
         "plain A2C": a2c_iterations(None, domain, config, batches, False, networks, lr=0.0)[0],
-        "keys-only transform (floor)": a2c_iterations(None, domain, config, batches, False, networks, lr=0.0,
-                                                      keys_only=True)[0],
-        "HRS, potential trained per batch": a2c_iterations(hrs_shaping(domain), domain, config, batches, False,
-                                                           networks, lr=0.0)[0],
-        "HRS, potential trained online": a2c_iterations(hrs_shaping(domain), domain, config, batches, True,
-                                                        networks, lr=0.0)[0],
+        "keys-only transform (floor)": a2c_iterations(
+            None, domain, config, batches, False, networks, lr=0.0, keys_only=True
+        )[0],
+        "HRS, potential trained per batch": a2c_iterations(
+            hrs_shaping(domain), domain, config, batches, False, networks, lr=0.0
+        )[0],
+        "HRS, potential trained online": a2c_iterations(
+            hrs_shaping(domain), domain, config, batches, True, networks, lr=0.0
+        )[0],
     }
     print(f"        {repeats} rounds; load average before {load_average()}")
     costs, plain = paired_costs(setups, repeats, "plain A2C")
-    print(f"        load average after {load_average()}; plain A2C iteration (median): CPU "
-          f"{1e3 * plain['cpu'] * config.frames_per_batch:.1f} ms, wall {1e3 * plain['wall'] * config.frames_per_batch:.1f} ms")
+    print(
+        f"        load average after {load_average()}; plain A2C iteration (median): CPU "
+        f"{1e3 * plain['cpu'] * config.frames_per_batch:.1f} ms, "
+        f"wall {1e3 * plain['wall'] * config.frames_per_batch:.1f} ms"
+    )
     print("        cost = time over the plain iteration's in the same round - 1, median [lowest, highest]")
     for name, clocks in costs.items():
         if name == "plain A2C":
             continue
         cpu, wall = clocks["cpu"], clocks["wall"]
-        print(f"  {name:34s} CPU {100 * cpu[0]:+5.1f}% [{100 * cpu[1]:+5.1f}, {100 * cpu[2]:+5.1f}]   "
-              f"wall {100 * wall[0]:+5.1f}% [{100 * wall[1]:+5.1f}, {100 * wall[2]:+5.1f}]")
+        print(
+            f"  {name:34s} CPU {100 * cpu[0]:+5.1f}% [{100 * cpu[1]:+5.1f}, {100 * cpu[2]:+5.1f}]   "
+            f"wall {100 * wall[0]:+5.1f}% [{100 * wall[1]:+5.1f}, {100 * wall[2]:+5.1f}]"
+        )
     if calls:
         # the floor of smaller entry formats: env_reward and the shaped reward, and 0-2 carried entries
-        setups |= {f"keys-only, {kept} of 3 carried entries": a2c_iterations(
-            None, domain, config, batches, False, networks, lr=0.0, keys_only=True, kept=kept)[0] for kept in (2, 1, 0)}
+        setups |= {
+            f"keys-only, {kept} of 3 carried entries": a2c_iterations(
+                None, domain, config, batches, False, networks, lr=0.0, keys_only=True, kept=kept
+            )[0]
+            for kept in (2, 1, 0)
+        }
         counts = call_counts(setups)
         per_iteration = config.frames_per_batch
         print(f"        Python function calls per iteration ({per_iteration} frames), one call of every set-up:")

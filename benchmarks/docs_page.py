@@ -38,7 +38,8 @@ def clean(text: str, tmp: Path | None = None) -> str:
     temporary directory ``tmp`` written ``RESULTS``.
 
     Examples:
-        >>> clean("\x1b[32mok\x1b[0m\n2026-01-02 03:04:05,678 [torchrl][INFO] storage\nResults: `/tmp/x/a`", Path("/tmp/x"))
+        >>> log = "\x1b[32mok\x1b[0m\n2026-01-02 03:04:05,678 [torchrl][INFO] storage\nResults: `/tmp/x/a`"
+        >>> clean(log, Path("/tmp/x"))
         'ok\nResults: `RESULTS/a`'
     """
     text = _STAMPED.sub("", _ANSI.sub("", text))
@@ -64,53 +65,86 @@ class Run:
 
 
 RUNS = (
-    Run("four_rooms_step", "Four-rooms env and the shaping transform",
+    Run(
+        "four_rooms_step",
+        "Four-rooms env and the shaping transform",
         "env-steps per second of `FourRoomsEnv(1000)` bare, wrapped, with the shaping transform, and the "
         "TorchRL loop against the fused engine for SARSA + HRS.",
-        ("benchmarks/four_rooms_step.py", "--quick")),
-    Run("pinball_step", "PinBall physics and env",
+        ("benchmarks/four_rooms_step.py", "--quick"),
+    ),
+    Run(
+        "pinball_step",
+        "PinBall physics and env",
         "ball-steps per second of the batched PinBall physics (numba, torch) and of the TorchRL env loop, "
         "beside the single-ball `pynball-rl` package.",
-        ("benchmarks/pinball_step.py", "--quick")),
-    Run("a2c_collection", "Collector throughput and the transform's cost in A2C",
+        ("benchmarks/pinball_step.py", "--quick"),
+    ),
+    Run(
+        "a2c_collection",
+        "Collector throughput and the transform's cost in A2C",
         "frames per second of TorchRL `Collector`s over the batched four-rooms env (in process and over a "
         "`ParallelEnv`), and the time of one A2C iteration with and without the shaping transform.",
-        ("benchmarks/a2c_collection.py", "--quick")),
-    Run("transform_cost", "What the shaping transform costs a collector and an A2C iteration",
+        ("benchmarks/a2c_collection.py", "--quick"),
+    ),
+    Run(
+        "transform_cost",
+        "What the shaping transform costs a collector and an A2C iteration",
         "Python calls per collector batch (16 four-rooms envs x 16 steps) the shaping transform adds over an "
         "empty `TransformedEnv`, beside TorchRL's `RewardSum` + `StepCounter`, and its share of an A2C "
         "iteration at the A2C recipe's four-rooms settings.",
-        ("benchmarks/transform_cost.py", "--repeats", "5")),
-    Run("finite_check", "The NaN/inf check of the transform",
+        ("benchmarks/transform_cost.py", "--repeats", "5"),
+    ),
+    Run(
+        "finite_check",
+        "The NaN/inf check of the transform",
         "env-steps per second with and without the transform's finite-reward check.",
-        ("benchmarks/finite_check.py", "--steps", "200", "--repeats", "3")),
-    Run("pick_and_place_throughput", "Pick-and-place collection and DDPG steps",
+        ("benchmarks/finite_check.py", "--steps", "200", "--repeats", "3"),
+    ),
+    Run(
+        "pick_and_place_throughput",
+        "Pick-and-place collection and DDPG steps",
         "MuJoCo Fetch env-steps per second raw and through shaped collectors (the recipe's stack, whose envs "
         "step with `fetch.LeanStep`, beside the same with gymnasium's step), CPU time per env step beside the "
         "raw env's, DDPG gradient steps per CPU second (beside a hand-written torch step), the FLOP floor, and "
         "the projected time of one paper-scale learning.",
-        ("benchmarks/pick_and_place_throughput.py", "--quick", "--repeats", "1")),
-    Run("training_throughput", "Learner frames per second of the training building blocks",
+        ("benchmarks/pick_and_place_throughput.py", "--quick", "--repeats", "1"),
+    ),
+    Run(
+        "training_throughput",
+        "Learner frames per second of the training building blocks",
         "frames per CPU second of A2C, PPO, DQN and DDPG learnings (four-rooms, PinBall, PointMaze UMaze) "
         "without shaping and with HRS, and the median HRS / plain ratio.",
-        ("benchmarks/training_throughput.py", "--quick")),
-    Run("studio_try_it", "The studio's Try it",
+        ("benchmarks/training_throughput.py", "--quick"),
+    ),
+    Run(
+        "studio_try_it",
+        "The studio's Try it",
         "wall time of the studio's *Try it* (HRS and the unshaped learner on the fused engine) at its default "
         "and largest settings, for four-rooms and PinBall.",
-        ("benchmarks/studio_try_it.py",)),
-    Run("four_rooms_demo", "End to end: the four-rooms reproduction at `make demo` scale",
+        ("benchmarks/studio_try_it.py",),
+    ),
+    Run(
+        "four_rooms_demo",
+        "End to end: the four-rooms reproduction at `make demo` scale",
         "wall time of `make demo`'s run (5 methods x 10 patterns x 10 learnings x 1,000 episodes, fused engine) "
         "including the report, in one worker process (`make demo` uses 2).",
-        ("recipes/four_rooms.py", "--workers", "1", "--results", "{tmp}/four_rooms")),
-    Run("pinball_small", "End to end: a small PinBall reproduction",
+        ("recipes/four_rooms.py", "--workers", "1", "--results", "{tmp}/four_rooms"),
+    ),
+    Run(
+        "pinball_small",
+        "End to end: a small PinBall reproduction",
         "wall time of `recipes/pinball.py` at 1 learning per pattern (10 learners per method, 200 episodes), "
         "in one worker process.",
-        ("recipes/pinball.py", "--learnings", "1", "--workers", "1", "--results", "{tmp}/pinball")),
-    Run("reproduction_speed", "End to end: the four-rooms reproduction at the paper's scale",
+        ("recipes/pinball.py", "--learnings", "1", "--workers", "1", "--results", "{tmp}/pinball"),
+    ),
+    Run(
+        "reproduction_speed",
+        "End to end: the four-rooms reproduction at the paper's scale",
         "wall time, CPU time, cores busy, learner-steps per second and the share of wall time after 99% of the "
         "learner-episodes of `recipes/four_rooms.py --learnings 100` (5 methods x 1,000 learnings x 1,000 "
         "episodes, 2 workers, report included).",
-        ("benchmarks/reproduction_speed.py", "--domains", "four_rooms")),
+        ("benchmarks/reproduction_speed.py", "--domains", "four_rooms"),
+    ),
 )
 
 
@@ -170,21 +204,38 @@ def run(item: Run, tmp: Path, timeout: float) -> list[str]:
     load_before = _load()
     start = time.perf_counter()
     try:
-        done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=timeout,
-                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        done = subprocess.run(
+            command,
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
         status, out, err = done.returncode, done.stdout, done.stderr
     except subprocess.TimeoutExpired as exc:
         status = None
         out = exc.stdout.decode() if isinstance(exc.stdout, bytes) else (exc.stdout or "")
         err = f"timed out after {timeout:.0f} s"
     wall = time.perf_counter() - start
-    lines = [f"## {item.title}", "", item.what, "",
-             f"`{shown}`: wall time {wall:.0f} s, load average (1/5/15 min) {load_before} before, "
-             f"{_load()} after.", ""]
+    lines = [
+        f"## {item.title}",
+        "",
+        item.what,
+        "",
+        f"`{shown}`: wall time {wall:.0f} s, load average (1/5/15 min) {load_before} before, {_load()} after.",
+        "",
+    ]
     if status != 0:
         tail = "\n".join(clean(err, tmp).strip().splitlines()[-15:])
-        lines += [f"**Failed** ({'timeout' if status is None else f'exit status {status}'}):", "",
-                  "```text", tail, "```", ""]
+        lines += [
+            f"**Failed** ({'timeout' if status is None else f'exit status {status}'}):",
+            "",
+            "```text",
+            tail,
+            "```",
+            "",
+        ]
     if out.strip():
         lines += ["```text", clean(out, tmp).rstrip(), "```", ""]
     return lines
@@ -211,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
         "script's (log lines with a time stamp left out). One section can be measured again on its own "
         "(`python benchmarks/docs_page.py OUT --only NAME`, the names in `benchmarks/docs_page.py`).",
         "",
-        "!!! note \"Reading the figures\"",
+        '!!! note "Reading the figures"',
         f"    Each run's load average is printed with it: with {cores} logical cores, a load above {cores} "
         "means the run waited for a core, and its absolute rates are then low. Compare the ratios *within* "
         "one benchmark, whose set-ups are timed in one run. The reproduction pages give the figures "

@@ -33,8 +33,13 @@ def main() -> None:
     torch.set_num_threads(1)
     n = args.envs
     patterns = list(load_patterns(str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")).values())
-    shaping = SubgoalPotentialTransform([patterns[i % len(patterns)] for i in range(n)], TabularPotential(3, (n,)),
-                                        gamma=0.99, observation_key="cell", value_update=0.1)
+    shaping = SubgoalPotentialTransform(
+        [patterns[i % len(patterns)] for i in range(n)],
+        TabularPotential(3, (n,)),
+        gamma=0.99,
+        observation_key="cell",
+        value_update=0.1,
+    )
     env = TransformedEnv(FourRoomsEnv(n), shaping)
     td = env.reset()
     check = transform_module.check_finite

@@ -46,8 +46,12 @@ PATTERNS = list(load_patterns(str(files("torchrl_subgoal") / "data" / "four_room
 
 def shaping(n: int, write: bool) -> SubgoalPotentialTransform:
     return SubgoalPotentialTransform(
-        [PATTERNS[i % len(PATTERNS)] for i in range(n)], TabularPotential(3, (n,)), gamma=0.99,
-        observation_key="cell", value_update=0.25, transitions_key="smdp" if write else None,
+        [PATTERNS[i % len(PATTERNS)] for i in range(n)],
+        TabularPotential(3, (n,)),
+        gamma=0.99,
+        observation_key="cell",
+        value_update=0.25,
+        transitions_key="smdp" if write else None,
     )
 
 
@@ -82,8 +86,9 @@ class KeysOnly(Transform):
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         reward = next_tensordict.get("reward")
-        next_tensordict.update({**self._zeros(next_tensordict.batch_size), "env_reward": reward,
-                                 "reward": reward.clone()})
+        next_tensordict.update(
+            {**self._zeros(next_tensordict.batch_size), "env_reward": reward, "reward": reward.clone()}
+        )
         return next_tensordict
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
@@ -138,15 +143,21 @@ def main() -> None:
     for name, t in times.items():
         print(f"{name:<22}{best[name] * 1e6:>16.0f}{statistics.median(t) * 1e6:>10.0f}{n / best[name]:>14,.0f}")
     for name in ("keys-only", "shaping", "shaping+transitions"):
-        print(f"{name}: +{best[name] / best['wrapper'] - 1:.0%} over the wrapper alone, "
-              f"+{best[name] / best['bare'] - 1:.0%} over the bare env")
+        print(
+            f"{name}: +{best[name] / best['wrapper'] - 1:.0%} over the wrapper alone, "
+            f"+{best[name] / best['bare'] - 1:.0%} over the bare env"
+        )
 
     print(f"\nPart 2: SARSA + HRS, {args.episodes} episodes per learner, N = {n}")
     rates = {}
     engines: tuple[Literal["torchrl", "fused"], ...] = ("torchrl", "fused")
     for engine in engines:  # warm up: numba compiles (or loads) the kernels once
-        run_episodes(TransformedEnv(FourRoomsEnv(4, max_steps=20), shaping(4, False)),
-                     SoftmaxSarsa(4, 104, 4, SARSA_PRESETS["released"]), 1, engine=engine)
+        run_episodes(
+            TransformedEnv(FourRoomsEnv(4, max_steps=20), shaping(4, False)),
+            SoftmaxSarsa(4, 104, 4, SARSA_PRESETS["released"]),
+            1,
+            engine=engine,
+        )
     for engine in engines:
         env = TransformedEnv(FourRoomsEnv(n), shaping(n, False))
         agent = SoftmaxSarsa(n, 104, 4, SARSA_PRESETS["released"], seed=0)
@@ -154,8 +165,10 @@ def main() -> None:
         records = run_episodes(env, agent, args.episodes, engine=engine)
         seconds = time.perf_counter() - start
         rates[engine] = records.env_steps * n / seconds
-        print(f"{engine:<8} {seconds:6.1f} s, {records.env_steps} batched steps, "
-              f"{rates[engine]:,.0f} learner-steps/s, mean episode {records.steps.float().mean():.0f} steps")
+        print(
+            f"{engine:<8} {seconds:6.1f} s, {records.env_steps} batched steps, "
+            f"{rates[engine]:,.0f} learner-steps/s, mean episode {records.steps.float().mean():.0f} steps"
+        )
     print(f"fused / torchrl: {rates['fused'] / rates['torchrl']:.1f}x")
 
 

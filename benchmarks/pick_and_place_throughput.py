@@ -124,8 +124,12 @@ class Watchdog:
         while True:
             time.sleep(min(1.0, self.seconds / 4))
             if time.monotonic() - self.last > self.seconds:
-                print(f"error: {self.what}: nothing for {self.seconds:.0f} s (--timeout); the stacks follow, "
-                      "then the collectors' worker processes are killed", file=sys.stderr, flush=True)
+                print(
+                    f"error: {self.what}: nothing for {self.seconds:.0f} s (--timeout); the stacks follow, "
+                    "then the collectors' worker processes are killed",
+                    file=sys.stderr,
+                    flush=True,
+                )
                 faulthandler.dump_traceback(file=sys.stderr)
                 for child in multiprocessing.active_children():
                     child.kill()
@@ -144,8 +148,12 @@ def next_batch(batches: Iterator[TensorDict], name: str) -> TensorDict:
     return batch
 
 
-def make_collector(collector_workers: int, env_workers: int, envs: int, stack: str = "lean",
-                   ) -> Collector | MultiSyncCollector:
+def make_collector(
+    collector_workers: int,
+    env_workers: int,
+    envs: int,
+    stack: str = "lean",
+) -> Collector | MultiSyncCollector:
     """A ``MultiSyncCollector`` of ``collector_workers`` processes (0: a ``Collector`` here) stepping
     ``envs`` envs each (in ``env_workers`` ParallelEnv processes, 0: in the collecting process), HRS shaping.
 
@@ -156,20 +164,38 @@ def make_collector(collector_workers: int, env_workers: int, envs: int, stack: s
     series = fetch.human_patterns()["participants"]
     shaping = Shaping([series], NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, (256, 256, 256))))
     make_env = partial(fetch.make_fetch_envs, 0, lean=stack == "lean")
-    factory = EnvFactory(shaped_env, make_env=make_env, num_envs=envs, env_workers=env_workers, shaping=shaping,
-                         potential=shaping.potential, gamma=0.98, episode_stats=False)
-    agent = DDPGAgent(fetch.OBSERVATION_SIZE, fetch.make_fetch_env(0).action_spec_unbatched,
-                      DDPGConfig(buffer_size=1000))
+    factory = EnvFactory(
+        shaped_env,
+        make_env=make_env,
+        num_envs=envs,
+        env_workers=env_workers,
+        shaping=shaping,
+        potential=shaping.potential,
+        gamma=0.98,
+        episode_stats=False,
+    )
+    agent = DDPGAgent(
+        fetch.OBSERVATION_SIZE, fetch.make_fetch_env(0).action_spec_unbatched, DDPGConfig(buffer_size=1000)
+    )
     policy = agent.policy
     frames = 50 * envs * max(collector_workers, 1)
-    return (Collector(factory(), policy, frames_per_batch=frames, total_frames=-1,
-                      auto_register_policy_transforms=False) if collector_workers == 0 else
-            MultiSyncCollector([factory] * collector_workers, policy, frames_per_batch=frames,
-                               total_frames=-1, cat_results="stack", auto_register_policy_transforms=False))
+    return (
+        Collector(factory(), policy, frames_per_batch=frames, total_frames=-1, auto_register_policy_transforms=False)
+        if collector_workers == 0
+        else MultiSyncCollector(
+            [factory] * collector_workers,
+            policy,
+            frames_per_batch=frames,
+            total_frames=-1,
+            cat_results="stack",
+            auto_register_policy_transforms=False,
+        )
+    )
 
 
-def collector_rate(collector_workers: int, env_workers: int, envs: int, steps: int, repeats: int,
-                   stack: str = "lean") -> float:
+def collector_rate(
+    collector_workers: int, env_workers: int, envs: int, steps: int, repeats: int, stack: str = "lean"
+) -> float:
     """Env steps/s of :func:`make_collector`'s collector (the best of ``repeats`` timings of ``steps``)."""
     name = f"{collector_workers} collector worker(s) x {envs} env(s), {stack}"
     WATCHDOG.beat(f"starting {name}")
@@ -193,10 +219,12 @@ def interleaved(steps: int, rounds: int) -> None:
     """The raw env and the ``MultiSyncCollector`` layouts of the target, every one alive at once and timed
     in turn, ``rounds`` times: on a shared machine each round's ratios to that round's raw rate hold up
     better than rates timed minutes apart."""
-    layouts = {"MultiSyncCollector, 1 worker x 3 envs": (1, 0, 3, "lean"),
-               "MultiSyncCollector, 2 workers x 3 envs": (2, 0, 3, "lean"),
-               "MultiSyncCollector, 2 workers x 3 envs, gymnasium step": (2, 0, 3, "gymnasium step"),
-               "MultiSyncCollector, 2 workers x 6 envs": (2, 0, 6, "lean")}
+    layouts = {
+        "MultiSyncCollector, 1 worker x 3 envs": (1, 0, 3, "lean"),
+        "MultiSyncCollector, 2 workers x 3 envs": (2, 0, 3, "lean"),
+        "MultiSyncCollector, 2 workers x 3 envs, gymnasium step": (2, 0, 3, "gymnasium step"),
+        "MultiSyncCollector, 2 workers x 6 envs": (2, 0, 6, "lean"),
+    }
     WATCHDOG.beat("starting the collectors")
     collectors = {name: make_collector(*layout) for name, layout in layouts.items()}
     iterators = {name: iter(collector) for name, collector in collectors.items()}
@@ -216,8 +244,11 @@ def interleaved(steps: int, rounds: int) -> None:
     raw = rates["raw gymnasium env, 1 process"]
     for name, values in rates.items():
         label = name + (":" if values is raw else ", HRS shaping:")
-        print(f"{label:66s} best {max(values):5.0f} env-steps/s ({max(values) / max(raw):.2f}x the "
-              f"best raw); per round, x that round's raw: " + ", ".join(f"{v / r:.2f}" for v, r in zip(values, raw, strict=True)))
+        print(
+            f"{label:66s} best {max(values):5.0f} env-steps/s ({max(values) / max(raw):.2f}x the "
+            f"best raw); per round, x that round's raw: "
+            + ", ".join(f"{v / r:.2f}" for v, r in zip(values, raw, strict=True))
+        )
 
 
 def cpu_per_step(envs: int, steps: int, repeats: int) -> dict[str, float]:
@@ -261,8 +292,7 @@ def profile_collector(steps: int, lean: bool) -> None:
     steps with :class:`fetch.LeanStep`, else with gymnasium's step)."""
     series = fetch.human_patterns()["participants"]
     shaping = Shaping([series], NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, (256, 256, 256))))
-    env = shaped_env(partial(fetch.make_fetch_envs, 0, lean=lean), 1, shaping=shaping, gamma=0.98,
-                     episode_stats=False)
+    env = shaped_env(partial(fetch.make_fetch_envs, 0, lean=lean), 1, shaping=shaping, gamma=0.98, episode_stats=False)
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, env.action_spec_unbatched, DDPGConfig(buffer_size=1000))
     explore = agent.policy.forward
 
@@ -270,8 +300,9 @@ def profile_collector(steps: int, lean: bool) -> None:
         return explore(tensordict)
 
     agent.policy.forward = policy_forward
-    collector = Collector(env, agent.policy, frames_per_batch=50, total_frames=-1,
-                          auto_register_policy_transforms=False)
+    collector = Collector(
+        env, agent.policy, frames_per_batch=50, total_frames=-1, auto_register_policy_transforms=False
+    )
     batches = iter(collector)
     next(batches)
     profiler = cProfile.Profile()
@@ -285,16 +316,20 @@ def profile_collector(steps: int, lean: bool) -> None:
     lean_line = inspect.getsourcelines(fetch.LeanStep.step)[1]
     parts: dict[str, Callable[[str, int, str], bool]] = {
         "policy (actor 3x256 + exploration)": lambda f, line, n: n == "policy_forward",
-        "shaping transform (+ neural potential)": lambda f, line, n: n == "_step" and f.endswith(
-            "torchrl_subgoal/transform.py"),
+        "shaping transform (+ neural potential)": lambda f, line, n: (
+            n == "_step" and f.endswith("torchrl_subgoal/transform.py")
+        ),
         "batched Fetch env (make_fetch_envs)": lambda f, line, n: n == "_step" and f.endswith("envs/fetch.py"),
-        "gymnasium-robotics step (incl. MuJoCo)": lambda f, line, n: n == "step" and f.endswith(
-            "gymnasium_robotics/envs/robot_env.py"),
+        "gymnasium-robotics step (incl. MuJoCo)": lambda f, line, n: (
+            n == "step" and f.endswith("gymnasium_robotics/envs/robot_env.py")
+        ),
         "LeanStep.step (incl. MuJoCo)": lambda f, line, n: line == lean_line and f.endswith("envs/fetch.py"),
         "MuJoCo mj_step": lambda f, line, n: "mj_step" in n,
     }
-    print(f"profile of {steps} collector steps, {'LeanStep' if lean else 'gymnasium step'} "
-          f"({total:.2f} s profiled; cumulative shares):")
+    print(
+        f"profile of {steps} collector steps, {'LeanStep' if lean else 'gymnasium step'} "
+        f"({total:.2f} s profiled; cumulative shares):"
+    )
     for label, match in parts.items():
         cumulative = sum(ct for (f, line, n), (_, _, _, ct, _) in stats.items() if match(f, line, n))
         print(f"  {label:42s} {100 * cumulative / total:5.1f}%")
@@ -303,21 +338,35 @@ def profile_collector(steps: int, lean: bool) -> None:
 def _filled_agent(batch_size: int, spec: Bounded) -> DDPGAgent:
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, spec, DDPGConfig(buffer_size=20_000, batch_size=batch_size))
     n = 10_000
-    agent.extend(TensorDict({
-        "observation": torch.randn(n, fetch.OBSERVATION_SIZE), "action": spec.rand((n,)),
-        "next": {"observation": torch.randn(n, fetch.OBSERVATION_SIZE), "reward": -torch.ones(n, 1),
-                 "done": torch.zeros(n, 1, dtype=torch.bool), "terminated": torch.zeros(n, 1, dtype=torch.bool)},
-    }, [n]))
+    agent.extend(
+        TensorDict(
+            {
+                "observation": torch.randn(n, fetch.OBSERVATION_SIZE),
+                "action": spec.rand((n,)),
+                "next": {
+                    "observation": torch.randn(n, fetch.OBSERVATION_SIZE),
+                    "reward": -torch.ones(n, 1),
+                    "done": torch.zeros(n, 1, dtype=torch.bool),
+                    "terminated": torch.zeros(n, 1, dtype=torch.bool),
+                },
+            },
+            [n],
+        )
+    )
     return agent
 
 
 def _hand_written_update(batch_size: int) -> Callable[[], None]:
     """The floor: the same networks, targets, clip, penalty and fused Adam in plain torch, no TorchRL."""
+
     def net(inputs: int, outputs: int) -> nn.Module:
         return mlp(inputs, outputs, (256, 256, 256))
 
     actor, critic = net(fetch.OBSERVATION_SIZE, 4), net(fetch.OBSERVATION_SIZE + 4, 1)
-    target_actor, target_critic = copy.deepcopy(actor).requires_grad_(False), copy.deepcopy(critic).requires_grad_(False)
+    target_actor, target_critic = (
+        copy.deepcopy(actor).requires_grad_(False),
+        copy.deepcopy(critic).requires_grad_(False),
+    )
     actor_opt = torch.optim.Adam(actor.parameters(), lr=1e-3, fused=True)
     critic_opt = torch.optim.Adam(critic.parameters(), lr=1e-3, fused=True)
     n = 10_000
@@ -392,12 +441,23 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="timings per figure (best is kept)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads for the gradient steps")
     parser.add_argument("--profile", action="store_true", help="only profile the one-process collector")
-    parser.add_argument("--interleaved", type=int, default=0, metavar="ROUNDS",
-                        help="only the raw env and the 1 x 3, 2 x 3 and 2 x 6 collectors, timed in turn ROUNDS times")
-    parser.add_argument("--collectors-only", action="store_true",
-                        help="env-steps only: no DDPG gradient steps, no projection")
-    parser.add_argument("--timeout", type=float, default=600.0, metavar="SECONDS",
-                        help="end the run when a collector gives no batch for this long (0: wait forever)")
+    parser.add_argument(
+        "--interleaved",
+        type=int,
+        default=0,
+        metavar="ROUNDS",
+        help="only the raw env and the 1 x 3, 2 x 3 and 2 x 6 collectors, timed in turn ROUNDS times",
+    )
+    parser.add_argument(
+        "--collectors-only", action="store_true", help="env-steps only: no DDPG gradient steps, no projection"
+    )
+    parser.add_argument(
+        "--timeout",
+        type=float,
+        default=600.0,
+        metavar="SECONDS",
+        help="end the run when a collector gives no batch for this long (0: wait forever)",
+    )
     args = parser.parse_args()
     if args.timeout < 0:
         parser.error(f"--timeout: seconds >= 0 (got {args.timeout})")
@@ -435,9 +495,15 @@ def main() -> None:
         print(f"{name + ', HRS shaping:':66s} {rate:8.0f} env-steps/s  ({rate / raw:.2f}x raw)")
     costs = cpu_per_step(3, steps, max(args.repeats, 2))
     raw_cpu = costs.pop("raw gymnasium env")
-    print(f"CPU per env step, this process, alternating: raw gymnasium env {raw_cpu:.0f} µs; a Collector over "
-          "3 envs, HRS: " + "; ".join(f"{stack} {cost:.0f} µs ({cost / raw_cpu:.2f}x raw, 2 such workers on "
-                                      f"2 idle cores: {2 * raw_cpu / cost:.2f}x raw)" for stack, cost in costs.items()))
+    print(
+        f"CPU per env step, this process, alternating: raw gymnasium env {raw_cpu:.0f} µs; a Collector over "
+        "3 envs, HRS: "
+        + "; ".join(
+            f"{stack} {cost:.0f} µs ({cost / raw_cpu:.2f}x raw, 2 such workers on "
+            f"2 idle cores: {2 * raw_cpu / cost:.2f}x raw)"
+            for stack, cost in costs.items()
+        )
+    )
     if args.collectors_only:
         print(f"load average after: {os.getloadavg()[0]:.2f}")
         return
@@ -448,20 +514,26 @@ def main() -> None:
         updates[batch] = rates_b["agent.update"]
         flop = update_flops(batch)
         gflops = matmul_gflops(batch)
-        print(f"DDPG gradient steps, batch {batch}, {args.threads} thread(s): " + "; ".join(
-            f"{name} {1e3 / rate:.1f} ms" for name, rate in rates_b.items())
-            + f" (agent.update {rates_b['hand-written torch step'] / rates_b['agent.update']:.2f}x the hand-written)")
-        print(f"  FLOP floor: {flop / 1e9:.2f} GFLOP per step / {gflops:.0f} GFLOP/s single-thread matmul "
-              f"[{batch}x256]@[256x256] = {1e3 * flop / gflops / 1e9:.1f} ms")
+        print(
+            f"DDPG gradient steps, batch {batch}, {args.threads} thread(s): "
+            + "; ".join(f"{name} {1e3 / rate:.1f} ms" for name, rate in rates_b.items())
+            + f" (agent.update {rates_b['hand-written torch step'] / rates_b['agent.update']:.2f}x the hand-written)"
+        )
+        print(
+            f"  FLOP floor: {flop / 1e9:.2f} GFLOP per step / {gflops:.0f} GFLOP/s single-thread matmul "
+            f"[{batch}x256]@[256x256] = {1e3 * flop / gflops / 1e9:.1f} ms"
+        )
         floor_minutes = GRADIENT_STEPS * flop / gflops / 1e9 / 60
         print(f"  {GRADIENT_STEPS:.0e} gradient steps of {batch} at that floor: {floor_minutes:.0f} min on one core")
     one_core = rates["Collector, this process, 1 env"]
     for preset, env_steps, batch in (("paper (6 workers' data)", 3_000_000, 1536), ("paper-1worker", 500_000, 256)):
         env_seconds = (env_steps + TEST_STEPS) / one_core
         update_seconds = GRADIENT_STEPS / updates[batch]
-        print(f"projected {preset} learning on one core: {(env_seconds + update_seconds) / 60:.0f} min = "
-              f"{env_seconds / 60:.0f} min collecting and testing ({env_steps:.0e} + {TEST_STEPS:.0e} steps) + "
-              f"{update_seconds / 60:.0f} min of {GRADIENT_STEPS:.0e} gradient steps of {batch}")
+        print(
+            f"projected {preset} learning on one core: {(env_seconds + update_seconds) / 60:.0f} min = "
+            f"{env_seconds / 60:.0f} min collecting and testing ({env_steps:.0e} + {TEST_STEPS:.0e} steps) + "
+            f"{update_seconds / 60:.0f} min of {GRADIENT_STEPS:.0e} gradient steps of {batch}"
+        )
     print(f"load average after: {os.getloadavg()[0]:.2f}")
 
 

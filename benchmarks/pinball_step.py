@@ -142,17 +142,13 @@ def main(argv: list[str] | None = None) -> None:
 
     rows: dict[str, dict[int, float]] = {}
     for backend in backends:
-        rows[f"kernel {backend}"] = {
-            n: kernel_rate(backend, n, min_time, repeats)[0] for n in BATCHES
-        }
+        rows[f"kernel {backend}"] = {n: kernel_rate(backend, n, min_time, repeats)[0] for n in BATCHES}
     if not args.quick:
         rate, compile_time = kernel_rate("compile", BATCHES[-1], min_time, repeats)
         rows["kernel compile"] = {BATCHES[-1]: rate}
         print(f"(torch.compile: first call {compile_time:.0f} s, measured at N={BATCHES[-1]} only)")
     for backend in backends:
-        rows[f"env loop {backend}"] = {
-            n: env_rate(backend, n, min_time, repeats, warmup) for n in BATCHES
-        }
+        rows[f"env loop {backend}"] = {n: env_rate(backend, n, min_time, repeats, warmup) for n in BATCHES}
 
     header = "".join(f"{f'N={n}':>14}" for n in BATCHES)
     print(f"{'':18}{header}")

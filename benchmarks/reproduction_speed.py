@@ -149,9 +149,15 @@ def measure(domain: str, args: list[str]) -> dict[str, float]:
     total = timeline[-1][1]
     sweep_wall = timeline[-1][0]
     t99 = next(t for t, done in timeline if done >= 0.99 * total)
-    return {"wall_s": wall, "sweep_wall_s": sweep_wall, "cpu_s": cpu, "cores_busy": cpu / wall,
-            "learner_steps_per_s": learner_steps / sweep_wall, "tail_share": (sweep_wall - t99) / sweep_wall,
-            "learner_steps": learner_steps}
+    return {
+        "wall_s": wall,
+        "sweep_wall_s": sweep_wall,
+        "cpu_s": cpu,
+        "cores_busy": cpu / wall,
+        "learner_steps_per_s": learner_steps / sweep_wall,
+        "tail_share": (sweep_wall - t99) / sweep_wall,
+        "learner_steps": learner_steps,
+    }
 
 
 def _child(domain: str, args: list[str], pythonpath: str | None) -> dict[str, float]:
@@ -168,9 +174,11 @@ def _child(domain: str, args: list[str], pythonpath: str | None) -> dict[str, fl
 
 
 def _row(label: str, figures: dict[str, float]) -> str:
-    return (f"| {label} | {figures['wall_s']:.1f} | {figures['sweep_wall_s']:.1f} | {figures['cpu_s']:.1f} | "
-            f"{figures['cores_busy']:.2f} | {figures['learner_steps_per_s'] / 1e6:.2f} M | "
-            f"{100 * figures['tail_share']:.1f}% |")
+    return (
+        f"| {label} | {figures['wall_s']:.1f} | {figures['sweep_wall_s']:.1f} | {figures['cpu_s']:.1f} | "
+        f"{figures['cores_busy']:.2f} | {figures['learner_steps_per_s'] / 1e6:.2f} M | "
+        f"{100 * figures['tail_share']:.1f}% |"
+    )
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -180,10 +188,19 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repeats", type=int, default=1, help="runs per side; the table shows the medians")
     parser.add_argument("--against", metavar="DIR", help="also run the package of this checkout, alternating")
     parser.add_argument("--engine", action="store_true", help="the fused engine's CPU time per learner-step only")
-    parser.add_argument("--batch", type=int, metavar="N", help="--engine: learners per batch (default: 100 for "
-                        "four-rooms, 50 for PinBall; the recipes' chunks are 100 and 10)")
-    parser.add_argument("--shaped", action="store_true", help="--engine: four-rooms shaped by a three-subgoal "
-                        "series, a potential table per learner (as most of the paper's methods)")
+    parser.add_argument(
+        "--batch",
+        type=int,
+        metavar="N",
+        help="--engine: learners per batch (default: 100 for "
+        "four-rooms, 50 for PinBall; the recipes' chunks are 100 and 10)",
+    )
+    parser.add_argument(
+        "--shaped",
+        action="store_true",
+        help="--engine: four-rooms shaped by a three-subgoal "
+        "series, a potential table per learner (as most of the paper's methods)",
+    )
     parser.add_argument("--measure", metavar="DOMAIN", help=argparse.SUPPRESS)  # one run, JSON out (internal)
     parser.add_argument("recipe_args", nargs="*", help=argparse.SUPPRESS)
     opts = parser.parse_args(argv)
@@ -221,13 +238,17 @@ def main(argv: list[str] | None = None) -> None:
             print(_row(f"{domain} ({label})", medians[label]), flush=True)
         if opts.against is not None:
             new, old = medians["this checkout"], medians["against"]
-            print(f"| {domain}: this / against | {new['wall_s'] / old['wall_s']:.2f}x | "
-                  f"{new['sweep_wall_s'] / old['sweep_wall_s']:.2f}x | {new['cpu_s'] / old['cpu_s']:.2f}x | | "
-                  f"{new['learner_steps_per_s'] / old['learner_steps_per_s']:.2f}x | |", flush=True)
+            print(
+                f"| {domain}: this / against | {new['wall_s'] / old['wall_s']:.2f}x | "
+                f"{new['sweep_wall_s'] / old['sweep_wall_s']:.2f}x | {new['cpu_s'] / old['cpu_s']:.2f}x | | "
+                f"{new['learner_steps_per_s'] / old['learner_steps_per_s']:.2f}x | |",
+                flush=True,
+            )
 
 
-def _alternate(domain: str, args: list[str], sides: dict[str, str | None], repeats: int,
-               figures: tuple[str, ...]) -> dict[str, dict[str, float]]:
+def _alternate(
+    domain: str, args: list[str], sides: dict[str, str | None], repeats: int, figures: tuple[str, ...]
+) -> dict[str, dict[str, float]]:
     """Median figures per side over ``repeats`` runs, the sides alternating within every repeat."""
     runs: dict[str, list[dict[str, float]]] = {label: [] for label in sides}
     for _ in range(repeats):
@@ -236,12 +257,15 @@ def _alternate(domain: str, args: list[str], sides: dict[str, str | None], repea
     return {label: {k: median(r[k] for r in rs) for k in figures} for label, rs in runs.items()}
 
 
-def _engine_table(domains: list[str], sides: dict[str, str | None], repeats: int, batch: int | None,
-                  shaped: bool) -> None:
+def _engine_table(
+    domains: list[str], sides: dict[str, str | None], repeats: int, batch: int | None, shaped: bool
+) -> None:
     size = f", batches of {batch} learners" if batch else ""
     kind = "shaped (three-subgoal series, a potential table per learner)" if shaped else "unshaped"
-    print(f"fused engine, {kind}, one process, median of {repeats} run(s) per side{size}; "
-          f"load average {os.getloadavg()[0]:.2f}\n")
+    print(
+        f"fused engine, {kind}, one process, median of {repeats} run(s) per side{size}; "
+        f"load average {os.getloadavg()[0]:.2f}\n"
+    )
     print("| engine | CPU ns per learner-step | learner-steps |")
     print("|---|---|---|")
     for domain in domains:

@@ -25,8 +25,10 @@ from torchrl_subgoal import load_patterns
 from torchrl_subgoal.studio.domains import default_domains
 from torchrl_subgoal.studio.training import TrySettings, try_pattern
 
-PATTERNS = {"four_rooms": ("four_rooms_participants.yaml", "participant_7"),
-            "pinball": ("pinball_participants.yaml", "participant_1")}
+PATTERNS = {
+    "four_rooms": ("four_rooms_participants.yaml", "participant_7"),
+    "pinball": ("pinball_participants.yaml", "participant_1"),
+}
 
 
 def main() -> None:

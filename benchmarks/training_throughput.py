@@ -82,16 +82,33 @@ def domains() -> dict[str, Domain]:
         d = registry.part(name, A2CDomain)
         series = next(iter(load_patterns(d.participants).values()))
         cap = float(getattr(d.make_env(1), "max_steps", 1000))
-        out[name] = Domain(name, d.make_env, d.observation_key, d.subgoal_key, series, d.a2c.features,
-                           d.a2c.reward_scale, cap)
-    out["point_maze"] = Domain("point_maze", functools.partial(make_point_maze, "umaze", seed=0), "observation",
-                               "observation", point_maze_task("umaze", 0).pattern(), "mlp", 1.0, 300.0)
+        out[name] = Domain(
+            name, d.make_env, d.observation_key, d.subgoal_key, series, d.a2c.features, d.a2c.reward_scale, cap
+        )
+    out["point_maze"] = Domain(
+        "point_maze",
+        functools.partial(make_point_maze, "umaze", seed=0),
+        "observation",
+        "observation",
+        point_maze_task("umaze", 0).pattern(),
+        "mlp",
+        1.0,
+        300.0,
+    )
     return out
 
 
 #: (block, domain) cells: the discrete-action learners on four-rooms and PinBall, the continuous ones on PointMaze.
-CELLS = [("a2c", "four_rooms"), ("a2c", "pinball"), ("ppo", "four_rooms"), ("ppo", "pinball"),
-         ("ppo", "point_maze"), ("dqn", "four_rooms"), ("dqn", "pinball"), ("ddpg", "point_maze")]
+CELLS = [
+    ("a2c", "four_rooms"),
+    ("a2c", "pinball"),
+    ("ppo", "four_rooms"),
+    ("ppo", "pinball"),
+    ("ppo", "point_maze"),
+    ("dqn", "four_rooms"),
+    ("dqn", "pinball"),
+    ("ddpg", "point_maze"),
+]
 
 
 def run_cell(block: str, domain: Domain, shaped: bool, batches: int) -> tuple[float, int]:
@@ -108,8 +125,12 @@ def run_cell(block: str, domain: Domain, shaped: bool, batches: int) -> tuple[fl
         train = train_ppo
     elif block == "dqn":
         fpb = DQNConfig.frames_per_batch
-        config = DQNConfig(features=domain.features, total_frames=batches * fpb, learning_starts=fpb,  # type: ignore[arg-type]
-                           reward_scale=scale)
+        config = DQNConfig(
+            features=domain.features,  # type: ignore[arg-type]
+            total_frames=batches * fpb,
+            learning_starts=fpb,
+            reward_scale=scale,
+        )
         train = train_dqn
     else:
         fpb = DDPGTrainConfig.frames_per_batch
@@ -117,11 +138,19 @@ def run_cell(block: str, domain: Domain, shaped: bool, batches: int) -> tuple[fl
         train = train_ddpg
     shaping = None
     if shaped:
-        shaping = Shaping(domain.series, TabularPotential(domain.series.num_abstract_states),
-                          {"observation_key": domain.subgoal_key})
+        shaping = Shaping(
+            domain.series, TabularPotential(domain.series.num_abstract_states), {"observation_key": domain.subgoal_key}
+        )
     stamps: list[float] = []
-    train(domain.make_env, config, shaping=shaping, observation_key=domain.observation_key, seed=0,
-          episode_cap=domain.episode_cap, progress=lambda _: stamps.append(time.process_time()))
+    train(
+        domain.make_env,
+        config,
+        shaping=shaping,
+        observation_key=domain.observation_key,
+        seed=0,
+        episode_cap=domain.episode_cap,
+        progress=lambda _: stamps.append(time.process_time()),
+    )
     frames = config.frames_per_batch * (len(stamps) - 1)
     return frames / (stamps[-1] - stamps[0]), config.frames_per_batch
 
@@ -154,16 +183,20 @@ def main(argv: list[str] | None = None) -> None:
                 rates.setdefault((block, name, shaped), []).append(rate)
                 batch_frames[block, name] = fpb
     wall = time.perf_counter() - start
-    print(f"Learner frames per CPU second (one core), best of {repeats} round(s) of {batches} batches "
-          f"(the first untimed); load average {load[0]:.1f} / {os.getloadavg()[0]:.1f} (before / after), "
-          f"wall time {wall:.0f} s.\n")
+    print(
+        f"Learner frames per CPU second (one core), best of {repeats} round(s) of {batches} batches "
+        f"(the first untimed); load average {load[0]:.1f} / {os.getloadavg()[0]:.1f} (before / after), "
+        f"wall time {wall:.0f} s.\n"
+    )
     print("| learner | domain | frames per batch | plain | HRS | HRS / plain (median of rounds) |")
     print("|---|---|---|---|---|---|")
     for block, name in cells:
         plain, hrs = rates[block, name, False], rates[block, name, True]
         ratio = statistics.median(h / p for h, p in zip(hrs, plain, strict=True))
-        print(f"| {block.upper()} | {name} | {batch_frames[block, name]} | {max(plain):,.0f} | {max(hrs):,.0f} | "
-              f"{ratio:.2f} |")
+        print(
+            f"| {block.upper()} | {name} | {batch_frames[block, name]} | {max(plain):,.0f} | {max(hrs):,.0f} | "
+            f"{ratio:.2f} |"
+        )
 
 
 if __name__ == "__main__":

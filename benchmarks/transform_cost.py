@@ -71,8 +71,9 @@ def setups() -> dict[str, Callable[[], Transform]]:
 def calls_per_batch(transform: Transform, batches: int) -> float:
     """Python calls per collected batch (after three warm-up batches), one collector in this process."""
     torch.manual_seed(0)
-    collector = Collector(TransformedEnv(FourRoomsEnv(ENVS), transform), None, frames_per_batch=ENVS * STEPS,
-                          total_frames=-1)
+    collector = Collector(
+        TransformedEnv(FourRoomsEnv(ENVS), transform), None, frames_per_batch=ENVS * STEPS, total_frames=-1
+    )
     try:
         iterator = iter(collector)
         for _ in range(3):  # kernels compiled, tables built, caches filled
@@ -89,8 +90,10 @@ def calls_per_batch(transform: Transform, batches: int) -> float:
 
 def part_1(batches: int) -> None:
     counts = {name: calls_per_batch(make(), batches) for name, make in setups().items()}
-    print(f"Part 1: Python calls per collector batch ({ENVS} four-rooms envs x {STEPS} steps, random policy, "
-          f"mean of {batches} batches)")
+    print(
+        f"Part 1: Python calls per collector batch ({ENVS} four-rooms envs x {STEPS} steps, random policy, "
+        f"mean of {batches} batches)"
+    )
     empty = counts.pop("empty")
     print(f"  {'empty TransformedEnv':32s} {empty:8.0f}")
     pair = counts["RewardSum + StepCounter"]
@@ -113,8 +116,10 @@ def part_2(repeats: int, batches: int) -> None:
         "HRS": a2c_iterations(hrs_shaping(domain), domain, config, batches, False, networks, lr=0.0)[0],
     }
     costs, _ = paired_costs(runs, repeats, "plain A2C")
-    print(f"Part 2: the shaping's share of an A2C iteration ({config.frames_per_batch} frames, {config.num_envs} "
-          f"four-rooms envs, the recipe's settings; potential trained per batch), median of {repeats} rounds")
+    print(
+        f"Part 2: the shaping's share of an A2C iteration ({config.frames_per_batch} frames, {config.num_envs} "
+        f"four-rooms envs, the recipe's settings; potential trained per batch), median of {repeats} rounds"
+    )
     for clock in ("wall", "cpu"):
         cost = costs["HRS"][clock][0]
         print(f"  {clock:5s} {100 * cost / (1 + cost):5.1f}% of the shaped iteration")

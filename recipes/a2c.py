@@ -75,9 +75,12 @@ class Config(RecipeConfig):
     online_potential: bool = setting(False, "train the potential in the transform every step instead")
     normalize_advantage: bool = setting(False, "standardise GAE advantages per batch")
     zero_terminal_potential: bool = setting(True, "Φ = 0 at the goal (exact policy invariance)")
-    start_potential: str = setting("value", "level of Φ: value (Φ = V; docs/torchrl.md's figures), zero or "
-                                   "nonpositive (the library default; docs/shaping_defaults.md)",
-                                   choices=["value", "zero", "nonpositive"])
+    start_potential: str = setting(
+        "value",
+        "level of Φ: value (Φ = V; docs/torchrl.md's figures), zero or "
+        "nonpositive (the library default; docs/shaping_defaults.md)",
+        choices=["value", "zero", "nonpositive"],
+    )
     seed: int = setting(0, "sweep seed (random patterns, learner seeds)")
     results: str = setting("", "results directory (default results/a2c_<domain>; re-run to resume)")
     backend: Literal["local", "ray"] = setting("local", "where learners run")
@@ -109,15 +112,28 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     for i, (pattern, learning) in enumerate(chunk.learners):
         index = int(pattern_index[i])
         parts = shaping_parts(
-            method, (), patterns=patterns[index:index + 1] if patterns else None, aggregation=domain.aggregation(),
-            eta=domain.eta, observation_key=domain.subgoal_key, aggregation_key=domain.aggregation_key,
-            zero_terminal_potential=config["zero_terminal_potential"], start_potential=config["start_potential"],
+            method,
+            (),
+            patterns=patterns[index : index + 1] if patterns else None,
+            aggregation=domain.aggregation(),
+            eta=domain.eta,
+            observation_key=domain.subgoal_key,
+            aggregation_key=domain.aggregation_key,
+            zero_terminal_potential=config["zero_terminal_potential"],
+            start_potential=config["start_potential"],
         )
         shaping = Shaping(*parts) if parts is not None else None
         # fresh: a learner run again after an interruption starts its log over, as its results do
         logger = experiment_logger(Path(config["log_dir"]), f"{chunk.method}_{pattern}_{learning}", fresh=True)
-        curve = train_a2c(domain.make_env, a2c, shaping=shaping, observation_key=domain.observation_key,
-                          seed=chunk.seed + i, logger=logger, progress=progress)
+        curve = train_a2c(
+            domain.make_env,
+            a2c,
+            shaping=shaping,
+            observation_key=domain.observation_key,
+            seed=chunk.seed + i,
+            logger=logger,
+            progress=progress,
+        )
         rows.append(curve)
     steps = np.array([np.round(c.episode_length) for c in rows], dtype=np.int64)
     returns = np.array([c.episode_return for c in rows])
@@ -131,20 +147,34 @@ def plan(cfg: Config) -> Plan:
     check_methods(METHODS, cfg.method_names)
     try:
         a2c = dataclasses.replace(
-            domain.a2c, num_envs=cfg.num_envs, frames_per_batch=cfg.frames_per_batch,
-            env_workers=cfg.env_workers, collector_workers=cfg.collector_workers, value_lr=cfg.value_lr,
-            online_potential=cfg.online_potential, normalize_advantage=cfg.normalize_advantage,
-            total_frames=cfg.total_frames or domain.a2c.total_frames, lr=cfg.lr or domain.a2c.lr,
+            domain.a2c,
+            num_envs=cfg.num_envs,
+            frames_per_batch=cfg.frames_per_batch,
+            env_workers=cfg.env_workers,
+            collector_workers=cfg.collector_workers,
+            value_lr=cfg.value_lr,
+            online_potential=cfg.online_potential,
+            normalize_advantage=cfg.normalize_advantage,
+            total_frames=cfg.total_frames or domain.a2c.total_frames,
+            lr=cfg.lr or domain.a2c.lr,
             reward_scale=cfg.reward_scale or domain.a2c.reward_scale,
         )
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
-    check(a2c.total_frames >= a2c.frames_per_batch, "total_frames",
-          f"{a2c.total_frames} is less than one batch of {a2c.frames_per_batch} frames (--frames-per-batch); "
-          f"give at least {a2c.frames_per_batch}")
+    check(
+        a2c.total_frames >= a2c.frames_per_batch,
+        "total_frames",
+        f"{a2c.total_frames} is less than one batch of {a2c.frames_per_batch} frames (--frames-per-batch); "
+        f"give at least {a2c.frames_per_batch}",
+    )
     human = load_patterns(cfg.subgoals or domain.participants, domain=cfg.domain)
-    patterns = pattern_sets(human, domain.candidates(cfg.seed), cfg.random_patterns, cfg.seed,
-                            random_needed=needs_random_patterns(METHODS, cfg.method_names))
+    patterns = pattern_sets(
+        human,
+        domain.candidates(cfg.seed),
+        cfg.random_patterns,
+        cfg.seed,
+        random_needed=needs_random_patterns(METHODS, cfg.method_names),
+    )
     check_patterns(patterns, domain.make_env(1), str(domain.subgoal_key))
     specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
     results = cfg.results or f"results/a2c_{cfg.domain}"
@@ -157,11 +187,14 @@ def plan(cfg: Config) -> Plan:
         "patterns": pattern_config(patterns),
         "pattern_sources": pattern_sources(patterns),
         "log_dir": str(Path(results) / "logs"),
-        "report": {"metric": "steps", "thresholds": list(domain.thresholds), "unit": "update",
-                   "asymptotic_window": [max(0, a2c.iterations - 10), a2c.iterations]},
+        "report": {
+            "metric": "steps",
+            "thresholds": list(domain.thresholds),
+            "unit": "update",
+            "asymptotic_window": [max(0, a2c.iterations - 10), a2c.iterations],
+        },
     }
-    return Plan(f"a2c_{cfg.domain}", specs, run_chunk, config, episodes=a2c.iterations, chunk_size=1,
-                results=results)
+    return Plan(f"a2c_{cfg.domain}", specs, run_chunk, config, episodes=a2c.iterations, chunk_size=1, results=results)
 
 
 def main(argv: list[str] | None = None) -> int:

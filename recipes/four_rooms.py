@@ -66,18 +66,27 @@ OBSERVATION_KEY = "cell"  # what the subgoal predicates read: (row, col)
 class Config(ReproductionConfig):
     """Four-rooms reproduction: SARSA with HRS, RRS, NRS and SARSA-RS."""
 
-    preset: str = setting("released", "SARSA hyper-parameters: the paper's text or the released configuration",
-                          choices=sorted(SARSA_PRESETS))
+    preset: str = setting(
+        "released",
+        "SARSA hyper-parameters: the paper's text or the released configuration",
+        choices=sorted(SARSA_PRESETS),
+    )
     episodes: int = setting(1000, "episodes per learning (paper: 1000)")
     learnings: int = setting(10, "learnings per subgoal pattern (paper: 100)")
     methods: str = setting(",".join(METHODS), "comma-separated methods to run")
     subgoals: str = setting(PARTICIPANTS, "subgoal file of the human patterns (HRS, NRS)")
     eta: float = setting(1.0, "NRS potential η (paper: 1)")
-    agent_state: str = setting("s", "what SARSA's table is over for subgoal methods: s (the paper) or s,z "
-                               "(z = subgoal index; makes Φ(z) a potential over the agent's state)",
-                               choices=["s", "s,z"])
-    reward: str = setting("goal", "goal: +1 at the goal, 0 otherwise (the paper); step-cost: -1 per step, "
-                          "0 at the goal", choices=["goal", "step-cost"])
+    agent_state: str = setting(
+        "s",
+        "what SARSA's table is over for subgoal methods: s (the paper) or s,z "
+        "(z = subgoal index; makes Φ(z) a potential over the agent's state)",
+        choices=["s", "s,z"],
+    )
+    reward: str = setting(
+        "goal",
+        "goal: +1 at the goal, 0 otherwise (the paper); step-cost: -1 per step, 0 at the goal",
+        choices=["goal", "step-cost"],
+    )
     results: str = setting("results/four_rooms", "results directory (re-run to resume)")
 
 
@@ -85,8 +94,9 @@ def build_patterns(cfg: Config) -> PatternSets:
     """The human patterns (from the file) and the seeded random ones, by kind."""
     human = load_patterns(cfg.subgoals, domain="four_rooms")
     candidates = [Cell(r, c) for r, c in free_cells() if (r, c) not in (START, GOAL)]
-    return pattern_sets(human, candidates, cfg.random_patterns, cfg.seed,
-                        random_needed=needs_random_patterns(METHODS, cfg.method_names))
+    return pattern_sets(
+        human, candidates, cfg.random_patterns, cfg.seed, random_needed=needs_random_patterns(METHODS, cfg.method_names)
+    )
 
 
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
@@ -98,18 +108,31 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     goal_reward, step_reward = (1.0, 0.0) if config["reward"] == "goal" else (0.0, -1.0)
     env = FourRoomsEnv(num_envs=chunk.n_learners, goal_reward=goal_reward, step_reward=step_reward)
     shaping = shaping_transform(
-        method, env.batch_size, gamma=sarsa.gamma, value_lr=sarsa.value_lr,
-        patterns=patterns, pattern_index=pattern_index, aggregation=room_aggregation(),
-        eta=config["eta"], observation_key=OBSERVATION_KEY,
+        method,
+        env.batch_size,
+        gamma=sarsa.gamma,
+        value_lr=sarsa.value_lr,
+        patterns=patterns,
+        pattern_index=pattern_index,
+        aggregation=room_aggregation(),
+        eta=config["eta"],
+        observation_key=OBSERVATION_KEY,
         zero_terminal_potential=config["zero_terminal_potential"],
         start_potential=config["start_potential"],
-        expectile=config.get("expectile", 0.5), bootstrap_truncated=config.get("bootstrap_truncated", True),
+        expectile=config.get("expectile", 0.5),
+        bootstrap_truncated=config.get("bootstrap_truncated", True),
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     subgoal_aware = config["agent_state"] == "s,z" and method.shaping in ("subgoals", "naive")
     abstract_states = max(len(p) for p in patterns) + 1 if subgoal_aware else 1
-    agent = SoftmaxSarsa(chunk.n_learners, env.num_states, 4, sarsa, seed=learner_seeds(config["seed"], chunk),
-                         abstract_states=abstract_states)
+    agent = SoftmaxSarsa(
+        chunk.n_learners,
+        env.num_states,
+        4,
+        sarsa,
+        seed=learner_seeds(config["seed"], chunk),
+        abstract_states=abstract_states,
+    )
     records = run_episodes(learning_env, agent, config["episodes"], progress=progress, engine=config["engine"])
     return EpisodeTable(records.steps, records.returns, records.success)
 
@@ -122,13 +145,28 @@ def plan(cfg: Config) -> Plan:
     specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
     settings = dataclasses.asdict(cfg)
     config = {
-        **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential",
-                                    "start_potential", "reward", "engine", "agent_state",
-                                    "expectile", "bootstrap_truncated")},
+        **{
+            k: settings[k]
+            for k in (
+                "preset",
+                "episodes",
+                "eta",
+                "zero_terminal_potential",
+                "start_potential",
+                "reward",
+                "engine",
+                "agent_state",
+                "expectile",
+                "bootstrap_truncated",
+            )
+        },
         "sarsa": dataclasses.asdict(SARSA_PRESETS[cfg.preset]),
         **sweep_entries(cfg, cfg.subgoals, patterns),
-        "report": {"metric": "steps", "thresholds": [500, 300, 100, 50],
-                   "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes]},
+        "report": {
+            "metric": "steps",
+            "thresholds": [500, 300, 100, 50],
+            "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes],
+        },
     }
     return Plan("four_rooms", specs, run_chunk, config, episodes=cfg.episodes, chunk_size=cfg.chunk_size)
 

@@ -42,8 +42,9 @@ class Config:
 
     learnings: int = setting(5, "learnings per participant's series (10 series)")
     episodes: int = setting(1000, "episodes per learning")
-    reward: str = setting("goal", "goal: +1 at the goal; step-cost: -1 per step, 0 at the goal",
-                          choices=["goal", "step-cost"])
+    reward: str = setting(
+        "goal", "goal: +1 at the goal; step-cost: -1 per step, 0 at the goal", choices=["goal", "step-cost"]
+    )
     seed: int = setting(0, "seed of the learners' draws")
 
     def __post_init__(self) -> None:
@@ -75,25 +76,36 @@ def run(cfg: Config) -> int:
     n = cfg.learnings * len(patterns)
     sarsa = SARSA_PRESETS["released"]
     goal_reward, step_reward = (1.0, 0.0) if cfg.reward == "goal" else (0.0, -1.0)
-    print(f"| convention ({cfg.reward}, {n} HRS learners) | last 10 episodes | on the greedy walks: median "
-          "max Q(s) | median gap | gap < τ | greedy walk of 20 steps | greedy walk revisits a cell |")
+    print(
+        f"| convention ({cfg.reward}, {n} HRS learners) | last 10 episodes | on the greedy walks: median "
+        "max Q(s) | median gap | gap < τ | greedy walk of 20 steps | greedy walk revisits a cell |"
+    )
     print("|---|---|---|---|---|---|---|")
     for name, (zero_terminal, start) in CONVENTIONS.items():
         env = FourRoomsEnv(n, goal_reward=goal_reward, step_reward=step_reward)
         shaping = shaping_transform(
-            paper_methods("SARSA")["HRS"], env.batch_size, gamma=sarsa.gamma, value_lr=sarsa.value_lr,
-            patterns=patterns, pattern_index=torch.arange(n) % len(patterns), observation_key="cell",
-            zero_terminal_potential=zero_terminal, start_potential=start,  # type: ignore[arg-type]
-            expectile=0.5, bootstrap_truncated=True,  # the paper's mean target: the conventions alone differ
+            paper_methods("SARSA")["HRS"],
+            env.batch_size,
+            gamma=sarsa.gamma,
+            value_lr=sarsa.value_lr,
+            patterns=patterns,
+            pattern_index=torch.arange(n) % len(patterns),
+            observation_key="cell",
+            zero_terminal_potential=zero_terminal,
+            start_potential=start,  # type: ignore[arg-type]
+            expectile=0.5,
+            bootstrap_truncated=True,  # the paper's mean target: the conventions alone differ
         )
         agent = SoftmaxSarsa(n, env.num_states, 4, sarsa, seed=cfg.seed)
         records = run_episodes(TransformedEnv(env, shaping), agent, cfg.episodes, engine="fused")
         steps, revisits, on_walk = greedy_walks(agent, env)
         top2 = agent.q.topk(2, dim=-1).values[on_walk]  # [cells on the walks, 2]
         gap = top2[:, 0] - top2[:, 1]
-        print(f"| {name} | {records.steps[:, -10:].double().mean():.2f} | {top2[:, 0].median():.3f} | "
-              f"{gap.median():.3f} | {(gap < sarsa.temperature).double().mean():.0%} | "
-              f"{int((steps == 20).sum())} of {n} | {int(revisits.sum())} of {n} |")
+        print(
+            f"| {name} | {records.steps[:, -10:].double().mean():.2f} | {top2[:, 0].median():.3f} | "
+            f"{gap.median():.3f} | {(gap < sarsa.temperature).double().mean():.0%} | "
+            f"{int((steps == 20).sum())} of {n} | {int(revisits.sum())} of {n} |"
+        )
     return 0
 
 

@@ -16,8 +16,8 @@ with ``--collector-workers 0``, a ``Collector`` here over ``TransformedEnv(envs,
 shaping)``. The authors' schedule (epochs of cycles: every env collects one episode,
 V takes one step of ``SubgoalValueLoss`` on the cycle's SMDP transitions, ``updates``
 DDPG gradient steps, one soft target update), then ``test_episodes`` greedy episodes
-whose final-step success gives the epoch's success rate. Every epoch is checkpointed, so a re-run resumes mid-learning; results go
-through the experiment engine (one chunk per learning) and the report gives success
+whose final-step success gives the epoch's success rate. Every epoch is checkpointed, so a re-run resumes
+mid-learning; results go through the experiment engine (one chunk per learning) and the report gives success
 curves, epochs to a success rate of 0.6 and the asymptotic success beside the paper's.
 
     python recipes/pick_and_place.py                          # paper scale: 5 learnings x 200 epochs
@@ -96,12 +96,23 @@ CLIP_POSITIVE = ("unshaped", "all", "none")
 #: 50-step episode per cycle, then 40 synchronous gradient steps whose gradients sum the 6 workers'
 #: 256-transition batches (= one batch of 1,536 under Adam); "paper-1worker" is one worker's share.
 PRESETS: dict[str, dict[str, Any]] = {
-    "paper": {"epochs": 200, "cycles": 50, "cycle_steps": 300, "updates": 40, "test_episodes": 10,
-              "ddpg": {"batch_size": 1536}},
-    "paper-1worker": {"epochs": 200, "cycles": 50, "cycle_steps": 50, "updates": 40, "test_episodes": 10,
-                      "ddpg": {}},
-    "tiny": {"epochs": 2, "cycles": 2, "cycle_steps": 100, "updates": 2, "test_episodes": 1,
-             "ddpg": {"hidden": (16, 16), "batch_size": 16}},
+    "paper": {
+        "epochs": 200,
+        "cycles": 50,
+        "cycle_steps": 300,
+        "updates": 40,
+        "test_episodes": 10,
+        "ddpg": {"batch_size": 1536},
+    },
+    "paper-1worker": {"epochs": 200, "cycles": 50, "cycle_steps": 50, "updates": 40, "test_episodes": 10, "ddpg": {}},
+    "tiny": {
+        "epochs": 2,
+        "cycles": 2,
+        "cycle_steps": 100,
+        "updates": 2,
+        "test_episodes": 1,
+        "ddpg": {"hidden": (16, 16), "batch_size": 16},
+    },
 }
 
 
@@ -114,24 +125,33 @@ class Config(RecipeConfig):
     learnings: int = setting(5, "learnings per method (paper: 5)")
     methods: str = setting("HRS,RRS,DDPG,NRS", f"comma-separated methods among {','.join(METHODS)}")
     envs: int = setting(0, "MuJoCo envs collecting together (0: the preset's, one episode each per cycle)")
-    collector_workers: int = setting(2, "MultiSyncCollector processes the envs are spread over; 0: a "
-                                     "Collector in this process")
+    collector_workers: int = setting(
+        2, "MultiSyncCollector processes the envs are spread over; 0: a Collector in this process"
+    )
     env_processes: int = setting(0, "ParallelEnv processes per collecting process (0: envs stepped in it)")
     subgoals: str = setting(fetch.PARTICIPANTS_FILE, "subgoal file of the human pattern (HRS, NRS)")
     value_lr: float = setting(1e-3, "Adam learning rate of the neural potential V(o; θ)")
     aggregation_lr: float = setting(0.1, "SGD learning rate of SARSA-RS's table")
     eta: float = setting(0.1, "NRS potential η (the authors' released value)")
-    start_potential: str = setting("zero", "level of HRS's and RRS's neural potential: zero (Phi(z_0) = 0, the "
-                                   "authors' level), nonpositive (the library's default: Phi(z_0) = min(V(z_0), 0), "
-                                   "-50 once V has learnt the failure return), value (Phi = V); "
-                                   "docs/pick_and_place.md", choices=("zero", "nonpositive", "value"))
-    shaping: str = setting("{}", "JSON of extra SubgoalPotentialTransform options, e.g. "
-                           '\'{"zero_terminal_potential": false}\'')
+    start_potential: str = setting(
+        "zero",
+        "level of HRS's and RRS's neural potential: zero (Phi(z_0) = 0, the "
+        "authors' level), nonpositive (the library's default: Phi(z_0) = min(V(z_0), 0), "
+        "-50 once V has learnt the failure return), value (Phi = V); "
+        "docs/pick_and_place.md",
+        choices=("zero", "nonpositive", "value"),
+    )
+    shaping: str = setting(
+        "{}", "JSON of extra SubgoalPotentialTransform options, e.g. '{\"zero_terminal_potential\": false}'"
+    )
     clip_return: float = setting(50.0, "critic targets clipped to [-clip_return, 0]; 0: no clipping")
-    clip_positive: str = setting("unshaped", "whose critic targets are clipped above at 0: unshaped (DDPG only), "
-                                 "all (the authors'), none; a shaped target Q - Φ exceeds 0 wherever Q > Φ, and "
-                                 "with Φ(z_0) = -50 every shaped target clips to 0 (docs/pick_and_place.md)",
-                                 choices=CLIP_POSITIVE)
+    clip_positive: str = setting(
+        "unshaped",
+        "whose critic targets are clipped above at 0: unshaped (DDPG only), "
+        "all (the authors'), none; a shaped target Q - Φ exceeds 0 wherever Q > Φ, and "
+        "with Φ(z_0) = -50 every shaped target clips to 0 (docs/pick_and_place.md)",
+        choices=CLIP_POSITIVE,
+    )
     device: str = setting("cpu", "device of the networks and replay buffer (e.g. cuda)")
     seed: int = setting(0, "sweep seed (goals, random patterns, chunk seeds)")
     results: str = setting("results/pick_and_place", "results directory (re-run to resume)")
@@ -145,12 +165,19 @@ class Config(RecipeConfig):
         check(self.value_lr > 0 and self.aggregation_lr > 0, "value_lr", "learning rates must be > 0")
         cycle_steps = PRESETS[self.preset]["cycle_steps"]
         self.envs = self.envs or cycle_steps // fetch.MAX_EPISODE_STEPS
-        check(cycle_steps % (self.envs * fetch.MAX_EPISODE_STEPS) == 0, "envs",
-              f"a cycle's {cycle_steps} steps must split into whole {fetch.MAX_EPISODE_STEPS}-step episodes "
-              f"over {self.envs} envs")
+        check(
+            cycle_steps % (self.envs * fetch.MAX_EPISODE_STEPS) == 0,
+            "envs",
+            f"a cycle's {cycle_steps} steps must split into whole {fetch.MAX_EPISODE_STEPS}-step episodes "
+            f"over {self.envs} envs",
+        )
         processes = max(self.collector_workers, 1) * max(self.env_processes, 1)
-        check(self.envs % processes == 0, "envs", f"{self.envs} envs do not split evenly over "
-              f"--collector-workers {self.collector_workers} x --env-processes {self.env_processes}")
+        check(
+            self.envs % processes == 0,
+            "envs",
+            f"{self.envs} envs do not split evenly over "
+            f"--collector-workers {self.collector_workers} x --env-processes {self.env_processes}",
+        )
         try:
             options = json.loads(self.shaping)
         except json.JSONDecodeError as exc:
@@ -159,12 +186,18 @@ class Config(RecipeConfig):
         check_shaping(options)
 
 
-def make_shaping(method_name: str, series: SubgoalSeries | None, config: Mapping[str, Any],
-                 gamma: float) -> tuple[Shaping | None, PotentialTrainer | None]:
+def make_shaping(
+    method_name: str, series: SubgoalSeries | None, config: Mapping[str, Any], gamma: float
+) -> tuple[Shaping | None, PotentialTrainer | None]:
     """The method's shaping and, for a neural potential (HRS, RRS), its trainer."""
     method = METHODS[method_name]
-    parts = shaping_parts(method, (), patterns=[series] if series is not None else None,
-                          aggregation=fetch.three_state_aggregation(), eta=config["eta"])
+    parts = shaping_parts(
+        method,
+        (),
+        patterns=[series] if series is not None else None,
+        aggregation=fetch.three_state_aggregation(),
+        eta=config["eta"],
+    )
     if parts is None:
         return None, None
     subgoals, potential, options = parts
@@ -174,10 +207,16 @@ def make_shaping(method_name: str, series: SubgoalSeries | None, config: Mapping
     if method.shaping != "subgoals":  # NRS: fixed η; SARSA-RS: its table learns online in the transform
         return shaping, None
     shaping.potential = NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, config["ddpg"]["hidden"]))
-    trainer = PotentialTrainer(shaping.transform(shaping.potential, gamma, None),
-                               SubgoalValueLoss(shaping.potential, reduction="mean", expectile=0.5,  # the paper's mean target
-                                                bootstrap_truncated=True).make_value_estimator(gamma=gamma),
-                               torch.optim.Adam(shaping.potential.parameters(), lr=config["value_lr"]))
+    trainer = PotentialTrainer(
+        shaping.transform(shaping.potential, gamma, None),
+        SubgoalValueLoss(
+            shaping.potential,
+            reduction="mean",
+            expectile=0.5,  # the paper's mean target
+            bootstrap_truncated=True,
+        ).make_value_estimator(gamma=gamma),
+        torch.optim.Adam(shaping.potential.parameters(), lr=config["value_lr"]),
+    )
     return shaping, trainer
 
 
@@ -201,17 +240,35 @@ def agent_config(config: Mapping[str, Any], shaped: bool) -> DDPGConfig:
     return DDPGConfig(**settings)
 
 
-def make_collector(goal_seed: int, shaping: Shaping | None, value_lr: float | None, agent: DDPGAgent,
-                   config: Mapping[str, Any], device: torch.device) -> Collector | MultiSyncCollector:
+def make_collector(
+    goal_seed: int,
+    shaping: Shaping | None,
+    value_lr: float | None,
+    agent: DDPGAgent,
+    config: Mapping[str, Any],
+    device: torch.device,
+) -> Collector | MultiSyncCollector:
     """A MultiSyncCollector of ``collector_workers`` processes sharing V, or a Collector in this process."""
     workers = config["collector_workers"]
-    factory = EnvFactory(shaped_env, make_env=partial(fetch.make_fetch_envs, goal_seed), episode_stats=False,
-                         num_envs=config["envs"] // max(workers, 1), env_workers=config["env_processes"],
-                         shaping=shaping, potential=shaping.potential if shaping is not None else None,
-                         gamma=agent.config.gamma, value_lr=value_lr)
-    common: dict[str, Any] = {"frames_per_batch": config["cycle_steps"], "total_frames": -1,
-                              "policy_device": device, "storing_device": "cpu", "env_device": "cpu",
-                              "auto_register_policy_transforms": False}
+    factory = EnvFactory(
+        shaped_env,
+        make_env=partial(fetch.make_fetch_envs, goal_seed),
+        episode_stats=False,
+        num_envs=config["envs"] // max(workers, 1),
+        env_workers=config["env_processes"],
+        shaping=shaping,
+        potential=shaping.potential if shaping is not None else None,
+        gamma=agent.config.gamma,
+        value_lr=value_lr,
+    )
+    common: dict[str, Any] = {
+        "frames_per_batch": config["cycle_steps"],
+        "total_frames": -1,
+        "policy_device": device,
+        "storing_device": "cpu",
+        "env_device": "cpu",
+        "auto_register_policy_transforms": False,
+    }
     if workers == 0:
         return Collector(factory(), agent.policy, **common)
     return MultiSyncCollector([factory] * workers, agent.policy, cat_results="stack", **common)
@@ -228,8 +285,13 @@ def evaluate(env: EnvBase, agent: DDPGAgent, episodes: int) -> tuple[float, floa
     return float(np.mean(successes)), float(np.mean(returns))
 
 
-def learn(chunk: Chunk, learning: int, series: SubgoalSeries | None, config: Mapping[str, Any],
-          progress: Callable[[int], None]) -> np.ndarray:
+def learn(
+    chunk: Chunk,
+    learning: int,
+    series: SubgoalSeries | None,
+    config: Mapping[str, Any],
+    progress: Callable[[int], None],
+) -> np.ndarray:
     """One learning; returns ``[epochs, 3]`` records (env steps, test return, success rate)."""
     torch.set_num_threads(1)  # a MultiSyncCollector's shutdown gives this process its workers' threads back
     torch.manual_seed(chunk.seed)
@@ -279,9 +341,13 @@ def learn(chunk: Chunk, learning: int, series: SubgoalSeries | None, config: Map
                     collector.update_policy_weights_()
             success, test_return = evaluate(test_env, agent, config["test_episodes"])
             records.append([config["cycles"] * config["cycle_steps"], test_return, success])
-            state = {"agent": agent.training_state(), "records": records, "rng": rng_states(),
-                     "potential": shaping.potential.state_dict() if shaping is not None else None,
-                     "value_optimizer": trainer.optimizer.state_dict() if trainer is not None else None}
+            state = {
+                "agent": agent.training_state(),
+                "records": records,
+                "rng": rng_states(),
+                "potential": shaping.potential.state_dict() if shaping is not None else None,
+                "value_optimizer": trainer.optimizer.state_dict() if trainer is not None else None,
+            }
             checkpoint.save(epoch + 1, state, torch.cat(collected))
             progress(1)
         close_collector(collector)
@@ -293,8 +359,10 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     """The learnings of one chunk, one after another."""
     series, index = chunk_patterns(chunk, config)
     offsets = config["learning_offsets"]  # RRS: learning k uses random pattern k and goal k
-    rows = [learn(chunk, learning + offsets.get(pattern, 0), series[int(i)] if series else None, config, progress)
-            for (pattern, learning), i in zip(chunk.learners, index, strict=True)]
+    rows = [
+        learn(chunk, learning + offsets.get(pattern, 0), series[int(i)] if series else None, config, progress)
+        for (pattern, learning), i in zip(chunk.learners, index, strict=True)
+    ]
     records = np.stack(rows)
     return EpisodeTable(records[..., 0].astype(np.int64), records[..., 1], records[..., 2])
 
@@ -317,8 +385,10 @@ def build_specs(cfg: Config, patterns: dict[str, dict[str, Any]]) -> list[Method
     """``learnings`` learnings per method: of each human pattern, of one random pattern each (RRS),
     or without patterns."""
     names = check_methods(METHODS, cfg.method_names)
-    specs = [MethodSpec(name, list(patterns[m.subgoals]) or ["none"],
-                        1 if m.subgoals == "random" else cfg.learnings) for name, m in METHODS.items()]
+    specs = [
+        MethodSpec(name, list(patterns[m.subgoals]) or ["none"], 1 if m.subgoals == "random" else cfg.learnings)
+        for name, m in METHODS.items()
+    ]
     try:
         return select_methods(specs, names)
     except UnknownMethodError as exc:
@@ -345,20 +415,28 @@ def check_shaping(options: Mapping[str, Any]) -> None:
         >>> check_shaping({"foo": 1})
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.experiments.cli.ConfigError: --shaping: unknown option 'foo'; SubgoalPotentialTransform takes ...
+        torchrl_subgoal.experiments.cli.ConfigError: --shaping: unknown option 'foo'; ...
     """
-    parameters = {name: p for name, p in inspect.signature(SubgoalPotentialTransform).parameters.items()
-                  if p.kind is inspect.Parameter.KEYWORD_ONLY}
+    parameters = {
+        name: p
+        for name, p in inspect.signature(SubgoalPotentialTransform).parameters.items()
+        if p.kind is inspect.Parameter.KEYWORD_ONLY
+    }
     allowed = [name for name in parameters if name not in SHAPING_SET_BY_THE_RECIPE]
     for name, value in options.items():
         if name in SHAPING_SET_BY_THE_RECIPE:
             raise ConfigError(f"--shaping: {name!r} is set by the recipe for every learner; leave it out")
         if name not in parameters:
-            raise ConfigError(f"--shaping: unknown option {name!r}; SubgoalPotentialTransform takes "
-                              f"{', '.join(allowed)}")
+            raise ConfigError(
+                f"--shaping: unknown option {name!r}; SubgoalPotentialTransform takes {', '.join(allowed)}"
+            )
         default = parameters[name].default
-        kinds = {bool: ((bool,), "true or false"), str: ((str,), "a string"), float: ((int, float), "a number"),
-                 int: ((int,), "a whole number")}
+        kinds = {
+            bool: ((bool,), "true or false"),
+            str: ((str,), "a string"),
+            float: ((int, float), "a number"),
+            int: ((int,), "a whole number"),
+        }
         if default is None or type(default) not in kinds:
             continue  # the transform checks it (see check_shaping_builds)
         accepted, wanted = kinds[type(default)]
@@ -393,28 +471,56 @@ def plan(cfg: Config) -> Plan:
     specs = build_specs(cfg, patterns)
     preset = PRESETS[cfg.preset]
     epochs = cfg.epochs or preset["epochs"]
-    ddpg = dataclasses.asdict(DDPGConfig(**preset["ddpg"], clip_return=cfg.clip_return or None,
-                                         clip_positive=cfg.clip_positive != "none"))
+    ddpg = dataclasses.asdict(
+        DDPGConfig(**preset["ddpg"], clip_return=cfg.clip_return or None, clip_positive=cfg.clip_positive != "none")
+    )
     config = {
         **{k: preset[k] for k in ("cycles", "cycle_steps", "updates", "test_episodes")},
-        **{k: getattr(cfg, k) for k in ("envs", "collector_workers", "env_processes", "value_lr", "aggregation_lr",
-                                        "eta", "device", "seed", "start_potential")},
-        "epochs": epochs, "ddpg": ddpg, "shaped_clip_positive": cfg.clip_positive == "all",
+        **{
+            k: getattr(cfg, k)
+            for k in (
+                "envs",
+                "collector_workers",
+                "env_processes",
+                "value_lr",
+                "aggregation_lr",
+                "eta",
+                "device",
+                "seed",
+                "start_potential",
+            )
+        },
+        "epochs": epochs,
+        "ddpg": ddpg,
+        "shaped_clip_positive": cfg.clip_positive == "all",
         "shaping": json.loads(cfg.shaping),
         "checkpoints": str((Path(cfg.results) / "checkpoints").resolve()),
-        "subgoal_file": cfg.subgoals, "patterns": pattern_config(patterns),
+        "subgoal_file": cfg.subgoals,
+        "patterns": pattern_config(patterns),
         "pattern_sources": pattern_sources(patterns),
         "learning_offsets": {name: k for k, name in enumerate(patterns["random"])},
-        "report": {"metric": "success", "lower_is_better": False, "thresholds": [0.6], "window": 1,
-                   "asymptotic_window": [max(0, epochs - 10), epochs], "log_scale": False, "unit": "epoch"},
+        "report": {
+            "metric": "success",
+            "lower_is_better": False,
+            "thresholds": [0.6],
+            "window": 1,
+            "asymptotic_window": [max(0, epochs - 10), epochs],
+            "log_scale": False,
+            "unit": "epoch",
+        },
     }
     check_shaping_builds(specs, config)
     return Plan("fetch", specs, run_chunk, config, episodes=epochs, chunk_size=1)
 
 
 def main(argv: list[str] | None = None) -> int:
-    return recipe_main(Config, plan, argv, description=__doc__.splitlines()[0] if __doc__ else None,
-                       errors=(*RECIPE_ERRORS, ValueError, ImportError))  # ImportError: the fetch extra missing
+    return recipe_main(
+        Config,
+        plan,
+        argv,
+        description=__doc__.splitlines()[0] if __doc__ else None,
+        errors=(*RECIPE_ERRORS, ValueError, ImportError),
+    )  # ImportError: the fetch extra missing
 
 
 if __name__ == "__main__":

@@ -65,9 +65,12 @@ SUBGOAL_RADIUS = 0.04  # the target's radius, as in the paper
 class Config(ReproductionConfig):
     """PinBall reproduction: actor-critic with HRS, RRS, NRS and SARSA-RS."""
 
-    preset: str = setting("released", "agent and rates: released (the authors' Q-based actor-critic), paper "
-                          "(the text's TD-error actor-critic, rates 0.01) or released-td (TD-error, released rates)",
-                          choices=sorted(AC_PRESETS))
+    preset: str = setting(
+        "released",
+        "agent and rates: released (the authors' Q-based actor-critic), paper "
+        "(the text's TD-error actor-critic, rates 0.01) or released-td (TD-error, released rates)",
+        choices=sorted(AC_PRESETS),
+    )
     episodes: int = setting(200, "episodes per learning (paper: 200)")
     learnings: int = setting(10, "learnings per subgoal pattern (paper: 10)")
     methods: str = setting(",".join(METHODS), "comma-separated methods to run")
@@ -77,11 +80,15 @@ class Config(ReproductionConfig):
     thrust_penalty: float = setting(0.0, "reward of a thrust (classic PinBall: -5; the paper: 0)")
     map: str = setting("simple", "PinBall configuration: simple, hard or a file")
     max_steps: int = setting(10_000, "episode cap (paper: 10,000)")
-    engine: str = setting("fused", "fused: one compiled loop; torchrl: step_and_maybe_reset (same episodes)",
-                          choices=["fused", "torchrl"])
+    engine: str = setting(
+        "fused", "fused: one compiled loop; torchrl: step_and_maybe_reset (same episodes)", choices=["fused", "torchrl"]
+    )
     results: str = setting("results/pinball", "results directory (re-run to resume)")
-    chunk_size: int = setting(10, "learners per batch (results do not depend on it; small chunks keep both "
-                              "workers busy to the end and resume finer)")
+    chunk_size: int = setting(
+        10,
+        "learners per batch (results do not depend on it; small chunks keep both "
+        "workers busy to the end and resume finer)",
+    )
 
     AT_LEAST_ONE = ("episodes", "learnings", "random_patterns", "max_steps", "chunk_size")
 
@@ -105,8 +112,9 @@ def build_patterns(cfg: Config) -> PatternSets:
     env = pinball_env(cfg)
     points = env.sample_free_positions(500, torch.Generator().manual_seed(cfg.seed))
     candidates = [Circle((float(x), float(y)), SUBGOAL_RADIUS) for x, y in points.tolist()]
-    return pattern_sets(human, candidates, cfg.random_patterns, cfg.seed,
-                        random_needed=needs_random_patterns(METHODS, cfg.method_names))
+    return pattern_sets(
+        human, candidates, cfg.random_patterns, cfg.seed, random_needed=needs_random_patterns(METHODS, cfg.method_names)
+    )
 
 
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
@@ -116,14 +124,28 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
     patterns, pattern_index = chunk_patterns(chunk, config)
 
     seeds = learner_seeds(config["seed"], chunk)  # each learner's own: results do not depend on the chunking
-    env = PinBallEnv(chunk.n_learners, config["map"], max_steps=config["max_steps"], seed=seeds,
-                     step_penalty=config["step_penalty"], thrust_penalty=config["thrust_penalty"])
+    env = PinBallEnv(
+        chunk.n_learners,
+        config["map"],
+        max_steps=config["max_steps"],
+        seed=seeds,
+        step_penalty=config["step_penalty"],
+        thrust_penalty=config["thrust_penalty"],
+    )
     shaping = shaping_transform(
-        method, env.batch_size, gamma=ac.gamma, value_lr=ac.value_lr, patterns=patterns,
-        pattern_index=pattern_index, aggregation=thirds_of_the_table(), eta=config["eta"],
-        zero_terminal_potential=config["zero_terminal_potential"], observation_key=OBSERVATION_KEY,
+        method,
+        env.batch_size,
+        gamma=ac.gamma,
+        value_lr=ac.value_lr,
+        patterns=patterns,
+        pattern_index=pattern_index,
+        aggregation=thirds_of_the_table(),
+        eta=config["eta"],
+        zero_terminal_potential=config["zero_terminal_potential"],
+        observation_key=OBSERVATION_KEY,
         start_potential=config["start_potential"],
-        expectile=config.get("expectile", 0.5), bootstrap_truncated=config.get("bootstrap_truncated", True),
+        expectile=config.get("expectile", 0.5),
+        bootstrap_truncated=config.get("bootstrap_truncated", True),
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     spec = env.observation_spec["observation"]
@@ -140,13 +162,32 @@ def plan(cfg: Config) -> Plan:
     specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
     settings = dataclasses.asdict(cfg)
     config = {
-        **{k: settings[k] for k in ("preset", "episodes", "eta", "zero_terminal_potential", "start_potential",
-                                    "step_penalty", "thrust_penalty", "map", "max_steps", "engine",
-                                    "expectile", "bootstrap_truncated")},
+        **{
+            k: settings[k]
+            for k in (
+                "preset",
+                "episodes",
+                "eta",
+                "zero_terminal_potential",
+                "start_potential",
+                "step_penalty",
+                "thrust_penalty",
+                "map",
+                "max_steps",
+                "engine",
+                "expectile",
+                "bootstrap_truncated",
+            )
+        },
         "actor_critic": dataclasses.asdict(AC_PRESETS[cfg.preset]),
         **sweep_entries(cfg, cfg.subgoals, patterns),
-        "report": {"metric": "steps", "thresholds": [3000, 2000, 1000, 500], "window": min(10, cfg.episodes),
-                   "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes], "map": {"config": cfg.map}},
+        "report": {
+            "metric": "steps",
+            "thresholds": [3000, 2000, 1000, 500],
+            "window": min(10, cfg.episodes),
+            "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes],
+            "map": {"config": cfg.map},
+        },
     }
     return Plan("pinball", specs, run_chunk, config, episodes=cfg.episodes, chunk_size=cfg.chunk_size)
 

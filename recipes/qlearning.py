@@ -79,8 +79,9 @@ class Config(RecipeConfig):
     """Tabular ε-greedy Q-learning with HRS (library defaults), HRS-mean and NRS against no shaping."""
 
     task: str = setting("four_rooms", "four_rooms or taxi", choices=sorted(TASKS))
-    reward: str = setting("step-cost", "four_rooms only: step-cost (-1 per step) or goal (+1 at the goal)",
-                          choices=["step-cost", "goal"])
+    reward: str = setting(
+        "step-cost", "four_rooms only: step-cost (-1 per step) or goal (+1 at the goal)", choices=["step-cost", "goal"]
+    )
     methods: str = setting(",".join(METHODS), "comma-separated methods to run")
     learnings: int = setting(2, "learnings per subgoal pattern (four_rooms has 10 patterns, taxi 1)")
     episodes: int = setting(200, "episodes per learning")
@@ -93,8 +94,9 @@ class Config(RecipeConfig):
     expectile: float = setting(0.9, "HRS: τ of the potential's target (HRS-mean: 0.5)")
     bootstrap_truncated: bool = setting(False, "HRS: train V(z) on a time-out inside z (HRS-mean: true)")
     zero_terminal_potential: bool = setting(True, "HRS, HRS-mean: Φ = 0 at the goal")
-    start_potential: str = setting("nonpositive", "HRS, HRS-mean: the level of Φ",
-                                   choices=["value", "zero", "nonpositive"])
+    start_potential: str = setting(
+        "nonpositive", "HRS, HRS-mean: the level of Φ", choices=["value", "zero", "nonpositive"]
+    )
     chunk_size: int = setting(100, "learners per batch (one policy seed per chunk)")
     results: str = setting("", "results directory (default results/qlearning_<task>[_<reward>]; re-run to resume)")
 
@@ -135,11 +137,25 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
             target = MEAN_TARGET if chunk.method == "HRS-mean" else config["target"]
             loss = SubgoalValueLoss(potential, **target).make_value_estimator(gamma=gamma)
             update = ValueUpdate(config["value_lr"], loss)
-        env = TransformedEnv(env, SubgoalPotentialTransform(
-            series, potential, gamma=gamma, value_update=update, observation_key=TASKS[config["task"]]["subgoal_key"],
-            zero_terminal_potential=config["zero_terminal_potential"], start_potential=config["start_potential"]))
-    settings = QLearningConfig(episodes=config["episodes"], lr=config["lr"], gamma=config["gamma"],
-                               epsilon=config["epsilon"], sees_subgoal=config["agent_state"] == "s,z")
+        env = TransformedEnv(
+            env,
+            SubgoalPotentialTransform(
+                series,
+                potential,
+                gamma=gamma,
+                value_update=update,
+                observation_key=TASKS[config["task"]]["subgoal_key"],
+                zero_terminal_potential=config["zero_terminal_potential"],
+                start_potential=config["start_potential"],
+            ),
+        )
+    settings = QLearningConfig(
+        episodes=config["episodes"],
+        lr=config["lr"],
+        gamma=config["gamma"],
+        epsilon=config["epsilon"],
+        sees_subgoal=config["agent_state"] == "s,z",
+    )
     records = train_qlearning(env, settings, seed=chunk.seed, progress=progress)
     return EpisodeTable(records.steps, records.returns, records.success)
 
@@ -156,20 +172,45 @@ def plan(cfg: Config) -> Plan:
         human, subgoal_file = load_patterns(PARTICIPANTS, domain="four_rooms"), PARTICIPANTS
     patterns = pattern_sets(human, [], 0, cfg.seed, random_needed=False)
     settings = dataclasses.asdict(cfg)
-    config: dict[str, Any] = {k: settings[k] for k in ("task", "reward", "episodes", "lr", "epsilon", "gamma",
-                                                        "value_lr", "eta", "agent_state",
-                                                        "zero_terminal_potential", "start_potential")}
+    config: dict[str, Any] = {
+        k: settings[k]
+        for k in (
+            "task",
+            "reward",
+            "episodes",
+            "lr",
+            "epsilon",
+            "gamma",
+            "value_lr",
+            "eta",
+            "agent_state",
+            "zero_terminal_potential",
+            "start_potential",
+        )
+    }
     check_patterns(patterns, make_env(config, 1), task["subgoal_key"])
     name = cfg.task if cfg.task == "taxi" else f"{cfg.task}_{cfg.reward.replace('-', '_')}"
     config.update(
-        domain=cfg.task, target={"expectile": cfg.expectile, "bootstrap_truncated": cfg.bootstrap_truncated},
+        domain=cfg.task,
+        target={"expectile": cfg.expectile, "bootstrap_truncated": cfg.bootstrap_truncated},
         **sweep_entries(cfg, subgoal_file, patterns),
-        report={"metric": "steps", "thresholds": task["thresholds"], "window": min(task["window"], cfg.episodes),
-                "asymptotic_window": [max(0, cfg.episodes - 20), cfg.episodes]},
+        report={
+            "metric": "steps",
+            "thresholds": task["thresholds"],
+            "window": min(task["window"], cfg.episodes),
+            "asymptotic_window": [max(0, cfg.episodes - 20), cfg.episodes],
+        },
     )
     specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
-    return Plan(f"qlearning_{name}", specs, run_chunk, config, episodes=cfg.episodes, chunk_size=cfg.chunk_size,
-                results=cfg.results or f"results/qlearning_{name}")
+    return Plan(
+        f"qlearning_{name}",
+        specs,
+        run_chunk,
+        config,
+        episodes=cfg.episodes,
+        chunk_size=cfg.chunk_size,
+        results=cfg.results or f"results/qlearning_{name}",
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

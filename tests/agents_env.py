@@ -25,28 +25,40 @@ class AgentsLineEnv(EnvBase):
         group = (num_envs, agents)
         self.observation_spec = Composite(
             agents=Composite(observation=Categorical(length + 1, shape=group, dtype=torch.long), shape=group),
-            shape=(num_envs,))
-        self.action_spec = Composite(agents=Composite(action=Categorical(2, shape=group, dtype=torch.long),
-                                                      shape=group), shape=(num_envs,))
-        self.reward_spec = Composite(agents=Composite(reward=Unbounded(shape=(*group, 1)), shape=group),
-                                     shape=(num_envs,))
+            shape=(num_envs,),
+        )
+        self.action_spec = Composite(
+            agents=Composite(action=Categorical(2, shape=group, dtype=torch.long), shape=group), shape=(num_envs,)
+        )
+        self.reward_spec = Composite(
+            agents=Composite(reward=Unbounded(shape=(*group, 1)), shape=group), shape=(num_envs,)
+        )
         flag = Categorical(2, shape=(*group, 1), dtype=torch.bool)
-        self.done_spec = Composite(agents=Composite(done=flag, terminated=flag.clone(), shape=group),
-                                   shape=(num_envs,))
+        self.done_spec = Composite(agents=Composite(done=flag, terminated=flag.clone(), shape=group), shape=(num_envs,))
         self.pos = torch.zeros(group, dtype=torch.long)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
         reset = tensordict.get(("agents", "_reset"), None) if tensordict is not None else None
         self.pos = self.pos.masked_fill(reset.squeeze(-1), 0) if reset is not None else torch.zeros_like(self.pos)
         false = torch.zeros(*self.pos.shape, 1, dtype=torch.bool)
-        return TensorDict({"agents": TensorDict({"observation": self.pos.clone(), "done": false,
-                                                 "terminated": false.clone()}, self.pos.shape)}, self.batch_size)
+        return TensorDict(
+            {
+                "agents": TensorDict(
+                    {"observation": self.pos.clone(), "done": false, "terminated": false.clone()}, self.pos.shape
+                )
+            },
+            self.batch_size,
+        )
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         self.pos = (self.pos + tensordict.get(("agents", "action")) * 2 - 1).clamp(0, self.length)
         terminated = (self.pos == self.length).unsqueeze(-1)
-        agents = {"observation": self.pos.clone(), "reward": torch.where(terminated, 10.0, 1.0), "done": terminated,
-                  "terminated": terminated.clone()}
+        agents = {
+            "observation": self.pos.clone(),
+            "reward": torch.where(terminated, 10.0, 1.0),
+            "done": terminated,
+            "terminated": terminated.clone(),
+        }
         return TensorDict({"agents": TensorDict(agents, self.pos.shape)}, self.batch_size)
 
     def _set_seed(self, seed: int | None) -> None:

@@ -23,8 +23,7 @@ class KeyDoorEnv(gym.Env):
 
     def __init__(self) -> None:
         self.observation_space = gym.spaces.Dict(
-            {"position": gym.spaces.Box(0, LENGTH, shape=(1,), dtype=np.float32),
-             "has_key": gym.spaces.MultiBinary(1)}
+            {"position": gym.spaces.Box(0, LENGTH, shape=(1,), dtype=np.float32), "has_key": gym.spaces.MultiBinary(1)}
         )
         self.action_space = gym.spaces.Discrete(2)
         self.position, self.has_key = 0, False

@@ -27,10 +27,18 @@ from torchrl_subgoal.methods import paper_methods, shaping_transform
 from torchrl_subgoal.subgoals import SubgoalFileError
 
 TUTORIAL = Path(__file__).resolve().parents[1] / "docs" / "tutorials" / "adding_a_domain.py"
-CORE = ("torchrl_subgoal", "torchrl_subgoal.subgoals", "torchrl_subgoal.experiments",
-        "torchrl_subgoal.experiments.plots", "torchrl_subgoal.experiments.paper",
-        "torchrl_subgoal.experiments.report", "torchrl_subgoal.experiments.recipe", "torchrl_subgoal.domains",
-        "torchrl_subgoal.studio.domains", "torchrl_subgoal.training")
+CORE = (
+    "torchrl_subgoal",
+    "torchrl_subgoal.subgoals",
+    "torchrl_subgoal.experiments",
+    "torchrl_subgoal.experiments.plots",
+    "torchrl_subgoal.experiments.paper",
+    "torchrl_subgoal.experiments.report",
+    "torchrl_subgoal.experiments.recipe",
+    "torchrl_subgoal.domains",
+    "torchrl_subgoal.studio.domains",
+    "torchrl_subgoal.training",
+)
 
 
 @pytest.fixture
@@ -48,8 +56,10 @@ def corridor(monkeypatch: pytest.MonkeyPatch) -> ModuleType:
 def test_the_core_imports_no_domain_module() -> None:
     """Importing the library, the registry and the layers that read it imports no domain plugin (nor the
     envs it would bring): a plugin is imported when its domain is first looked up."""
-    code = f"import importlib, sys\nfor m in {CORE!r}: importlib.import_module(m)\n" \
-           "print(sorted(m for m in sys.modules if m.startswith(('torchrl_subgoal.envs', 'torchrl_subgoal.domains.'))))"
+    code = (
+        f"import importlib, sys\nfor m in {CORE!r}: importlib.import_module(m)\n"
+        "print(sorted(m for m in sys.modules if m.startswith(('torchrl_subgoal.envs', 'torchrl_subgoal.domains.'))))"
+    )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert done.stdout.strip() == "[]"
 
@@ -64,8 +74,11 @@ def test_built_in_domains_load_on_first_use() -> None:
 def test_a_file_naming_an_unknown_domain_is_one_line(tmp_path: Path) -> None:
     path = tmp_path / "elsewhere.yaml"
     path.write_text("domain: elsewhere\npatterns:\n  p:\n    subgoals:\n      - state: 3\n")
-    with pytest.raises(SubgoalFileError, match=r"^\S*elsewhere.yaml: domain: unknown domain 'elsewhere'; "
-                                               r"known: four_rooms, pick_and_place, pinball"):
+    with pytest.raises(
+        SubgoalFileError,
+        match=r"^\S*elsewhere.yaml: domain: unknown domain 'elsewhere'; "
+        r"known: four_rooms, pick_and_place, pinball",
+    ):
         load_patterns(path)
 
 
@@ -81,7 +94,9 @@ def test_pick_and_place_without_the_fetch_extra_still_says_how_to_install(monkey
     domain = domains.get("pick_and_place")  # registering needs no MuJoCo, nor does checking a file
     assert load_patterns(fetch.PARTICIPANTS_FILE, domain="pick_and_place")
     assert domain.make_env is not None
-    with pytest.raises(fetch.FetchUnavailableError, match=r"gymnasium_robotics is missing\): pip install 'torchrl_subgoal\[fetch\]'"):
+    with pytest.raises(
+        fetch.FetchUnavailableError, match=r"gymnasium_robotics is missing\): pip install 'torchrl_subgoal\[fetch\]'"
+    ):
         domain.make_env(1)
 
 
@@ -90,11 +105,16 @@ def test_a_toy_domain_checks_its_subgoal_files(corridor: ModuleType, tmp_path: P
     good.write_text(corridor.SUBGOAL_FILE)
     bad.write_text(corridor.SUBGOAL_FILE.replace("state: 8", "state: 12"))
     assert [p.state for p in load_patterns(good)["thirds"].predicates] == [4, 8]
-    with pytest.raises(SubgoalFileError, match=r"bad.yaml: pattern 'thirds': subgoals\[1\]\.state: state 12 is "
-                                               r"not a cell short of the goal"):
+    with pytest.raises(
+        SubgoalFileError,
+        match=r"bad.yaml: pattern 'thirds': subgoals\[1\]\.state: state 12 is "
+        r"not a cell short of the goal",
+    ):
         load_patterns(bad)
     cell = _written(tmp_path / "cell.yaml", "domain: corridor\npatterns:\n  p:\n    subgoals:\n      - cell: [1, 2]\n")
-    with pytest.raises(SubgoalFileError, match=r"cell.yaml: pattern 'p': subgoals\[0\]\.cell: corridor subgoals are states"):
+    with pytest.raises(
+        SubgoalFileError, match=r"cell.yaml: pattern 'p': subgoals\[0\]\.cell: corridor subgoals are states"
+    ):
         load_patterns(cell)
 
 
@@ -108,11 +128,18 @@ def _corridor_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[
     sarsa = SARSA_PRESETS["released"]
     patterns, index = chunk_patterns(chunk, config)
     env = domains.get("corridor").make_env(chunk.n_learners)  # type: ignore[misc]
-    shaping = shaping_transform(paper_methods("SARSA")[chunk.method], env.batch_size, gamma=sarsa.gamma,
-                                value_lr=sarsa.value_lr, patterns=patterns, pattern_index=index)
+    shaping = shaping_transform(
+        paper_methods("SARSA")[chunk.method],
+        env.batch_size,
+        gamma=sarsa.gamma,
+        value_lr=sarsa.value_lr,
+        patterns=patterns,
+        pattern_index=index,
+    )
     agent = SoftmaxSarsa(chunk.n_learners, env.observation_spec["observation"].n, 2, sarsa, seed=chunk.seed)
-    records = run_episodes(TransformedEnv(env, shaping) if shaping is not None else env, agent,
-                           config["episodes"], progress=progress)
+    records = run_episodes(
+        TransformedEnv(env, shaping) if shaping is not None else env, agent, config["episodes"], progress=progress
+    )
     if shaping is not None:  # HRS learned a potential over the file's subgoals
         assert shaping.potential.table.abs().sum() > 0  # type: ignore[union-attr]
     return EpisodeTable(records.steps, records.returns, records.success)
@@ -121,11 +148,13 @@ def _corridor_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[
 def test_the_method_runs_on_a_toy_domain_from_a_subgoal_file(corridor: ModuleType, tmp_path: Path) -> None:
     path = _written(tmp_path / "corridor.yaml", corridor.SUBGOAL_FILE)
     patterns = load_patterns(path)
-    config = {"episodes": 6, "patterns": {n: s.to_dict() for n, s in patterns.items()},
-              "report": {"metric": "steps", "thresholds": [100.0]}}
+    config = {
+        "episodes": 6,
+        "patterns": {n: s.to_dict() for n, s in patterns.items()},
+        "report": {"metric": "steps", "thresholds": [100.0]},
+    }
     specs = [MethodSpec("HRS", ["thirds"], 3), MethodSpec("SARSA", ["none"], 3)]
-    Sweep("corridor", tmp_path / "results", specs, _corridor_chunk, config, n_episodes=6).run(workers=0,
-                                                                                               progress=False)
+    Sweep("corridor", tmp_path / "results", specs, _corridor_chunk, config, n_episodes=6).run(workers=0, progress=False)
     report = write_report(tmp_path / "results", n_boot=20)
     assert (tmp_path / "results" / "patterns.png").read_bytes()[:4] == b"\x89PNG"  # the corridor's draw_map
     assert "no map" not in report.markdown and "skipped" not in report.markdown
@@ -140,12 +169,18 @@ def test_a_toy_domain_joins_the_fused_engine(corridor: ModuleType, tmp_path: Pat
         results = {}
         for engine in ("torchrl", "fused"):
             env = corridor.CorridorEnv(n, max_steps=40)
-            shaping = shaping_transform(paper_methods("SARSA")[method], env.batch_size, gamma=sarsa.gamma,
-                                        value_lr=sarsa.value_lr, patterns=patterns,
-                                        pattern_index=torch.zeros(n, dtype=torch.long))
+            shaping = shaping_transform(
+                paper_methods("SARSA")[method],
+                env.batch_size,
+                gamma=sarsa.gamma,
+                value_lr=sarsa.value_lr,
+                patterns=patterns,
+                pattern_index=torch.zeros(n, dtype=torch.long),
+            )
             agent = SoftmaxSarsa(n, corridor.LENGTH + 1, 2, sarsa, seed=3)
-            records = run_episodes(TransformedEnv(env, shaping) if shaping is not None else env, agent, 8,
-                                   engine=engine)  # type: ignore[arg-type]
+            records = run_episodes(
+                TransformedEnv(env, shaping) if shaping is not None else env, agent, 8, engine=engine
+            )  # type: ignore[arg-type]
             potential = shaping.potential.table.clone() if shaping is not None else None  # type: ignore[union-attr]
             results[engine] = (records, agent.q.clone(), potential)
         (a, qa, va), (b, qb, vb) = results["torchrl"], results["fused"]

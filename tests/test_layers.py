@@ -19,26 +19,50 @@ PACKAGE = Path(__file__).resolve().parents[1] / "torchrl_subgoal"
 
 #: module (exact) or package (every module below it) -> layer; the longest match wins
 LAYERS: dict[str, int] = {
-    "torchrl_subgoal._kernels": 0, "torchrl_subgoal._kernels.random": 0, "torchrl_subgoal._kernels.steps": 0,
-    "torchrl_subgoal.subgoals.errors": 1, "torchrl_subgoal.subgoals.predicates": 1,
-    "torchrl_subgoal.subgoals.forms": 1, "torchrl_subgoal.subgoals.series": 1, "torchrl_subgoal.subgoals.files": 1,
-    "torchrl_subgoal.subgoals": 2, "torchrl_subgoal._kernels.regions": 2,
+    "torchrl_subgoal._kernels": 0,
+    "torchrl_subgoal._kernels.random": 0,
+    "torchrl_subgoal._kernels.steps": 0,
+    "torchrl_subgoal.subgoals.errors": 1,
+    "torchrl_subgoal.subgoals.predicates": 1,
+    "torchrl_subgoal.subgoals.forms": 1,
+    "torchrl_subgoal.subgoals.series": 1,
+    "torchrl_subgoal.subgoals.files": 1,
+    "torchrl_subgoal.subgoals": 2,
+    "torchrl_subgoal._kernels.regions": 2,
     "torchrl_subgoal.potentials": 3,
     "torchrl_subgoal.loss": 4,
-    "torchrl_subgoal.transform": 5, "torchrl_subgoal._kernels.shaping": 5,
-    "torchrl_subgoal.envs": 6, "torchrl_subgoal.agents.module": 6, "torchrl_subgoal.agents.sarsa": 6,
-    "torchrl_subgoal.agents.actor_critic": 6, "torchrl_subgoal.agents.ddpg": 6, "torchrl_subgoal.agents.subgoal_input": 6,
+    "torchrl_subgoal.transform": 5,
+    "torchrl_subgoal._kernels.shaping": 5,
+    "torchrl_subgoal.envs": 6,
+    "torchrl_subgoal.agents.module": 6,
+    "torchrl_subgoal.agents.sarsa": 6,
+    "torchrl_subgoal.agents.actor_critic": 6,
+    "torchrl_subgoal.agents.ddpg": 6,
+    "torchrl_subgoal.agents.subgoal_input": 6,
     "torchrl_subgoal._kernels.grid": 6,
-    "torchrl_subgoal._kernels.sarsa": 6, "torchrl_subgoal._kernels.actor_critic": 6,
-    "torchrl_subgoal.agents": 7, "torchrl_subgoal._kernels.records": 7, "torchrl_subgoal._kernels.engine": 7,
-    "torchrl_subgoal.training": 7, "torchrl_subgoal.methods": 7,
+    "torchrl_subgoal._kernels.sarsa": 6,
+    "torchrl_subgoal._kernels.actor_critic": 6,
+    "torchrl_subgoal.agents": 7,
+    "torchrl_subgoal._kernels.records": 7,
+    "torchrl_subgoal._kernels.engine": 7,
+    "torchrl_subgoal.training": 7,
+    "torchrl_subgoal.methods": 7,
     "torchrl_subgoal.domains": 8,
-    "torchrl_subgoal.domains.": 9, "torchrl_subgoal.experiments": 9, "torchrl_subgoal.studio": 9,
-    "torchrl_subgoal.console": 9, "torchrl_subgoal": 9,
+    "torchrl_subgoal.domains.": 9,
+    "torchrl_subgoal.experiments": 9,
+    "torchrl_subgoal.studio": 9,
+    "torchrl_subgoal.console": 9,
+    "torchrl_subgoal": 9,
 }
 #: what the core of the method never imports, whatever the layers say
-NOT_IN_THE_CORE = ("torchrl_subgoal.domains", "torchrl_subgoal.agents", "torchrl_subgoal.training",
-                   "torchrl_subgoal.experiments", "torchrl_subgoal.studio", "torchrl_subgoal.envs")
+NOT_IN_THE_CORE = (
+    "torchrl_subgoal.domains",
+    "torchrl_subgoal.agents",
+    "torchrl_subgoal.training",
+    "torchrl_subgoal.experiments",
+    "torchrl_subgoal.studio",
+    "torchrl_subgoal.envs",
+)
 CORE = ("torchrl_subgoal.subgoals", "torchrl_subgoal.transform", "torchrl_subgoal.potentials", "torchrl_subgoal.loss")
 
 
@@ -77,7 +101,7 @@ def imports(path: Path) -> set[str]:
             base = node.module or ""
             if node.level:  # relative: from the module's package
                 package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
-                base = ".".join(package[:len(package) - node.level + 1] + ([base] if base else []))
+                base = ".".join(package[: len(package) - node.level + 1] + ([base] if base else []))
             for alias in node.names:
                 found.add(f"{base}.{alias.name}" if f"{base}.{alias.name}" in MODULES else base)
         elif isinstance(node, ast.Call) and getattr(node.func, "attr", getattr(node.func, "id", "")) == "import_module":
@@ -131,8 +155,12 @@ def test_no_function_but_a_kernel_takes_more_than_12_parameters() -> None:
     for module, path in MODULES.items():
         for function in _functions(ast.parse(path.read_text())):
             args = function.args
-            count = len(args.posonlyargs) + len(args.args) + len(args.kwonlyargs) - (args.args[:1] != [] and
-                                                                                     args.args[0].arg == "self")
+            count = (
+                len(args.posonlyargs)
+                + len(args.args)
+                + len(args.kwonlyargs)
+                - (args.args[:1] != [] and args.args[0].arg == "self")
+            )
             if count > 12 and not _compiled(function) and not module.startswith("torchrl_subgoal._kernels"):
                 many.append(f"{module}.{function.name}: {count}")
     assert not many

@@ -100,8 +100,12 @@ def test_neural_potential_learns_a_constant_target() -> None:
             "subgoal_anchor": torch.randn(n, 2),
             "steps_to_next_obs": torch.ones(n, 1, dtype=torch.long),
             "mask": torch.ones(n, 1, dtype=torch.bool),
-            "next": {"subgoal_anchor": torch.randn(n, 2), "reward": torch.full((n, 1), 2.0),
-                     "terminated": torch.ones(n, 1, dtype=torch.bool), "done": torch.ones(n, 1, dtype=torch.bool)},
+            "next": {
+                "subgoal_anchor": torch.randn(n, 2),
+                "reward": torch.full((n, 1), 2.0),
+                "terminated": torch.ones(n, 1, dtype=torch.bool),
+                "done": torch.ones(n, 1, dtype=torch.bool),
+            },
         },
         batch_size=[n],
     )
@@ -136,9 +140,18 @@ def test_misuse_gives_clear_errors() -> None:
     with pytest.raises(TypeError, match="TensorDict module"):
         SubgoalValueLoss(torch.nn.Linear(2, 1))  # type: ignore[arg-type]
     wide = NeuralPotential(torch.nn.Linear(2, 3))
-    data = TensorDict({"subgoal_anchor": torch.zeros(4, 2), "steps_to_next_obs": torch.ones(4, 1, dtype=torch.long),
-                       "next": {"subgoal_anchor": torch.zeros(4, 2), "reward": torch.zeros(4, 1),
-                                "terminated": torch.zeros(4, 1, dtype=torch.bool)}}, [4])
+    data = TensorDict(
+        {
+            "subgoal_anchor": torch.zeros(4, 2),
+            "steps_to_next_obs": torch.ones(4, 1, dtype=torch.long),
+            "next": {
+                "subgoal_anchor": torch.zeros(4, 2),
+                "reward": torch.zeros(4, 1),
+                "terminated": torch.zeros(4, 1, dtype=torch.bool),
+            },
+        },
+        [4],
+    )
     with pytest.raises(ValueError, match=r"returned values of shape \(4, 3\)"):
         SubgoalValueLoss(wide).make_value_estimator(gamma=0.9)(data)
 
@@ -164,7 +177,9 @@ def test_any_tensordict_module_with_a_make_value_estimator_hook() -> None:
 
 def test_gamma_goes_through_make_value_estimator() -> None:
     v = TabularPotential(3)
-    with pytest.raises(TypeError, match=r"make_value_estimator: SubgoalValueLoss\(potential\)\.make_value_estimator\(gamma=0\.9\)"):
+    with pytest.raises(
+        TypeError, match=r"make_value_estimator: SubgoalValueLoss\(potential\)\.make_value_estimator\(gamma=0\.9\)"
+    ):
         SubgoalValueLoss(v, gamma=0.9)
     loss = SubgoalValueLoss(v)  # TorchRL's default discount until one is made
     assert loss.gamma == pytest.approx(0.99)
@@ -204,8 +219,11 @@ def test_set_keys_value_takes_effect() -> None:
     z, z2 = data["subgoal_index"].float(), data["next", "subgoal_index"].float()
     target = data["next", "reward"] + 0.9 ** data["steps_to_next_obs"] * z2 * ~data["next", "terminated"]
     assert torch.allclose(small, target - z, atol=1e-5)
-    assert torch.allclose(big, data["next", "reward"] + 0.9 ** data["steps_to_next_obs"] * 10 * z2
-                          * ~data["next", "terminated"] - 10 * z, atol=1e-4)
+    assert torch.allclose(
+        big,
+        data["next", "reward"] + 0.9 ** data["steps_to_next_obs"] * 10 * z2 * ~data["next", "terminated"] - 10 * z,
+        atol=1e-4,
+    )
 
 
 def test_the_expectile_weights_each_sgd_step() -> None:
@@ -213,10 +231,21 @@ def test_the_expectile_weights_each_sgd_step() -> None:
     ``α 2(1 − τ) δ``: ``V`` settles at the ``τ``-expectile of its targets."""
     v = TabularPotential(2, batch_shape=(2,))
     one = torch.ones(2, 1, dtype=torch.bool)
-    data = TensorDict({"subgoal_index": torch.zeros(2, 1, dtype=torch.long), "steps_to_next_obs": torch.ones(2, 1,
-                       dtype=torch.long), "mask": one, "achieved": one,
-                       "next": {"subgoal_index": torch.ones(2, 1, dtype=torch.long), "reward": torch.tensor([[2.0],
-                                [-2.0]]), "terminated": one, "done": one}}, batch_size=[2])
+    data = TensorDict(
+        {
+            "subgoal_index": torch.zeros(2, 1, dtype=torch.long),
+            "steps_to_next_obs": torch.ones(2, 1, dtype=torch.long),
+            "mask": one,
+            "achieved": one,
+            "next": {
+                "subgoal_index": torch.ones(2, 1, dtype=torch.long),
+                "reward": torch.tensor([[2.0], [-2.0]]),
+                "terminated": one,
+                "done": one,
+            },
+        },
+        batch_size=[2],
+    )
     loss = SubgoalValueLoss(v, expectile=0.9).make_value_estimator(gamma=0.9)
     loss(data)["loss_value"].backward()
     with torch.no_grad():
@@ -232,12 +261,21 @@ def test_a_time_out_inside_z_trains_nothing_unless_bootstrapped() -> None:
     ``"achieved"`` entry every truncated row is skipped."""
     v = TabularPotential(3, batch_shape=(3,))
     col = (3, 1)
-    data = TensorDict({"subgoal_index": torch.zeros(col, dtype=torch.long), "steps_to_next_obs": torch.ones(col,
-                       dtype=torch.long), "mask": torch.ones(col, dtype=torch.bool),
-                       "achieved": torch.tensor([[False], [True], [True]]),
-                       "next": {"subgoal_index": torch.tensor([[0], [1], [1]]), "reward": -torch.ones(col),
-                                "terminated": torch.tensor([[False], [False], [True]]),
-                                "done": torch.ones(col, dtype=torch.bool)}}, batch_size=[3])
+    data = TensorDict(
+        {
+            "subgoal_index": torch.zeros(col, dtype=torch.long),
+            "steps_to_next_obs": torch.ones(col, dtype=torch.long),
+            "mask": torch.ones(col, dtype=torch.bool),
+            "achieved": torch.tensor([[False], [True], [True]]),
+            "next": {
+                "subgoal_index": torch.tensor([[0], [1], [1]]),
+                "reward": -torch.ones(col),
+                "terminated": torch.tensor([[False], [False], [True]]),
+                "done": torch.ones(col, dtype=torch.bool),
+            },
+        },
+        batch_size=[3],
+    )
     skipped = SubgoalValueLoss(v).make_value_estimator(gamma=0.9)(data)["td_error"]
     assert skipped.reshape(-1).tolist() == [0.0, -1.0, -1.0]
     every = SubgoalValueLoss(v, bootstrap_truncated=True).make_value_estimator(gamma=0.9)(data)["td_error"]

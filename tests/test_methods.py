@@ -25,14 +25,26 @@ def test_random_patterns_are_seeded_and_valid() -> None:
     assert len({p.name for p in a}) == 10
 
 
-@pytest.mark.parametrize(("name", "potential", "learning"), [
-    ("HRS", TabularPotential, True), ("RRS", TabularPotential, True), ("NRS", NaivePotential, False),
-    ("SARSA-RS", TabularPotential, True),
-])
+@pytest.mark.parametrize(
+    ("name", "potential", "learning"),
+    [
+        ("HRS", TabularPotential, True),
+        ("RRS", TabularPotential, True),
+        ("NRS", NaivePotential, False),
+        ("SARSA-RS", TabularPotential, True),
+    ],
+)
 def test_shaping_transform_per_method(name: str, potential: type, learning: bool) -> None:
     patterns = [SubgoalSeries([Cell(3, 6), Cell(7, 9)])]
-    t = shaping_transform(paper_methods("SARSA")[name], torch.Size([4]), gamma=0.99, value_lr=0.25,
-                          patterns=patterns, aggregation=room_aggregation(), eta=1.0)
+    t = shaping_transform(
+        paper_methods("SARSA")[name],
+        torch.Size([4]),
+        gamma=0.99,
+        value_lr=0.25,
+        patterns=patterns,
+        aggregation=room_aggregation(),
+        eta=1.0,
+    )
     assert t is not None and isinstance(t.potential, potential) and t.learning == learning
     assert shaping_transform(paper_methods("SARSA")["SARSA"], torch.Size([4]), gamma=0.99, value_lr=0.25) is None
 

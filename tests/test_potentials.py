@@ -63,8 +63,9 @@ def test_potentials_are_tensordict_modules() -> None:
         v.table.copy_(torch.arange(8.0).reshape(2, 4))
     assert isinstance(v, TensorDictModuleBase)
     assert v.in_keys == ["subgoal_index", "subgoal_learner"] and v.out_keys == ["subgoal_value"]
-    td = TensorDict({"subgoal_index": torch.tensor([[3], [1], [0]]), "subgoal_learner": torch.tensor([[0], [1], [1]])},
-                    [3])
+    td = TensorDict(
+        {"subgoal_index": torch.tensor([[3], [1], [0]]), "subgoal_learner": torch.tensor([[0], [1], [1]])}, [3]
+    )
     assert v(td)["subgoal_value"].squeeze(-1).tolist() == [3.0, 5.0, 4.0]  # rows by the learner key
     shared = TabularPotential(4)
     assert shared.in_keys == ["subgoal_index"]

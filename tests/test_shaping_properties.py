@@ -31,16 +31,26 @@ from torchrl_subgoal.transform import RETURN, STEPS
 from torchrl_subgoal.transform.compiled import StepInputs
 
 D = 3  # observation entries
-PROPERTY = settings(max_examples=150, deadline=None, derandomize=True, database=None,
-                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+PROPERTY = settings(
+    max_examples=150,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 
 coords = st.sampled_from([-1.0, 0.0, 0.1, 0.3, 1 / 3, 0.5, 2.0, 7.0])
 predicates: st.SearchStrategy[Predicate] = st.one_of(
     st.builds(lambda r, c: Cell(r, c, (0, 2)), st.integers(0, 3), st.integers(0, 3)),
-    st.builds(lambda c, r, d: Circle(tuple(c), r, d), st.lists(coords, min_size=2, max_size=2),
-              st.sampled_from([0.04, 0.1, 0.5, 1.0]), st.sampled_from([(0, 1), (1, 2), (2, 0)])),
-    st.builds(lambda c, m, d: Box((c,), (m,), (d,)), coords, st.sampled_from([0.0, 0.04, 1 / 6, 1.0]),
-              st.integers(0, D - 1)),
+    st.builds(
+        lambda c, r, d: Circle(tuple(c), r, d),
+        st.lists(coords, min_size=2, max_size=2),
+        st.sampled_from([0.04, 0.1, 0.5, 1.0]),
+        st.sampled_from([(0, 1), (1, 2), (2, 0)]),
+    ),
+    st.builds(
+        lambda c, m, d: Box((c,), (m,), (d,)), coords, st.sampled_from([0.0, 0.04, 1 / 6, 1.0]), st.integers(0, D - 1)
+    ),
 )
 
 
@@ -128,8 +138,15 @@ def test_first_region_agrees_with_torch(case: tuple) -> None:
 rewards = st.sampled_from([0.0, 1.0, -1.0, 0.5, 1e-3, math.nan, math.inf, -math.inf]) | st.floats(-10, 10)
 
 
-def one_step(t: SubgoalPotentialTransform, current: dict[str, torch.Tensor], obs: torch.Tensor, reward: torch.Tensor,
-             done: torch.Tensor, terminated: torch.Tensor, shape: torch.Size) -> dict:
+def one_step(
+    t: SubgoalPotentialTransform,
+    current: dict[str, torch.Tensor],
+    obs: torch.Tensor,
+    reward: torch.Tensor,
+    done: torch.Tensor,
+    terminated: torch.Tensor,
+    shape: torch.Size,
+) -> dict:
     """One step of ``t`` (set up for a batch of ``shape``, learning online) from the entries ``current``."""
     n = shape.numel()
     setup = t._batch(shape, torch.arange(n).reshape(*shape, 1), n, obs, online=True)
@@ -148,8 +165,9 @@ def test_shaping_paths_agree(case: tuple, data: st.DataObject) -> None:
     done = torch.tensor(data.draw(st.lists(st.booleans(), min_size=n, max_size=n))).reshape(*shape, 1)
     terminated = done & torch.tensor(data.draw(st.lists(st.booleans(), min_size=n, max_size=n))).reshape(*shape, 1)
     k = torch.tensor(data.draw(st.lists(st.integers(0, 50), min_size=n, max_size=n))).reshape(*shape, 1)
-    r_h = torch.tensor(data.draw(st.lists(st.floats(-5, 5), min_size=n, max_size=n)),
-                       dtype=torch.float32).reshape(*shape, 1)
+    r_h = torch.tensor(data.draw(st.lists(st.floats(-5, 5), min_size=n, max_size=n)), dtype=torch.float32).reshape(
+        *shape, 1
+    )
     states = max(len(s) for s in series) + 1
     table = torch.randn(*shape, states, generator=torch.Generator().manual_seed(data.draw(st.integers(0, 99))))
     outcomes = []
@@ -157,8 +175,14 @@ def test_shaping_paths_agree(case: tuple, data: st.DataObject) -> None:
         potential = TabularPotential(states, batch_shape=shape)
         with torch.no_grad():
             potential.table.copy_(table)
-        t = SubgoalPotentialTransform([series[int(i)] for i in index.reshape(-1)], potential, gamma=0.9,
-                                      value_update=0.5, transitions_key="smdp", backend=backend)  # type: ignore[arg-type]
+        t = SubgoalPotentialTransform(
+            [series[int(i)] for i in index.reshape(-1)],
+            potential,
+            gamma=0.9,
+            value_update=0.5,
+            transitions_key="smdp",
+            backend=backend,
+        )  # type: ignore[arg-type]
         current = {INDEX: z.clone(), RETURN: r_h.clone(), STEPS: k.clone(), ACHIEVED: torch.zeros_like(done)}
         try:
             out = one_step(t, current, obs, r.clone(), done, terminated, shape)
@@ -184,21 +208,28 @@ def test_shaping_paths_agree(case: tuple, data: st.DataObject) -> None:
 
 
 @pytest.mark.parametrize("eager", [False, True])
-@pytest.mark.parametrize(("reward", "obs", "message"), [
-    (math.nan, 0.5, r"'reward' is NaN or infinite at index \(1, 0\) \(value nan\)"),
-    (math.inf, 0.5, "'reward' is NaN or infinite"),
-    (1.0, math.nan, r"'observation' is NaN at index \(1, 1\)"),
-])
+@pytest.mark.parametrize(
+    ("reward", "obs", "message"),
+    [
+        (math.nan, 0.5, r"'reward' is NaN or infinite at index \(1, 0\) \(value nan\)"),
+        (math.inf, 0.5, "'reward' is NaN or infinite"),
+        (1.0, math.nan, r"'observation' is NaN at index \(1, 1\)"),
+    ],
+)
 def test_nan_is_an_error_on_both_paths(eager: bool, reward: float, obs: float, message: str) -> None:
     """A NaN reward would make the table NaN for good; the transform refuses it."""
     series = [SubgoalSeries([Circle((0.5, 0.5), 0.1)])]
     potential = TabularPotential(2, batch_shape=(2,))
-    t = SubgoalPotentialTransform(series, potential, gamma=0.9, value_update=0.5,
-                                  backend="torch" if eager else "compiled")
+    t = SubgoalPotentialTransform(
+        series, potential, gamma=0.9, value_update=0.5, backend="torch" if eager else "compiled"
+    )
     observation = torch.tensor([[0.5, 0.5], [0.5, obs]])
     rewards = torch.tensor([[0.0], [reward]])
-    current = {INDEX: torch.zeros(2, 1, dtype=torch.long), RETURN: torch.zeros(2, 1),
-               STEPS: torch.zeros(2, 1, dtype=torch.long)}
+    current = {
+        INDEX: torch.zeros(2, 1, dtype=torch.long),
+        RETURN: torch.zeros(2, 1),
+        STEPS: torch.zeros(2, 1, dtype=torch.long),
+    }
     false = torch.zeros(2, 1, dtype=torch.bool)
     with pytest.raises(ValueError, match=message):
         one_step(t, current, observation, rewards, false, false, torch.Size([2]))
@@ -250,16 +281,42 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
     z, z_next, k, r_h, reward = ints(states - 1), ints(states - 1), ints(40), floats(), floats()
     done = ints(1).bool()
     terminated = done & ints(1).bool()
-    table = torch.tensor(data.draw(st.lists(st.floats(-3, 3, width=32), min_size=(1 if shared else n) * states,
-                                            max_size=(1 if shared else n) * states))).reshape(-1, states)
+    table = torch.tensor(
+        data.draw(
+            st.lists(
+                st.floats(-3, 3, width=32),
+                min_size=(1 if shared else n) * states,
+                max_size=(1 if shared else n) * states,
+            )
+        )
+    ).reshape(-1, states)
     # the compiled step
     kernel_table = table.numpy().copy()
-    outputs = [np.empty(col, np.float32), np.empty(col, np.int64), np.empty(col, np.float32),
-               np.empty(col, np.float32), np.empty(col, np.int64), np.empty(col, np.bool_)]
-    potential = PotentialKernelState(kernel_table, 0.0, gamma, value_gamma, lr, zero_terminal, START_MODES[start],
-                                     expectile, bootstrap)
-    shape_step(potential, shared, z.numpy(), z_next.numpy(), z.numpy(), r_h.numpy(), k.numpy(), reward.numpy(),
-               done.numpy(), terminated.numpy(), np.zeros(col, np.int64), *outputs)
+    outputs = [
+        np.empty(col, np.float32),
+        np.empty(col, np.int64),
+        np.empty(col, np.float32),
+        np.empty(col, np.float32),
+        np.empty(col, np.int64),
+        np.empty(col, np.bool_),
+    ]
+    potential = PotentialKernelState(
+        kernel_table, 0.0, gamma, value_gamma, lr, zero_terminal, START_MODES[start], expectile, bootstrap
+    )
+    shape_step(
+        potential,
+        shared,
+        z.numpy(),
+        z_next.numpy(),
+        z.numpy(),
+        r_h.numpy(),
+        k.numpy(),
+        reward.numpy(),
+        done.numpy(),
+        terminated.numpy(),
+        np.zeros(col, np.int64),
+        *outputs,
+    )
     # the torch reference
     v = TabularPotential(states, () if shared else (n,))
     with torch.no_grad():
@@ -269,9 +326,21 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
     learner = {} if shared else {"subgoal_learner": torch.arange(n).reshape(col)}
     if lr:
         loss = SubgoalValueLoss(v, expectile=expectile, bootstrap_truncated=bootstrap).make_value_estimator(
-            gamma=value_gamma)
-        loss(transition(torch.Size([n]), {INDEX: z, **learner}, {INDEX: z_next, **learner}, r_acc, k_acc, closed,
-                        done, terminated, z_next != z))["loss_value"].backward()
+            gamma=value_gamma
+        )
+        loss(
+            transition(
+                torch.Size([n]),
+                {INDEX: z, **learner},
+                {INDEX: z_next, **learner},
+                r_acc,
+                k_acc,
+                closed,
+                done,
+                terminated,
+                z_next != z,
+            )
+        )["loss_value"].backward()
         with torch.no_grad():
             v.table -= lr * v.table.grad
     rows = torch.zeros(n, dtype=torch.long) if shared else torch.arange(n)
@@ -282,8 +351,9 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
         phi, phi_next = phi - level, phi_next - level
     shaped = shaped_reward(reward, phi, phi_next, terminated, gamma, zero_terminal)
     rh_out, k_out = restart(r_acc, k_acc, closed)
-    torch.testing.assert_close(torch.from_numpy(kernel_table), v.table.detach().reshape(-1, states), rtol=1e-5,
-                               atol=1e-4)
+    torch.testing.assert_close(
+        torch.from_numpy(kernel_table), v.table.detach().reshape(-1, states), rtol=1e-5, atol=1e-4
+    )
     torch.testing.assert_close(torch.from_numpy(outputs[2]), shaped, rtol=1e-5, atol=1e-4)
     torch.testing.assert_close(torch.from_numpy(outputs[0]), rh_out, rtol=1e-5, atol=1e-4)
     assert torch.equal(torch.from_numpy(outputs[1]), k_out) and torch.equal(torch.from_numpy(outputs[5]), closed)
@@ -302,10 +372,21 @@ def test_conditions_advance_alike_compiled_and_in_torch(case: tuple, data: st.Da
     series, shape, index, z, obs = case
     n = shape.numel()
     flags = [Condition(lambda td, c=c: td[f"flag{c}"], name=f"flag{c}") for c in range(3)]
-    mixed = [SubgoalSeries([flags[data.draw(st.integers(0, 2))] if data.draw(st.booleans()) else p
-                            for p in s.predicates], order=s.order, name=s.name) for s in series]
-    td = TensorDict({f"flag{c}": torch.tensor(data.draw(st.lists(st.booleans(), min_size=n, max_size=n))).reshape(shape)
-                     for c in range(3)}, batch_size=shape)
+    mixed = [
+        SubgoalSeries(
+            [flags[data.draw(st.integers(0, 2))] if data.draw(st.booleans()) else p for p in s.predicates],
+            order=s.order,
+            name=s.name,
+        )
+        for s in series
+    ]
+    td = TensorDict(
+        {
+            f"flag{c}": torch.tensor(data.draw(st.lists(st.booleans(), min_size=n, max_size=n))).reshape(shape)
+            for c in range(3)
+        },
+        batch_size=shape,
+    )
     tables = SubgoalTables(mixed, index, D)
     observation = obs if tables.uses_regions else None
     assert torch.equal(tables.advance(z, observation, td), tables.advance_eager(z, observation, td))

@@ -77,7 +77,9 @@ def test_file_round_trip(tmp_path: Path) -> None:
         "chain": SubgoalSeries([Cell(3, 6), Cell(7, 9)], name="chain"),
         "dag": SubgoalSeries(
             [Circle((0.5, 0.5), 0.04), Box((0.0, 0.0, 0.0), (0.01, 0.01, 0.01), (6, 7, 8)), State(3)],
-            order=[(0, 2), (1, 2)], names=["c", "b", "s"], name="dag",
+            order=[(0, 2), (1, 2)],
+            names=["c", "b", "s"],
+            name="dag",
         ),
     }
     path = tmp_path / "p.yaml"
@@ -91,11 +93,21 @@ def test_file_round_trip(tmp_path: Path) -> None:
 
 
 def test_save_keeps_file_and_pattern_descriptions(tmp_path: Path) -> None:
-    path = write(tmp_path, {"description": "whole file", "patterns": {
-        "chain": {"description": "hallways first", "subgoals": [{"cell": [3, 6]}, {"cell": [7, 9]}]},
-        "named": {"description": "partial", "subgoals": {"a": {"cell": [3, 6]}, "b": {"cell": [7, 9]}},
-                  "order": []},
-        "plain": {"subgoals": [{"cell": [3, 6]}]}}})
+    path = write(
+        tmp_path,
+        {
+            "description": "whole file",
+            "patterns": {
+                "chain": {"description": "hallways first", "subgoals": [{"cell": [3, 6]}, {"cell": [7, 9]}]},
+                "named": {
+                    "description": "partial",
+                    "subgoals": {"a": {"cell": [3, 6]}, "b": {"cell": [7, 9]}},
+                    "order": [],
+                },
+                "plain": {"subgoals": [{"cell": [3, 6]}]},
+            },
+        },
+    )
     loaded = load_patterns(path)
     assert [s.description for s in loaded.values()] == ["hallways first", "partial", None]
     again = tmp_path / "again.yaml"
@@ -131,28 +143,50 @@ def test_json_and_box_slice(tmp_path: Path) -> None:
 BAD_FILES = [
     ({"patterns": {"p": {"subgoals": [{"square": [1, 2]}]}}}, "pattern 'p': subgoals[0]: give exactly one predicate"),
     ({"patterns": {"p": {"subgoals": [{"cell": [1, 2, 3]}]}}}, "subgoals[0].cell: expected [row, col]"),
-    ({"patterns": {"p": {"subgoals": [{"circle": {"centre": [0.1, float("nan")], "radius": 0.1}}]}}},
-     "subgoals[0].circle.centre[1]: expected a finite number"),
-    ({"patterns": {"p": {"subgoals": [{"circle": {"centre": [0.1, 0.2], "radius": 0.1, "dims": [0]}}]}}},
-     "subgoals[0].circle.dims: has 1 entries but the centre has 2"),
-    ({"patterns": {"p": {"subgoals": [{"circle": {"centre": [0.1, 0.2], "radius": -1}}]}}},
-     "circle.radius: must be positive"),
-    ({"patterns": {"p": {"subgoals": [{"box": {"centre": [0.1], "margin": [0.1, 0.2]}}]}}},
-     "box.margin: has 2 entries but the centre has 1"),
-    ({"patterns": {"p": {"subgoals": {"a": {"cell": [1, 1]}, "b": {"cell": [2, 2]}},
-                         "order": [["a", "b"], ["b", "a"]]}}}, "pattern 'p': order: the order has a cycle"),
-    ({"patterns": {"p": {"subgoals": {"a": {"cell": [1, 1]}}, "order": [["a", "z"]]}}},
-     "order[0]: unknown subgoal 'z'"),
+    (
+        {"patterns": {"p": {"subgoals": [{"circle": {"centre": [0.1, float("nan")], "radius": 0.1}}]}}},
+        "subgoals[0].circle.centre[1]: expected a finite number",
+    ),
+    (
+        {"patterns": {"p": {"subgoals": [{"circle": {"centre": [0.1, 0.2], "radius": 0.1, "dims": [0]}}]}}},
+        "subgoals[0].circle.dims: has 1 entries but the centre has 2",
+    ),
+    (
+        {"patterns": {"p": {"subgoals": [{"circle": {"centre": [0.1, 0.2], "radius": -1}}]}}},
+        "circle.radius: must be positive",
+    ),
+    (
+        {"patterns": {"p": {"subgoals": [{"box": {"centre": [0.1], "margin": [0.1, 0.2]}}]}}},
+        "box.margin: has 2 entries but the centre has 1",
+    ),
+    (
+        {
+            "patterns": {
+                "p": {"subgoals": {"a": {"cell": [1, 1]}, "b": {"cell": [2, 2]}}, "order": [["a", "b"], ["b", "a"]]}
+            }
+        },
+        "pattern 'p': order: the order has a cycle",
+    ),
+    (
+        {"patterns": {"p": {"subgoals": {"a": {"cell": [1, 1]}}, "order": [["a", "z"]]}}},
+        "order[0]: unknown subgoal 'z'",
+    ),
     ({"patterns": {"p": {"subgoals": {"a": {"cell": [1, 1]}}}}}, "pattern 'p': order: missing"),
     ({"patterns": {"p": {"goals": []}}}, "pattern 'p': unknown field(s) ['goals']"),
     ({"patterns": {"p": {"subgoals": []}}}, "pattern 'p': a pattern needs at least one subgoal"),
     ({"patterns": {}}, "patterns: expected a non-empty mapping"),
-    ({"domain": "four_rooms", "patterns": {"p": {"subgoals": [{"cell": [1, 1]}, {"cell": [0, 6]}]}}},
-     "pattern 'p': subgoals[1].cell: (0, 6) is a wall"),
-    ({"domain": "four_rooms", "patterns": {"p": {"subgoals": [{"cell": [13, 2]}]}}},
-     "subgoals[0].cell: (13, 2) is off the 13x13 grid"),
-    ({"domain": "four_rooms", "patterns": {"p": {"subgoals": [{"circle": {"centre": [1, 1], "radius": 1}}]}}},
-     "four-rooms subgoals are cells or states"),
+    (
+        {"domain": "four_rooms", "patterns": {"p": {"subgoals": [{"cell": [1, 1]}, {"cell": [0, 6]}]}}},
+        "pattern 'p': subgoals[1].cell: (0, 6) is a wall",
+    ),
+    (
+        {"domain": "four_rooms", "patterns": {"p": {"subgoals": [{"cell": [13, 2]}]}}},
+        "subgoals[0].cell: (13, 2) is off the 13x13 grid",
+    ),
+    (
+        {"domain": "four_rooms", "patterns": {"p": {"subgoals": [{"circle": {"centre": [1, 1], "radius": 1}}]}}},
+        "four-rooms subgoals are cells or states",
+    ),
     ({"domain": "mars", "patterns": {"p": {"subgoals": [{"cell": [1, 1]}]}}}, "unknown domain 'mars'"),
     ("patterns: [unclosed", "not valid YAML/JSON"),
 ]
@@ -306,7 +340,9 @@ def test_condition_reads_any_entry_and_checks_its_mask() -> None:
     tables = SubgoalTables([series], torch.zeros(2, dtype=torch.long), 0)
     td = TensorDict({"flag": torch.tensor([[True], [False]])}, [2])
     assert tables.advance(torch.zeros(2, 1, dtype=torch.long), None, td).tolist() == [[1], [0]]
-    wrong = SubgoalTables([SubgoalSeries([lambda td: td["flag"][:1]], name="short")], torch.zeros(2, dtype=torch.long), 0)
+    wrong = SubgoalTables(
+        [SubgoalSeries([lambda td: td["flag"][:1]], name="short")], torch.zeros(2, dtype=torch.long), 0
+    )
     with pytest.raises(ValueError, match=r"returned \(1, 1\); expected a boolean mask of shape \(2,\)"):
         wrong.advance(torch.zeros(2, 1, dtype=torch.long), None, td)
     with pytest.raises(KeyError, match="failed on the step"):

@@ -58,8 +58,13 @@ def test_smdp_arithmetic_by_hand(backend: str, start: str) -> None:
         v.table.copy_(torch.tensor([0.1, 0.2, 0.3]))
     paper = ValueUpdate(0.5, SubgoalValueLoss(v, expectile=0.5).make_value_estimator(gamma=0.9))
     t = SubgoalPotentialTransform(
-        SubgoalSeries([State(1), State(3)]), v, gamma=0.9, value_update=paper, transitions_key="smdp",
-        start_potential=start, backend=backend,  # type: ignore[arg-type]
+        SubgoalSeries([State(1), State(3)]),
+        v,
+        gamma=0.9,
+        value_update=paper,
+        transitions_key="smdp",
+        start_potential=start,
+        backend=backend,  # type: ignore[arg-type]
     )
     env = TransformedEnv(LineEnv(1), t)
     td = env.reset()
@@ -87,7 +92,9 @@ def test_smdp_arithmetic_by_hand(backend: str, start: str) -> None:
 
 
 def test_accumulators_reset_on_emission(backend: str) -> None:
-    t = SubgoalPotentialTransform(SubgoalSeries([State(3)]), TabularPotential(2), gamma=0.5, transitions_key="smdp", backend=backend)
+    t = SubgoalPotentialTransform(
+        SubgoalSeries([State(3)]), TabularPotential(2), gamma=0.5, transitions_key="smdp", backend=backend
+    )
     env = TransformedEnv(LineEnv(1, length=6), t)
     td = env.reset()
     rewards = []
@@ -125,8 +132,13 @@ def test_shaped_reward_is_r_plus_gamma_v_next_minus_v(backend: str, zero_termina
     with torch.no_grad():
         v.table.copy_(torch.randn(n, 3))
     t = SubgoalPotentialTransform(
-        [patterns[i % 3] for i in range(n)], v, gamma=0.95, observation_key="cell",
-        zero_terminal_potential=zero_terminal, start_potential=start, backend=backend,  # type: ignore[arg-type]
+        [patterns[i % 3] for i in range(n)],
+        v,
+        gamma=0.95,
+        observation_key="cell",
+        zero_terminal_potential=zero_terminal,
+        start_potential=start,
+        backend=backend,  # type: ignore[arg-type]
     )
     env = TransformedEnv(FourRoomsEnv(n, max_steps=40), t)
     torch.manual_seed(0)
@@ -166,8 +178,15 @@ def test_compiled_and_torch_backends_agree() -> None:
             v.table.copy_(torch.randn(n, 3, generator=torch.Generator().manual_seed(3)))
         start = v.table.detach().clone()
         patterns = [HALLWAYS, SubgoalSeries([Cell(6, 2), Cell(10, 6)])]
-        t = SubgoalPotentialTransform([patterns[i % 2] for i in range(n)], v, gamma=0.99, observation_key="cell",
-                                      value_update=0.3, transitions_key="smdp", backend=backend)  # type: ignore[arg-type]
+        t = SubgoalPotentialTransform(
+            [patterns[i % 2] for i in range(n)],
+            v,
+            gamma=0.99,
+            observation_key="cell",
+            value_update=0.3,
+            transitions_key="smdp",
+            backend=backend,
+        )  # type: ignore[arg-type]
         env = TransformedEnv(FourRoomsEnv(n, max_steps=60), t)
         torch.manual_seed(1)
         data = env.rollout(300, break_when_any_done=False)
@@ -178,16 +197,26 @@ def test_compiled_and_torch_backends_agree() -> None:
     compiled, v_compiled = run("compiled")
     eager, v_eager = run("torch")
     assert torch.allclose(v_compiled, v_eager, atol=1e-5)
-    for key in [("next", "reward"), ("next", "subgoal_index"), ("next", "subgoal_return"),
-                ("next", "subgoal_steps"), ("next", "smdp", "mask"), ("next", "smdp", "next", "reward")]:
+    for key in [
+        ("next", "reward"),
+        ("next", "subgoal_index"),
+        ("next", "subgoal_return"),
+        ("next", "subgoal_steps"),
+        ("next", "smdp", "mask"),
+        ("next", "smdp", "next", "reward"),
+    ]:
         assert torch.allclose(compiled[key].float(), eager[key].float(), atol=1e-5), key
 
 
 def test_compiled_backend_refuses_what_it_cannot_shape_in_one_line() -> None:
-    t = SubgoalPotentialTransform(HALLWAYS, NeuralPotential(torch.nn.Linear(2, 1)), gamma=0.9,
-                                  observation_key="cell", backend="compiled")
-    with pytest.raises(TypeError, match=r"backend='compiled'\): it shapes with a TabularPotential or a "
-                                         r"NaivePotential, not NeuralPotential; use backend='torch' or 'auto'"):
+    t = SubgoalPotentialTransform(
+        HALLWAYS, NeuralPotential(torch.nn.Linear(2, 1)), gamma=0.9, observation_key="cell", backend="compiled"
+    )
+    with pytest.raises(
+        TypeError,
+        match=r"backend='compiled'\): it shapes with a TabularPotential or a "
+        r"NaivePotential, not NeuralPotential; use backend='torch' or 'auto'",
+    ):
         TransformedEnv(FourRoomsEnv(2), t).reset()
     with pytest.raises(ValueError, match="backend must be 'auto', 'compiled' or 'torch', got 'numba'"):
         SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), gamma=0.9, backend="numba")  # type: ignore[arg-type]
@@ -240,7 +269,9 @@ def test_in_a_compose_with_other_transforms() -> None:
 
 
 def test_partial_resets_keep_other_envs_state(backend: str) -> None:
-    t = SubgoalPotentialTransform(SubgoalSeries([State(1), State(2)]), TabularPotential(3, (3,)), gamma=0.9, backend=backend)
+    t = SubgoalPotentialTransform(
+        SubgoalSeries([State(1), State(2)]), TabularPotential(3, (3,)), gamma=0.9, backend=backend
+    )
     env = TransformedEnv(LineEnv(3, length=3), t)
     td = env.reset()
     for actions in ([1, 1, 0], [1, 1, 1]):
@@ -332,8 +363,9 @@ def test_start_potential_under_a_step_cost(backend: str, start: str) -> None:
     v = TabularPotential(3)
     with torch.no_grad():
         v.table.copy_(torch.tensor([-3.0, -2.0, -1.0]))
-    t = SubgoalPotentialTransform(SubgoalSeries([State(1), State(3)]), v, gamma=0.9,
-                                  start_potential=start, backend=backend)  # type: ignore[arg-type]
+    t = SubgoalPotentialTransform(
+        SubgoalSeries([State(1), State(3)]), v, gamma=0.9, start_potential=start, backend=backend
+    )  # type: ignore[arg-type]
     env = TransformedEnv(LineEnv(1, step_reward=-1.0, goal_reward=0.0), t)
     td = env.reset()
     raw = [-1 + 0.9 * -2 + 3, -1 + 0.9 * -2 + 2, -1 + 0.9 * -1 + 2, 0 - 0 + 1]  # z: 0→1, 1→1, 1→2, 2→goal
@@ -350,8 +382,9 @@ def test_neural_start_potential_reads_the_reset_observation(start: str) -> None:
     net = torch.nn.Linear(2, 1)
     with torch.no_grad():
         net.bias.fill_(0.5 if start == "nonpositive" else -0.5)
-    t = SubgoalPotentialTransform(HALLWAYS, NeuralPotential(net), gamma=0.9, observation_key="cell",
-                                  start_potential=start)  # type: ignore[arg-type]
+    t = SubgoalPotentialTransform(
+        HALLWAYS, NeuralPotential(net), gamma=0.9, observation_key="cell", start_potential=start
+    )  # type: ignore[arg-type]
     env = TransformedEnv(FourRoomsEnv(3, max_steps=40), t)
     check_env_specs(env)
     data = env.rollout(60, break_when_any_done=False)
@@ -400,8 +433,9 @@ def test_unknown_observation_key() -> None:
 
 def test_observation_too_small_for_the_predicate() -> None:
     series = SubgoalSeries([Cell(3, 6, (1, 2))], name="wide", source="wide.yaml")
-    env = TransformedEnv(FourRoomsEnv(2), SubgoalPotentialTransform(series, TabularPotential(2), gamma=0.9,
-                                                                    observation_key="cell"))
+    env = TransformedEnv(
+        FourRoomsEnv(2), SubgoalPotentialTransform(series, TabularPotential(2), gamma=0.9, observation_key="cell")
+    )
     with pytest.raises(SubgoalFileError, match=r"wide\.yaml: pattern 'wide'.*has 2 entries"):
         env.reset()
 
@@ -414,7 +448,9 @@ def test_potential_batch_mismatch() -> None:
 
 def test_wrong_number_of_patterns() -> None:
     t = SubgoalPotentialTransform([HALLWAYS, HALLWAYS], TabularPotential(3), gamma=0.9, observation_key="cell")
-    with pytest.raises(ValueError, match="2 subgoal series for a batch of 3 envs: give one series for every env, or one per env"):
+    with pytest.raises(
+        ValueError, match="2 subgoal series for a batch of 3 envs: give one series for every env, or one per env"
+    ):
         TransformedEnv(FourRoomsEnv(3), t).reset()
 
 
@@ -443,8 +479,9 @@ def assert_forward_matches(t: SubgoalPotentialTransform, data: TensorDict) -> No
 
 
 def test_forward_equals_online_on_categorical_observations(backend: str) -> None:
-    t = SubgoalPotentialTransform(SubgoalSeries([State(1), State(3)]), fixed_table(TabularPotential(3, (3,))),
-                                  gamma=0.9, backend=backend)
+    t = SubgoalPotentialTransform(
+        SubgoalSeries([State(1), State(3)]), fixed_table(TabularPotential(3, (3,))), gamma=0.9, backend=backend
+    )
     env = TransformedEnv(LineEnv(3, length=4), t)
     torch.manual_seed(0)
     data = env.rollout(60, break_when_any_done=False)
@@ -545,14 +582,23 @@ def test_kernel_boundaries_check_shapes() -> None:
 
 def test_transitions_rebuilt_equal_the_written_ones(backend: str) -> None:
     v = fixed_table(TabularPotential(3, (6,)))
-    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.97, observation_key="cell", transitions_key="smdp", backend=backend)
+    t = SubgoalPotentialTransform(
+        HALLWAYS, v, gamma=0.97, observation_key="cell", transitions_key="smdp", backend=backend
+    )
     data = TransformedEnv(FourRoomsEnv(6, max_steps=60), t).rollout(200, break_when_any_done=False)
     written = data["next", "smdp"].reshape(-1)
     written = written[written["mask"].reshape(-1)]
     rebuilt = t.transitions(data)
     assert rebuilt.numel() == written.numel() > 10
-    for key in ("subgoal_index", "subgoal_learner", "steps_to_next_obs", ("next", "subgoal_index"),
-                ("next", "subgoal_learner"), ("next", "terminated"), ("next", "done")):
+    for key in (
+        "subgoal_index",
+        "subgoal_learner",
+        "steps_to_next_obs",
+        ("next", "subgoal_index"),
+        ("next", "subgoal_learner"),
+        ("next", "terminated"),
+        ("next", "done"),
+    ):
         assert torch.equal(rebuilt[key], written[key]), key
     assert torch.allclose(rebuilt["next", "reward"], written["next", "reward"], atol=1e-6)
 
@@ -563,10 +609,17 @@ def test_transitions_rebuilt_equal_the_written_ones(backend: str) -> None:
 def test_two_transforms_on_one_env(backend: str) -> None:
     halves = StateAggregation(torch.tensor([0, 0, 1, 1, 2]), num_states=3)
     # Φ = V (start_potential="value") keeps the expected rewards below a plain table look-up
-    first = SubgoalPotentialTransform(SubgoalSeries([State(1), State(3)]), fixed_table(TabularPotential(3), 1),
-                                      gamma=0.9, start_potential="value", backend=backend)
+    first = SubgoalPotentialTransform(
+        SubgoalSeries([State(1), State(3)]),
+        fixed_table(TabularPotential(3), 1),
+        gamma=0.9,
+        start_potential="value",
+        backend=backend,
+    )
     second_potential = fixed_table(TabularPotential(3, index_key="half_index"), 2)
-    second = SubgoalPotentialTransform(halves, second_potential, gamma=0.9, prefix="half", start_potential="value", backend=backend)
+    second = SubgoalPotentialTransform(
+        halves, second_potential, gamma=0.9, prefix="half", start_potential="value", backend=backend
+    )
     env = TransformedEnv(LineEnv(3, length=4), Compose(first, second))
     check_env_specs(env)
     torch.manual_seed(0)
@@ -619,8 +672,9 @@ def test_arbitrary_tensordict_module_as_the_potential() -> None:
 
     torch.manual_seed(0)
     embed = TensorDictModule(torch.nn.Linear(2, 8), in_keys=["subgoal_anchor"], out_keys=["hidden"])
-    head = TensorDictModule(torch.nn.Sequential(torch.nn.Tanh(), torch.nn.Linear(8, 1)), in_keys=["hidden"],
-                            out_keys=["subgoal_value"])
+    head = TensorDictModule(
+        torch.nn.Sequential(torch.nn.Tanh(), torch.nn.Linear(8, 1)), in_keys=["hidden"], out_keys=["subgoal_value"]
+    )
     potential = TensorDictSequential(embed, head)
     before = [p.detach().clone() for p in potential.parameters()]
     # random walks of 40 steps mostly time out inside z: bootstrapped, they train the module too
@@ -651,8 +705,7 @@ def test_potential_reading_entries_the_transform_does_not_keep() -> None:
 
 
 def test_neural_potential_with_the_wrong_output_shape() -> None:
-    t = SubgoalPotentialTransform(HALLWAYS, NeuralPotential(torch.nn.Linear(2, 3)), gamma=0.9,
-                                  observation_key="cell")
+    t = SubgoalPotentialTransform(HALLWAYS, NeuralPotential(torch.nn.Linear(2, 3)), gamma=0.9, observation_key="cell")
     env = TransformedEnv(FourRoomsEnv(2), t)
     with pytest.raises(ValueError, match=r"returned values of shape \(2, 3\).*output size is 1"):
         env.rollout(3)
@@ -674,14 +727,15 @@ class _CountingNet(torch.nn.Module):
 @pytest.mark.parametrize("change", ["none", "optimizer", "data", "shared"])
 def test_potential_value_is_reused_only_while_inputs_and_parameters_are_unchanged(change: str) -> None:
     """Φ(z) of a step is the previous step's Φ(z'), Φ(z') is Φ(z) until a subgoal is achieved and Φ(z_0)
-    that of the episode, without evaluating the potential again; any change of the parameters (an optimiser step, an in-place ``.data`` write
-    that moves no version counter, shared memory written by another process) is seen."""
+    that of the episode, without evaluating the potential again; any change of the parameters (an optimiser step,
+    an in-place ``.data`` write that moves no version counter, shared memory written by another process) is seen."""
     torch.manual_seed(0)
     net = _CountingNet()
     if change == "shared":
         net.share_memory()
-    t = SubgoalPotentialTransform(HALLWAYS, NeuralPotential(net), gamma=0.9, observation_key="cell",
-                                  start_potential="zero")
+    t = SubgoalPotentialTransform(
+        HALLWAYS, NeuralPotential(net), gamma=0.9, observation_key="cell", start_potential="zero"
+    )
     env = TransformedEnv(FourRoomsEnv(8, max_steps=1000), t)
     optimizer = torch.optim.SGD(net.parameters(), lr=0.1)
     td = env.reset()
@@ -743,8 +797,9 @@ def test_value_cache_sees_one_changed_entry_of_a_large_parameter(dtype: torch.dt
 def test_fused_step_reads_state_entries_written_in_place_or_moved_to_other_memory() -> None:
     # the step reuses the numpy views of last step's outputs: writes into them, and a storage swapped
     # under the same tensor object, must still be what the kernel reads
-    t = SubgoalPotentialTransform(SubgoalSeries([Cell(3, 6), Cell(7, 9)]), TabularPotential(3), gamma=0.9,
-                                  observation_key="cell")
+    t = SubgoalPotentialTransform(
+        SubgoalSeries([Cell(3, 6), Cell(7, 9)]), TabularPotential(3), gamma=0.9, observation_key="cell"
+    )
     env = TransformedEnv(FourRoomsEnv(4), t)
     td = env.reset()
     td["action"] = torch.zeros(4, dtype=torch.long)

@@ -141,8 +141,11 @@ def test_transform_model() -> None:
 def test_transform_rb() -> None:
     """On a replay buffer of whole trajectories: each sample shaped as it was collected."""
     online, data = stored_line()
-    rb = ReplayBuffer(storage=LazyTensorStorage(10), transform=SubgoalPotentialTransform(LINE, online.potential,
-                                                                                           gamma=0.9), batch_size=2)
+    rb = ReplayBuffer(
+        storage=LazyTensorStorage(10),
+        transform=SubgoalPotentialTransform(LINE, online.potential, gamma=0.9),
+        batch_size=2,
+    )
     rb.extend(data.exclude(("next", "reward")))
     sample = rb.sample()
     assert sample.shape == data.shape
@@ -163,8 +166,9 @@ def test_in_and_out_keys_are_what_the_step_reads_and_writes() -> None:
     t = shaping(transitions_key="smdp")
     env = TransformedEnv(FourRoomsEnv(2), t)
     base = FourRoomsEnv(2)
-    written = set(env.rand_step(env.reset())["next"].keys(True, True)) - set(base.rand_step(base.reset())["next"]
-                                                                            .keys(True, True))
+    written = set(env.rand_step(env.reset())["next"].keys(True, True)) - set(
+        base.rand_step(base.reset())["next"].keys(True, True)
+    )
     assert t.in_keys == ["reward", "done", "terminated", "cell"]
     assert {k for k in t.out_keys if k != "reward"} == {k if isinstance(k, str) else k[0] for k in written}
     with pytest.raises(KeyError, match=r"the stored data has no \[\('next', 'cell'\)\]; store the steps' entries"):
@@ -186,8 +190,10 @@ def test_nested_multi_agent_keys() -> None:
     nxt = out["next", "agents"]
     assert nxt["subgoal_index"].squeeze(-1).tolist() == [[1, 1, 0], [1, 0, 1]]  # position 1 achieves State(1)
     assert torch.allclose(nxt["reward"].squeeze(-1), torch.tensor([[1.9, 1.9, 1.0], [1.9, 1.0, 1.9]]))
-    assert nxt["env_reward"].shape == (2, 3, 1) and td["agents", "subgoal_steps"].tolist() == [[[0], [0], [1]],
-                                                                                                [[0], [1], [0]]]
+    assert nxt["env_reward"].shape == (2, 3, 1) and td["agents", "subgoal_steps"].tolist() == [
+        [[0], [0], [1]],
+        [[0], [1], [0]],
+    ]
 
 
 def test_a_reward_with_more_rows_than_the_episodes_is_refused_in_one_line() -> None:
@@ -195,8 +201,11 @@ def test_a_reward_with_more_rows_than_the_episodes_is_refused_in_one_line() -> N
 
     base = LineEnv(2)
     base.reward_spec = Unbounded(shape=(2, 3))  # three rewards per env, one done per env
-    with pytest.raises(ValueError, match=r"^SubgoalPotentialTransform: the reward 'reward' has shape \(2, 3\) but "
-                                         r"episodes end by 'done' of shape \(2, 1\): one reward per episode row"):
+    with pytest.raises(
+        ValueError,
+        match=r"^SubgoalPotentialTransform: the reward 'reward' has shape \(2, 3\) but "
+        r"episodes end by 'done' of shape \(2, 1\): one reward per episode row",
+    ):
         _ = TransformedEnv(base, SubgoalPotentialTransform(LINE, TabularPotential(3), gamma=0.9)).reward_spec
 
 
@@ -215,16 +224,24 @@ def test_native_auto_reset_restarts_the_abstract_state_of_the_envs_that_reset() 
 
 def test_two_transforms_with_the_same_prefix_are_refused_in_one_line() -> None:
     env = TransformedEnv(FourRoomsEnv(2), Compose(shaping(), shaping()))
-    with pytest.raises(ValueError, match=r"^SubgoalPotentialTransform: 'subgoal_index' is kept already by another "
-                                         r"transform on this env; give this one another prefix \(prefix='room'\)"):
+    with pytest.raises(
+        ValueError,
+        match=r"^SubgoalPotentialTransform: 'subgoal_index' is kept already by another "
+        r"transform on this env; give this one another prefix \(prefix='room'\)",
+    ):
         env.reset()
 
 
 def test_two_transforms_with_their_own_prefixes_are_independent() -> None:
     """Each shapes as it would alone: the first's entries are those of the same transform alone."""
     alone = TransformedEnv(FourRoomsEnv(2), shaping())
-    second = SubgoalPotentialTransform(SubgoalSeries([Cell(1, 2)]), TabularPotential(2, index_key="room_index"),
-                                       gamma=0.9, observation_key="cell", prefix="room")
+    second = SubgoalPotentialTransform(
+        SubgoalSeries([Cell(1, 2)]),
+        TabularPotential(2, index_key="room_index"),
+        gamma=0.9,
+        observation_key="cell",
+        prefix="room",
+    )
     both = TransformedEnv(FourRoomsEnv(2), Compose(shaping(), second))
     check_env_specs(both)
     torch.manual_seed(0)
@@ -260,6 +277,9 @@ def test_forward_shapes_a_shuffled_multi_env_replay_sample_with_one_table() -> N
 def test_forward_refuses_in_one_line_when_rows_have_their_own_tables_and_no_learner_entry() -> None:
     t = SubgoalPotentialTransform(HALLWAYS, TabularPotential(3, (4,)), gamma=0.9, observation_key="cell")
     data = TransformedEnv(FourRoomsEnv(4), t).rollout(5)
-    with pytest.raises(ValueError, match=r"^data of batch shape \(3,\) \(time excluded\) from 4 learners with their "
-                                         r"own patterns or tables: each row's learner is unknown"):
+    with pytest.raises(
+        ValueError,
+        match=r"^data of batch shape \(3,\) \(time excluded\) from 4 learners with their "
+        r"own patterns or tables: each row's learner is unknown",
+    ):
         t(data[:3].exclude("subgoal_learner", ("next", "subgoal_learner")).clone())

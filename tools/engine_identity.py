@@ -54,8 +54,15 @@ def fingerprint(engine: str) -> dict[str, np.ndarray]:
         run = recipe.run_episodes
         count = [0]
 
-        def capture(env: Any, agent: Any, episodes: int, _run: Any = run, _domain: str = domain, _count: list[int] = count,
-                    **kwargs: Any) -> Any:
+        def capture(
+            env: Any,
+            agent: Any,
+            episodes: int,
+            _run: Any = run,
+            _domain: str = domain,
+            _count: list[int] = count,
+            **kwargs: Any,
+        ) -> Any:
             records = _run(env, agent, episodes, **kwargs)
             key = f"{_domain}/{_count[0]}"
             _count[0] += 1
@@ -83,8 +90,11 @@ def compare(a: Path, b: Path) -> int:
     """Print the differing keys; 0 if the two fingerprints are identical."""
     left, right = np.load(a), np.load(b)
     keys = sorted(set(left.files) | set(right.files))
-    bad = [k for k in keys if k not in left.files or k not in right.files
-           or not np.array_equal(left[k], right[k], equal_nan=True)]
+    bad = [
+        k
+        for k in keys
+        if k not in left.files or k not in right.files or not np.array_equal(left[k], right[k], equal_nan=True)
+    ]
     for k in bad:
         print(f"differs: {k}")
     print(f"{len(keys) - len(bad)} of {len(keys)} arrays identical")

@@ -38,6 +38,7 @@ from torchrl_subgoal.transform.cache import ValueCache as _ValueCache
 try:
     from torchrl_subgoal.training import close_collector
 except ImportError:  # a version of the library before close_collector: a Collector needs no more
+
     def close_collector(collector: Collector) -> None:
         collector.shutdown()
 
@@ -56,11 +57,13 @@ def collector_cpu(envs: int, steps: int, repeats: int) -> list[float]:
     """CPU µs per env step of a HRS-shaped ``Collector`` over ``envs`` Fetch envs, ``repeats`` timings."""
     series = fetch.human_patterns()["participants"]
     shaping = Shaping([series], NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, (256, 256, 256))))
-    env = shaped_env(partial(fetch.make_fetch_envs, 0, lean=True), envs, shaping=shaping, gamma=0.98,
-                     episode_stats=False)
+    env = shaped_env(
+        partial(fetch.make_fetch_envs, 0, lean=True), envs, shaping=shaping, gamma=0.98, episode_stats=False
+    )
     agent = DDPGAgent(fetch.OBSERVATION_SIZE, env.action_spec_unbatched, DDPGConfig(buffer_size=1000))
-    collector = Collector(env, agent.policy, frames_per_batch=50 * envs, total_frames=-1,
-                          auto_register_policy_transforms=False)
+    collector = Collector(
+        env, agent.policy, frames_per_batch=50 * envs, total_frames=-1, auto_register_policy_transforms=False
+    )
     batches = iter(collector)
     next(batches)
     costs = []
@@ -87,14 +90,17 @@ def main() -> None:
     print(f"load average before: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     with torch.no_grad():
         for batch in (3, 6, 9):
-            inputs = TensorDict({key: torch.randn(batch, fetch.OBSERVATION_SIZE) for key in potential.in_keys},
-                                batch_size=[batch])
+            inputs = TensorDict(
+                {key: torch.randn(batch, fetch.OBSERVATION_SIZE) for key in potential.in_keys}, batch_size=[batch]
+            )
             forward = partial(lambda td: potential(td.clone(False)), inputs)
             print(f"V forward, batch {batch}: {micros(forward, 2000):6.0f} µs")
         print(f"the cache's check of V's parameters: {micros(lambda: cache.check(potential), 2000):6.0f} µs")
     costs = collector_cpu(args.envs, args.steps, args.repeats)
-    print(f"Collector over {args.envs} envs, HRS, LeanStep: {min(costs):.0f} CPU µs per env step (least of "
-          f"{args.repeats}; all: {', '.join(f'{c:.0f}' for c in costs)})")
+    print(
+        f"Collector over {args.envs} envs, HRS, LeanStep: {min(costs):.0f} CPU µs per env step (least of "
+        f"{args.repeats}; all: {', '.join(f'{c:.0f}' for c in costs)})"
+    )
     print(f"load average after: {os.getloadavg()[0]:.2f}")
 
 

@@ -151,10 +151,12 @@ def run(name: str, act: Policy, seed: int, episodes: int) -> None:
         closest.append(nearest)
     env.close()
     rate = reached / episodes
-    print(f"  {name:32s} {episodes:4d} episodes: subgoal 1 {rate[0]:.3f} ({steps_1} steps), subgoal 2 "
-          f"{rate[1]:.3f}, success any step {rate[2]:.3f}, last step {rate[3]:.3f}; closest gripper-object "
-          f"median {np.median(closest):.3f} m, min {np.min(closest):.3f} m  [{time.process_time() - start:.0f} s CPU]",
-          flush=True)
+    print(
+        f"  {name:32s} {episodes:4d} episodes: subgoal 1 {rate[0]:.3f} ({steps_1} steps), subgoal 2 "
+        f"{rate[1]:.3f}, success any step {rate[2]:.3f}, last step {rate[3]:.3f}; closest gripper-object "
+        f"median {np.median(closest):.3f} m, min {np.min(closest):.3f} m  [{time.process_time() - start:.0f} s CPU]",
+        flush=True,
+    )
 
 
 def replay_counts(learning_dir: Path, goal: np.ndarray) -> None:
@@ -167,15 +169,21 @@ def replay_counts(learning_dir: Path, goal: np.ndarray) -> None:
         rewards.append(float(data["next", "reward"].mean()))
         obs = data["next", "observation"].numpy()
         start = data["observation"][0, 3:6].numpy()
-        counts += [subgoal_1(obs).sum(), subgoal_2(obs).sum(),
-                   (np.linalg.norm(obs[:, 3:6] - goal, axis=-1) < SUCCESS_DISTANCE).sum(),
-                   (np.linalg.norm(obs[:, 3:6] - start, axis=-1) > 0.01).sum()]
+        counts += [
+            subgoal_1(obs).sum(),
+            subgoal_2(obs).sum(),
+            (np.linalg.norm(obs[:, 3:6] - goal, axis=-1) < SUCCESS_DISTANCE).sum(),
+            (np.linalg.norm(obs[:, 3:6] - start, axis=-1) > 0.01).sum(),
+        ]
         total += obs.shape[0]
         closest.append(float(np.linalg.norm(obs[:, 6:9], axis=-1).min()))
-    print(f"  stored transitions ({len(parts)} epochs, {total} steps): subgoal 1 on {counts[0]} steps, "
-          f"subgoal 2 on {counts[1]}, success on {counts[2]}, object moved > 1 cm on {counts[3]}; "
-          f"closest gripper-object per epoch {np.round(closest, 3).tolist()} m; mean stored (shaped) reward per "
-          f"epoch {np.round(rewards, 4).tolist()}", flush=True)
+    print(
+        f"  stored transitions ({len(parts)} epochs, {total} steps): subgoal 1 on {counts[0]} steps, "
+        f"subgoal 2 on {counts[1]}, success on {counts[2]}, object moved > 1 cm on {counts[3]}; "
+        f"closest gripper-object per epoch {np.round(closest, 3).tolist()} m; mean stored (shaped) reward per "
+        f"epoch {np.round(rewards, 4).tolist()}",
+        flush=True,
+    )
 
 
 def task(seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -190,15 +198,19 @@ def task(seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 def list_tasks(seeds: int, learnings: int) -> None:
     """One line per sweep seed: each learning's goal height, object-goal and gripper-object distances."""
-    print("sweep seed | " + " | ".join(f"learning {k}: goal height, object-goal, gripper-object (m)"
-                                       for k in range(learnings)))
+    print(
+        "sweep seed | "
+        + " | ".join(f"learning {k}: goal height, object-goal, gripper-object (m)" for k in range(learnings))
+    )
     for seed in range(seeds):
         cells = []
         for learning in range(learnings):
             obs, goal = task(goal_seed(seed, learning))
             height = goal[2] - obs[5]
-            cells.append(f"{'table' if height < 0.005 else 'air  '} {height:.3f}, {np.linalg.norm(goal - obs[3:6]):.3f}, "
-                         f"{np.linalg.norm(obs[6:9]):.3f}")
+            cells.append(
+                f"{'table' if height < 0.005 else 'air  '} {height:.3f}, {np.linalg.norm(goal - obs[3:6]):.3f}, "
+                f"{np.linalg.norm(obs[6:9]):.3f}"
+            )
         print(f"{seed:10d} | " + " | ".join(cells), flush=True)
 
 
@@ -207,11 +219,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="the sweep's --seed (goal seeds)")
     parser.add_argument("--learnings", type=int, default=2, help="learnings 0 .. N-1")
     parser.add_argument("--episodes", type=int, default=60, help="episodes per random policy")
-    parser.add_argument("--checkpoints", type=Path, default=None,
-                        help="checkpoints/<METHOD> of a results directory: also the trained actors")
+    parser.add_argument(
+        "--checkpoints",
+        type=Path,
+        default=None,
+        help="checkpoints/<METHOD> of a results directory: also the trained actors",
+    )
     parser.add_argument("--replay", action="store_true", help="also count over the stored transitions")
-    parser.add_argument("--tasks", type=int, default=0, metavar="SEEDS",
-                        help="only list the tasks of sweep seeds 0 .. SEEDS-1")
+    parser.add_argument(
+        "--tasks", type=int, default=0, metavar="SEEDS", help="only list the tasks of sweep seeds 0 .. SEEDS-1"
+    )
     args = parser.parse_args(argv)
     if args.tasks < 0 or args.learnings < 1:
         parser.error(f"--tasks: >= 0 (got {args.tasks}); --learnings: >= 1 (got {args.learnings})")
@@ -227,14 +244,16 @@ def main(argv: list[str] | None = None) -> int:
         seed = goal_seed(args.seed, learning)
         obs, goal = task(seed)
         gripper, obj = (np.round(obs[part].astype(np.float64), 3).tolist() for part in (slice(0, 3), slice(3, 6)))
-        print(f"learning {learning} (goal seed {seed}): gripper {gripper}, object {obj}, goal "
-              f"{np.round(goal, 3).tolist()} ({goal[2] - obs[5]:.3f} m above the "
-              f"object's start, {np.linalg.norm(goal - obs[3:6]):.3f} m from it; gripper-object "
-              f"{np.linalg.norm(obs[6:9]):.3f} m)", flush=True)
+        print(
+            f"learning {learning} (goal seed {seed}): gripper {gripper}, object {obj}, goal "
+            f"{np.round(goal, 3).tolist()} ({goal[2] - obs[5]:.3f} m above the "
+            f"object's start, {np.linalg.norm(goal - obs[3:6]):.3f} m from it; gripper-object "
+            f"{np.linalg.norm(obs[6:9]):.3f} m)",
+            flush=True,
+        )
         run("scripted", scripted, seed, 3)
         run("uniform random", lambda o, g, s: rng.uniform(-1.0, 1.0, 4), seed, args.episodes)
-        run("untrained actor + exploration", actor_policy(DDPGAgent(25, spec, DDPGConfig()), True), seed,
-            args.episodes)
+        run("untrained actor + exploration", actor_policy(DDPGAgent(25, spec, DDPGConfig()), True), seed, args.episodes)
         if args.checkpoints is not None:
             learning_dir = args.checkpoints / f"{learning:05d}"
             stored = args.checkpoints.parent.parent / "config.json"  # RESULTS/config.json: the networks' sizes

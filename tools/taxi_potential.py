@@ -34,8 +34,10 @@ from torchrl_subgoal.envs.gym_batch import require_gymnasium
 from torchrl_subgoal.envs.taxi import ENV_ID, STANDS, make_taxi, taxi_subgoals
 from torchrl_subgoal.training.qlearning import QLearningConfig, train_qlearning
 
-TARGETS = {"library (0.9-expectile, no time-out update)": {},
-           "paper's mean (time-outs bootstrapped)": {"expectile": 0.5, "bootstrap_truncated": True}}
+TARGETS = {
+    "library (0.9-expectile, no time-out update)": {},
+    "paper's mean (time-outs bootstrapped)": {"expectile": 0.5, "bootstrap_truncated": True},
+}
 
 
 def optimal_values(gamma: float) -> tuple[float, float, float]:
@@ -44,8 +46,15 @@ def optimal_values(gamma: float) -> tuple[float, float, float]:
     transitions, states, actions = env.P, env.observation_space.n, env.action_space.n
     v = np.zeros(states)
     for _ in range(2000):
-        q = np.array([[sum(p * (r + gamma * v[s2] * (not done)) for p, s2, r, done in transitions[s][a])
-                       for a in range(actions)] for s in range(states)])
+        q = np.array(
+            [
+                [
+                    sum(p * (r + gamma * v[s2] * (not done)) for p, s2, r, done in transitions[s][a])
+                    for a in range(actions)
+                ]
+                for s in range(states)
+            ]
+        )
         new = q.max(1)
         if np.abs(new - v).max() < 1e-9:
             break
@@ -78,18 +87,25 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     gamma = 0.99
     optimal = optimal_values(gamma)
-    print(f"Taxi, {opts.learners} tabular Q-learners over (s, z) per target, {opts.episodes} episodes, "
-          f"gamma = {gamma}, alpha_v = {opts.value_lr}\n")
-    print("| target | z | optimal V*(z) | learned V(z) | (gamma - 1) Phi(z) per step inside z | last 50: success, steps |")
+    print(
+        f"Taxi, {opts.learners} tabular Q-learners over (s, z) per target, {opts.episodes} episodes, "
+        f"gamma = {gamma}, alpha_v = {opts.value_lr}\n"
+    )
+    print(
+        "| target | z | optimal V*(z) | learned V(z) | (gamma - 1) Phi(z) per step inside z | last 50: success, steps |"
+    )
     print("|---|---|---|---|---|---|")
     for name, target in TARGETS.items():
         series = taxi_subgoals()
         potential = TabularPotential(series.num_abstract_states, (opts.learners,))
         loss = SubgoalValueLoss(potential, **target).make_value_estimator(gamma=gamma)  # type: ignore[arg-type]
-        env = TransformedEnv(make_taxi(opts.learners), SubgoalPotentialTransform(
-            series, potential, gamma=gamma, value_update=ValueUpdate(opts.value_lr, loss)))
-        records = train_qlearning(env, QLearningConfig(episodes=opts.episodes, lr=0.25, epsilon=0.1, gamma=gamma),
-                                  seed=opts.seed)
+        env = TransformedEnv(
+            make_taxi(opts.learners),
+            SubgoalPotentialTransform(series, potential, gamma=gamma, value_update=ValueUpdate(opts.value_lr, loss)),
+        )
+        records = train_qlearning(
+            env, QLearningConfig(episodes=opts.episodes, lr=0.25, epsilon=0.1, gamma=gamma), seed=opts.seed
+        )
         table = potential.table.detach()
         level = table[:, :1].clamp(min=0.0)  # "nonpositive": Φ = V − max(V(z_0), 0)
         phi = table - level
@@ -97,8 +113,10 @@ def main(argv: list[str] | None = None) -> int:
         steps = float(records.steps[:, -50:].float().mean())
         for z in range(3):
             last = f"{success:.2f}, {steps:.1f}" if z == 0 else ""
-            print(f"| {name if z == 0 else ''} | {z} | {optimal[z]:.1f} | {float(table[:, z].mean()):.1f} "
-                  f"({float(table[:, z].std()):.1f}) | {float(((gamma - 1) * phi[:, z]).mean()):+.2f} | {last} |")
+            print(
+                f"| {name if z == 0 else ''} | {z} | {optimal[z]:.1f} | {float(table[:, z].mean()):.1f} "
+                f"({float(table[:, z].std()):.1f}) | {float(((gamma - 1) * phi[:, z]).mean()):+.2f} | {last} |"
+            )
     return 0
 
 

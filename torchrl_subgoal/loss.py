@@ -136,8 +136,10 @@ class SubgoalValueLoss(LossModule):
         gamma: float | None = None,
     ) -> None:
         if gamma is not None:
-            raise TypeError(f"SubgoalValueLoss takes gamma through make_value_estimator: "
-                            f"SubgoalValueLoss(potential).make_value_estimator(gamma={gamma})")
+            raise TypeError(
+                f"SubgoalValueLoss takes gamma through make_value_estimator: "
+                f"SubgoalValueLoss(potential).make_value_estimator(gamma={gamma})"
+            )
         super().__init__()
         if not isinstance(potential, TensorDictModuleBase) or not potential.out_keys:
             raise TypeError(
@@ -207,7 +209,10 @@ class SubgoalValueLoss(LossModule):
         self.loss_mask_key = keys.mask  # TorchRL's reduction masks with it
         if self._value_estimator is not None:
             self._value_estimator.set_keys(
-                value=keys.value, reward=keys.reward, done=keys.done, terminated=keys.terminated,
+                value=keys.value,
+                reward=keys.reward,
+                done=keys.done,
+                terminated=keys.terminated,
                 steps_to_next_obs=keys.steps_to_next_obs,
             )
 
@@ -244,10 +249,14 @@ class SubgoalValueLoss(LossModule):
             next_value = self._value(tensordict.get("next"))
             terminated = tensordict.get(("next", keys.terminated))
             estimate = TensorDict(
-                {keys.steps_to_next_obs: tensordict.get(keys.steps_to_next_obs),
-                 "next": {keys.reward: tensordict.get(("next", keys.reward)),
-                          keys.done: tensordict.get(("next", keys.done), terminated),
-                          keys.terminated: terminated}},
+                {
+                    keys.steps_to_next_obs: tensordict.get(keys.steps_to_next_obs),
+                    "next": {
+                        keys.reward: tensordict.get(("next", keys.reward)),
+                        keys.done: tensordict.get(("next", keys.done), terminated),
+                        keys.terminated: terminated,
+                    },
+                },
                 batch_size=batch,
             )
             target = self.value_estimator.value_estimate(estimate, next_value=next_value).to(value.dtype)
@@ -262,7 +271,6 @@ class SubgoalValueLoss(LossModule):
         loss = self._reduce_loss(losses, rows)
         return TensorDict({"loss_value": loss, "td_error": td_error.detach()}, batch_size=[])
 
-
     def _trains(self, tensordict: TensorDictBase) -> torch.Tensor | None:
         """Which rows train ``V``: the real transitions, less the time-outs inside ``z`` unless
         ``bootstrap_truncated`` (``None``: every row)."""
@@ -276,6 +284,7 @@ class SubgoalValueLoss(LossModule):
         achieved = tensordict.get(keys.achieved, None)
         timeout = truncated if achieved is None else truncated & ~achieved.bool()
         return ~timeout if real is None else real & ~timeout
+
 
 @dataclass(frozen=True)
 class ValueUpdate:

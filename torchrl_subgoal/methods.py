@@ -88,8 +88,7 @@ def random_patterns(
     """
     generator = torch.Generator().manual_seed(seed)
     return [
-        SubgoalSeries.random(candidates, num_subgoals, generator, name=f"random_{i + 1}")
-        for i in range(num_patterns)
+        SubgoalSeries.random(candidates, num_subgoals, generator, name=f"random_{i + 1}") for i in range(num_patterns)
     ]
 
 
@@ -130,8 +129,11 @@ def shaping_parts(
     if method.shaping == "aggregation":
         if aggregation is None:
             raise ValueError(f"{method.name} needs an aggregation g(s)")
-        return aggregation, TabularPotential(aggregation.num_states, batch_shape), {
-            **options, "observation_key": aggregation_key}
+        return (
+            aggregation,
+            TabularPotential(aggregation.num_states, batch_shape),
+            {**options, "observation_key": aggregation_key},
+        )
     if not patterns:
         raise ValueError(f"{method.name} needs subgoal patterns")
     options["observation_key"] = observation_key
@@ -188,9 +190,16 @@ def shaping_transform(
         ('TabularPotential', torch.Size([4]))
     """
     parts = shaping_parts(
-        method, batch_shape, patterns=patterns, pattern_index=pattern_index, aggregation=aggregation, eta=eta,
-        observation_key=observation_key, aggregation_key=aggregation_key,
-        zero_terminal_potential=zero_terminal_potential, start_potential=start_potential,
+        method,
+        batch_shape,
+        patterns=patterns,
+        pattern_index=pattern_index,
+        aggregation=aggregation,
+        eta=eta,
+        observation_key=observation_key,
+        aggregation_key=aggregation_key,
+        zero_terminal_potential=zero_terminal_potential,
+        start_potential=start_potential,
     )
     if parts is None:
         return None

@@ -51,8 +51,7 @@ def check_value(value: torch.Tensor, batch_shape: torch.Size, who: str) -> torch
         torch.Size([3, 1])
     """
     if not isinstance(value, torch.Tensor):
-        raise TypeError(f"{who} returned {type(value).__name__}, expected a tensor of shape "
-                        f"{(*batch_shape, 1)}")
+        raise TypeError(f"{who} returned {type(value).__name__}, expected a tensor of shape {(*batch_shape, 1)}")
     if value.shape == (*batch_shape, 1):
         return value
     if value.shape == batch_shape:
@@ -105,8 +104,10 @@ class Potential(TensorDictModuleBase):
             for key in self.in_keys:
                 entry = tensordict.get(key, None)
                 if entry is None and key not in self.optional_in_keys:
-                    raise KeyError(f"{type(self).__name__} reads {key!r}, which the TensorDict does not hold; "
-                                   f"it has {sorted(map(str, tensordict.keys(True, True)))}")
+                    raise KeyError(
+                        f"{type(self).__name__} reads {key!r}, which the TensorDict does not hold; "
+                        f"it has {sorted(map(str, tensordict.keys(True, True)))}"
+                    )
                 inputs.append(entry)
             value = check_value(self.value(*inputs), tensordict.batch_size, type(self).__name__)
             tensordict.set(self.out_keys[0], value)
@@ -186,18 +187,22 @@ class TabularPotential(Potential):
         if z.dtype.is_floating_point or z.dtype == torch.bool:
             raise ValueError(f"subgoal_index must be an integer tensor, got {z.dtype}")
         if z.numel() and (int(z.min()) < 0 or int(z.max()) >= self.num_states):
-            raise ValueError(f"subgoal_index values must lie in [0, {self.num_states}), got "
-                             f"[{int(z.min())}, {int(z.max())}]")
+            raise ValueError(
+                f"subgoal_index values must lie in [0, {self.num_states}), got [{int(z.min())}, {int(z.max())}]"
+            )
         if not self.batch_shape:
             return self.table[z]
         table = self.table.reshape(self.learners, self.num_states)
         if learner is not None:
             if learner.shape != z.shape:
-                raise ValueError(f"subgoal_learner has shape {tuple(learner.shape)}, subgoal_index "
-                                 f"{tuple(z.shape)}: they must match")
+                raise ValueError(
+                    f"subgoal_learner has shape {tuple(learner.shape)}, subgoal_index {tuple(z.shape)}: they must match"
+                )
             if learner.numel() and (int(learner.min()) < 0 or int(learner.max()) >= self.learners):
-                raise ValueError(f"subgoal_learner values must lie in [0, {self.learners}) for a table batch "
-                                 f"of shape {tuple(self.batch_shape)}")
+                raise ValueError(
+                    f"subgoal_learner values must lie in [0, {self.learners}) for a table batch "
+                    f"of shape {tuple(self.batch_shape)}"
+                )
             return table[learner.long(), z]
         nb = len(self.batch_shape)
         if z.shape[:nb] != self.batch_shape:

@@ -43,7 +43,8 @@ class CorridorEnv(EnvBase):
         super().__init__(batch_size=torch.Size([num_envs]))
         self.length, self.max_steps = length, max_steps
         self.observation_spec = Composite(
-            observation=Categorical(length + 1, shape=(num_envs,), dtype=torch.long), shape=(num_envs,))
+            observation=Categorical(length + 1, shape=(num_envs,), dtype=torch.long), shape=(num_envs,)
+        )
         self.action_spec = Categorical(2, shape=(num_envs,), dtype=torch.long)
         self.reward_spec = Unbounded(shape=(num_envs, 1))
         self.position = torch.zeros(num_envs, dtype=torch.long)
@@ -55,17 +56,31 @@ class CorridorEnv(EnvBase):
         self.position.masked_fill_(fresh, 0)
         self.t.masked_fill_(fresh, 0)
         false = torch.zeros(*self.batch_size, 1, dtype=torch.bool)
-        return TensorDict({"observation": self.position.clone(), "done": false, "terminated": false.clone(),
-                           "truncated": false.clone()}, self.batch_size)
+        return TensorDict(
+            {
+                "observation": self.position.clone(),
+                "done": false,
+                "terminated": false.clone(),
+                "truncated": false.clone(),
+            },
+            self.batch_size,
+        )
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         self.position = (self.position + tensordict["action"] * 2 - 1).clamp(0, self.length)
         self.t += 1
         terminated = (self.position == self.length).unsqueeze(-1)
         truncated = (self.t >= self.max_steps).unsqueeze(-1) & ~terminated
-        return TensorDict({"observation": self.position.clone(), "reward": terminated.float(),
-                           "done": terminated | truncated, "terminated": terminated, "truncated": truncated},
-                          self.batch_size)
+        return TensorDict(
+            {
+                "observation": self.position.clone(),
+                "reward": terminated.float(),
+                "done": terminated | truncated,
+                "terminated": terminated,
+                "truncated": truncated,
+            },
+            self.batch_size,
+        )
 
     def _set_seed(self, seed: int | None) -> None:
         pass
@@ -76,6 +91,8 @@ class CorridorEnv(EnvBase):
         if observation_key != "observation":
             raise TypeError(f"the corridor's compiled steps read 'observation', not {observation_key!r}")
         return CorridorKernelState(self.position.numpy(), self.t.numpy(), self.length, self.max_steps)
+
+
 # --8<-- [end:env]
 
 
@@ -103,10 +120,17 @@ def draw_map(ax: Any, patterns: Mapping[str, Any], options: Mapping[str, Any]) -
             ax.annotate(str(i), (predicate.state, 0), ha="center", va="center")
 
 
-domains.register(domains.Domain(
-    "corridor", "Corridor", make_env=CorridorEnv, check_subgoal=check_subgoal, parts=(ReportMap(draw_map),),
-))
+domains.register(
+    domains.Domain(
+        "corridor",
+        "Corridor",
+        make_env=CorridorEnv,
+        check_subgoal=check_subgoal,
+        parts=(ReportMap(draw_map),),
+    )
+)
 # --8<-- [end:register]
+
 
 # --8<-- [start:fused]
 class CorridorKernelState(NamedTuple):
@@ -148,6 +172,8 @@ def _reset(env: CorridorKernelState, b: int, scratch: np.ndarray) -> int:
 def _shaping_observation(env: CorridorKernelState, cell: int, scratch: np.ndarray) -> np.ndarray:
     scratch[0] = cell
     return scratch
+
+
 # --8<-- [end:fused]
 
 
@@ -182,13 +208,21 @@ def main() -> None:
         if name not in ("SARSA", "HRS"):
             continue
         env = domains.get("corridor").make_env(learners)  # type: ignore[misc]
-        shaping = shaping_transform(method, env.batch_size, gamma=sarsa.gamma, value_lr=sarsa.value_lr,
-                                    patterns=patterns, pattern_index=torch.zeros(learners, dtype=torch.long))
+        shaping = shaping_transform(
+            method,
+            env.batch_size,
+            gamma=sarsa.gamma,
+            value_lr=sarsa.value_lr,
+            patterns=patterns,
+            pattern_index=torch.zeros(learners, dtype=torch.long),
+        )
         learning_env = TransformedEnv(env, shaping) if shaping is not None else env
         agent = SoftmaxSarsa(learners, LENGTH + 1, 2, sarsa, seed=0)
         steps = run_episodes(learning_env, agent, episodes).steps.double()
-        lines.append(f"{name}: mean steps per episode {steps.mean():.1f} over {episodes} episodes of "
-                     f"{learners} learners; last episode {steps[:, -1].mean():.1f}")
+        lines.append(
+            f"{name}: mean steps per episode {steps.mean():.1f} over {episodes} episodes of "
+            f"{learners} learners; last episode {steps[:, -1].mean():.1f}"
+        )
     # --8<-- [end:train]
     figure = plot_pattern_maps("corridor", {p.name: p.to_dict() for p in patterns}, args.out / "adding_a_domain.png")
     assert figure.path is not None, figure.note

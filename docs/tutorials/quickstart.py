@@ -1,6 +1,6 @@
 """Quick start: a shaped A2C learner on gymnasium's CliffWalking, beside an unshaped one.
 
-    python docs/tutorials/quickstart.py      # ~2 min of CPU; TUTORIAL_TINY=1: seconds (what CI runs)
+python docs/tutorials/quickstart.py      # ~2 min of CPU; TUTORIAL_TINY=1: seconds (what CI runs)
 """
 
 import os
@@ -27,9 +27,19 @@ if __name__ == "__main__":
     series = SubgoalSeries([State(24), past_halfway, State(35)])
     shaping = Shaping(series, TabularPotential(series.num_abstract_states), {"observation_key": "observation"})
     frames = 2_048 if os.environ.get("TUTORIAL_TINY") else 40_000
-    config = A2CConfig(num_envs=8, frames_per_batch=128, total_frames=frames, features="one_hot", hidden=(),
-                       lr=0.05, value_lr=0.1, online_potential=True)
+    config = A2CConfig(
+        num_envs=8,
+        frames_per_batch=128,
+        total_frames=frames,
+        features="one_hot",
+        hidden=(),
+        lr=0.05,
+        value_lr=0.1,
+        online_potential=True,
+    )
     for name, arm in (("unshaped", None), ("shaped", shaping)):
         curve = train_a2c(batched(make_single), config, shaping=arm, seed=0, episode_cap=5000)
-        print(f"{name}: {curve.episodes[-1]} episodes, mean length of the last ones {curve.episode_length[-1]:.0f} "
-              f"steps (the shortest path takes 13)")
+        print(
+            f"{name}: {curve.episodes[-1]} episodes, mean length of the last ones {curve.episode_length[-1]:.0f} "
+            f"steps (the shortest path takes 13)"
+        )

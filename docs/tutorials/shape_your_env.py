@@ -57,9 +57,12 @@ COLS, MAX_STEPS, GAMMA, VALUE_LR = 12, 5000, 0.99, 0.1
 
 def make_env(num_envs: int) -> GymWrapper:
     """``num_envs`` copies of the gymnasium env in one vector env; TorchRL resets each when it ends."""
-    envs = gym.vector.SyncVectorEnv([lambda: gym.make("CliffWalking-v1")] * num_envs,
-                                    autoreset_mode=gym.vector.AutoresetMode.DISABLED)
+    envs = gym.vector.SyncVectorEnv(
+        [lambda: gym.make("CliffWalking-v1")] * num_envs, autoreset_mode=gym.vector.AutoresetMode.DISABLED
+    )
     return GymWrapper(envs, categorical_action_encoding=True)
+
+
 # --8<-- [end:env]
 
 
@@ -94,7 +97,9 @@ def a2c_agent() -> tuple[ProbabilisticActor, Callable[[TensorDictBase], None]]:
         nn.init.zeros_(table.weight)  # uniform policy, zero values
     actor = ProbabilisticActor(
         TensorDictModule(logits, in_keys=["observation"], out_keys=["logits"]),
-        in_keys=["logits"], distribution_class=torch.distributions.Categorical, return_log_prob=True,
+        in_keys=["logits"],
+        distribution_class=torch.distributions.Categorical,
+        return_log_prob=True,
     )
     critic = ValueOperator(value, in_keys=["observation"])
     advantage = GAE(gamma=GAMMA, lmbda=0.95, value_network=critic)
@@ -110,6 +115,8 @@ def a2c_agent() -> tuple[ProbabilisticActor, Callable[[TensorDictBase], None]]:
         optimizer.step()
 
     return actor, update
+
+
 # --8<-- [end:agent]
 
 
@@ -117,8 +124,11 @@ def a2c_agent() -> tuple[ProbabilisticActor, Callable[[TensorDictBase], None]]:
 def make_env_with(transform: SubgoalPotentialTransform | None, num_envs: int, seed: int) -> TransformedEnv:
     """The env a collector steps: a step counter, the shaping transform (if any), the episode's env return."""
     reward_key = "reward" if transform is None else transform.env_reward_key  # the unshaped reward
-    transforms = [StepCounter(max_steps=MAX_STEPS), *([transform] if transform else []),
-                  RewardSum(in_keys=[reward_key], out_keys=["episode_return"])]
+    transforms = [
+        StepCounter(max_steps=MAX_STEPS),
+        *([transform] if transform else []),
+        RewardSum(in_keys=[reward_key], out_keys=["episode_return"]),
+    ]
     env = TransformedEnv(make_env(num_envs), Compose(*transforms))
     env.set_seed(seed)
     return env
@@ -130,8 +140,9 @@ def recent_returns(data: TensorDictBase, recent: list[float]) -> list[float]:
     return (recent + data["next", "episode_return"][done].flatten().tolist())[-32:]
 
 
-def train(shaped: bool, frames: int, seed: int, num_envs: int = 16, frames_per_batch: int = 256
-          ) -> tuple[np.ndarray, list[float]]:
+def train(
+    shaped: bool, frames: int, seed: int, num_envs: int = 16, frames_per_batch: int = 256
+) -> tuple[np.ndarray, list[float]]:
     """One A2C learner: ``[batches, 2]`` (frames so far, mean env return of recent episodes), and
     the learned potential ``Φ(z)`` of each abstract state (empty when unshaped)."""
     torch.manual_seed(seed)
@@ -139,13 +150,17 @@ def train(shaped: bool, frames: int, seed: int, num_envs: int = 16, frames_per_b
     if shaped:
         potential = TabularPotential(series.num_abstract_states)  # Φ(z): one table for the batch
         transform = SubgoalPotentialTransform(  # reward ← r + γΦ(z') − Φ(z); r stays under "env_reward"
-            series, potential, gamma=GAMMA, observation_key="observation",
-            value_update=VALUE_LR,  # train Φ online (the tabular SMDP update, optimistic target), before shaping each step
+            series,
+            potential,
+            gamma=GAMMA,
+            observation_key="observation",
+            value_update=VALUE_LR,  # train Φ online (the SMDP update, optimistic target), then shape
         )
     env = make_env_with(transform, num_envs, seed)
     actor, update = a2c_agent()
-    collector = Collector(env, actor, frames_per_batch=frames_per_batch, total_frames=frames,
-                          auto_register_policy_transforms=False)
+    collector = Collector(
+        env, actor, frames_per_batch=frames_per_batch, total_frames=frames, auto_register_policy_transforms=False
+    )
     curve: list[tuple[int, float]] = []
     recent: list[float] = []
     seen = 0
@@ -157,6 +172,8 @@ def train(shaped: bool, frames: int, seed: int, num_envs: int = 16, frames_per_b
     collector.shutdown()
     phi = potential.table.flatten().tolist() if potential is not None else []
     return np.asarray(curve), phi
+
+
 # --8<-- [end:train]
 
 
@@ -196,11 +213,14 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
 
     # --8<-- [start:compare]
-    results = {arm: [train(arm == "shaped", args.frames, seed) for seed in range(args.seeds)]
-               for arm in ("unshaped", "shaped")}
+    results = {
+        arm: [train(arm == "shaped", args.frames, seed) for seed in range(args.seeds)] for arm in ("unshaped", "shaped")
+    }
     curves = {arm: [curve for curve, _ in runs] for arm, runs in results.items()}
-    lines = [f"CliffWalking-v1, A2C: {args.frames} frames x {args.seeds} learners per arm",
-             "arm        frames to a return > -50 (per learner)      final return (mean of learners)"]
+    lines = [
+        f"CliffWalking-v1, A2C: {args.frames} frames x {args.seeds} learners per arm",
+        "arm        frames to a return > -50 (per learner)      final return (mean of learners)",
+    ]
     fig, ax = plt.subplots(figsize=(6.4, 3.6))
     for arm, runs in curves.items():
         returns = np.stack([run[:, 1] for run in runs])  # [learners, batches]; nan before any episode ended
@@ -214,8 +234,9 @@ def main() -> None:
         final = f"{mean[-1]:.1f}" if mean.size else "no episode ended"
         lines.append(f"{arm:10s} {to_50:44s} {final}")
     phi = np.mean([p for _, p in results["shaped"]], 0)
-    lines.append("learned potential, mean of the shaped learners: "
-                 + ", ".join(f"Φ({z})={v:.1f}" for z, v in enumerate(phi)))
+    lines.append(
+        "learned potential, mean of the shaped learners: " + ", ".join(f"Φ({z})={v:.1f}" for z, v in enumerate(phi))
+    )
     returns_axes(ax, "CliffWalking-v1, A2C")
     # --8<-- [end:compare]
     save(fig, lines, args.out / "shape_your_env")

@@ -57,6 +57,8 @@ class CellFeatures(nn.Module):
 def make_potential() -> NeuralPotential:
     """``V(o_z; θ)``: an MLP over the observation at which the abstract state ``z`` was entered."""
     return NeuralPotential(nn.Sequential(CellFeatures(), nn.Linear(2, 32), nn.Tanh(), nn.Linear(32, 1)))
+
+
 # --8<-- [end:potential]
 
 
@@ -79,11 +81,14 @@ def main() -> None:
     transform = SubgoalPotentialTransform(series, potential, gamma=GAMMA, observation_key="observation")
     env = make_env_with(transform, num_envs=16, seed=args.seed)
     actor, update = a2c_agent()
-    collector = Collector(env, actor, frames_per_batch=256, total_frames=args.frames,
-                          auto_register_policy_transforms=False)
+    collector = Collector(
+        env, actor, frames_per_batch=256, total_frames=args.frames, auto_register_policy_transforms=False
+    )
 
     buffer = ReplayBuffer(storage=LazyTensorStorage(20_000), batch_size=64)  # SMDP transitions only
-    value_loss = SubgoalValueLoss(potential, reduction="mean").make_value_estimator(gamma=GAMMA)  # TD(0) on the SMDP target
+    value_loss = SubgoalValueLoss(potential, reduction="mean").make_value_estimator(
+        gamma=GAMMA
+    )  # TD(0) on the SMDP target
     value_optimizer = torch.optim.Adam(potential.parameters(), lr=0.05)
     # --8<-- [end:setup]
 
@@ -97,10 +102,12 @@ def main() -> None:
         stored = extend_transitions(buffer, data, transform)  # the batch's real SMDP transitions
         if seen == 0:
             first = buffer[:stored]
-            lines.append(f"first batch: {data.numel()} steps, {stored} SMDP transitions; the first: stage "
-                         f"entered at cell {first['subgoal_anchor'][0].item():.0f}, left after "
-                         f"k={first['steps_to_next_obs'][0].item()} steps at cell "
-                         f"{first['next', 'subgoal_anchor'][0].item():.0f}, r_h={first['next', 'reward'][0].item():.2f}")
+            lines.append(
+                f"first batch: {data.numel()} steps, {stored} SMDP transitions; the first: stage "
+                f"entered at cell {first['subgoal_anchor'][0].item():.0f}, left after "
+                f"k={first['steps_to_next_obs'][0].item()} steps at cell "
+                f"{first['next', 'subgoal_anchor'][0].item():.0f}, r_h={first['next', 'reward'][0].item():.2f}"
+            )
         loss_value = math.nan
         if len(buffer) >= 64:
             for _ in range(8):  # a few gradient steps per batch on samples of the buffer
@@ -117,8 +124,12 @@ def main() -> None:
 
     # --8<-- [start:inspect]
     # the learned potential at the cell each stage is typically entered at
-    entries = {"start (z=0)": 3 * COLS, "up (z=1)": 2 * COLS, "halfway (z=2)": 2 * COLS + COLS // 2,
-               "above_goal (z=3)": 3 * COLS - 1}
+    entries = {
+        "start (z=0)": 3 * COLS,
+        "up (z=1)": 2 * COLS,
+        "halfway (z=2)": 2 * COLS + COLS // 2,
+        "above_goal (z=3)": 3 * COLS - 1,
+    }
     with torch.no_grad():
         for name, cell in entries.items():
             value = potential(torch.tensor([[float(cell)]])).item()
@@ -126,8 +137,10 @@ def main() -> None:
     # --8<-- [end:inspect]
     curve = np.asarray(history)
     final = curve[-1, 1]
-    lines.append(f"{args.frames} frames, seed {args.seed}: final return of recent episodes "
-                 f"{'no episode ended' if math.isnan(final) else f'{final:.1f}'}; buffer holds {len(buffer)}")
+    lines.append(
+        f"{args.frames} frames, seed {args.seed}: final return of recent episodes "
+        f"{'no episode ended' if math.isnan(final) else f'{final:.1f}'}; buffer holds {len(buffer)}"
+    )
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(9, 3.4))
     left.plot(curve[:, 0], curve[:, 1])

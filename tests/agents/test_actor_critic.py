@@ -38,8 +38,11 @@ def test_one_update_matches_autograd(normalize: bool) -> None:
     reward = torch.tensor([[1.0], [-2.0], [5.0]])
     terminated = torch.tensor([[False], [False], [True]])
     transition = TensorDict(
-        {"observation": obs, "action": action,
-         "next": {"observation": obs_next, "reward": reward, "terminated": terminated, "done": terminated}},
+        {
+            "observation": obs,
+            "action": action,
+            "next": {"observation": obs_next, "reward": reward, "terminated": terminated, "done": terminated},
+        },
         [n],
     )
     root = TensorDict({"observation": obs_next}, [n])
@@ -77,8 +80,12 @@ def _inverse_cdf(probs: torch.Tensor, u: np.ndarray) -> torch.Tensor:
 def test_q_actor_critic_update_matches_autograd(normalize: bool) -> None:
     """The authors' released agent: a' ~ π(·|s') first, actor step scaled by Q(s, a), SARSA critic per action."""
 
-    n, cfg = 3, ActorCriticConfig(actor_lr=0.05, critic_lr=0.1, gamma=0.9, value_lr=0.0, normalize_lr=normalize,
-                                  critic="action")
+    n, cfg = (
+        3,
+        ActorCriticConfig(
+            actor_lr=0.05, critic_lr=0.1, gamma=0.9, value_lr=0.0, normalize_lr=normalize, critic="action"
+        ),
+    )
     agent = FourierActorCritic(n, LOW, HIGH, 5, cfg, seed=0)
     assert agent.w.shape == (n, 5 * 256)
     g = torch.Generator().manual_seed(1)
@@ -93,9 +100,16 @@ def test_q_actor_critic_update_matches_autograd(normalize: bool) -> None:
     terminated = torch.tensor([[False], [False], [True]])
     truncated = torch.tensor([[False], [True], [False]])
     transition = TensorDict(
-        {"observation": obs, "action": action,
-         "next": {"observation": obs_next, "reward": reward, "terminated": terminated,
-                  "done": terminated | truncated}},
+        {
+            "observation": obs,
+            "action": action,
+            "next": {
+                "observation": obs_next,
+                "reward": reward,
+                "terminated": terminated,
+                "done": terminated | truncated,
+            },
+        },
         [n],
     )
     root = TensorDict({"observation": torch.where(terminated | truncated, obs_reset, obs_next)}, [n])

@@ -16,11 +16,19 @@ SPEC = Bounded(-1.0, 1.0, shape=(4,))
 
 def batch(n: int, reward: float = -1.0, seed: int = 0) -> TensorDict:
     g = torch.Generator().manual_seed(seed)
-    return TensorDict({
-        "observation": torch.randn(n, 6, generator=g), "action": torch.rand(n, 4, generator=g) * 2 - 1,
-        "next": {"observation": torch.randn(n, 6, generator=g), "reward": torch.full((n, 1), reward),
-                 "done": torch.zeros(n, 1, dtype=torch.bool), "terminated": torch.zeros(n, 1, dtype=torch.bool)},
-    }, [n])
+    return TensorDict(
+        {
+            "observation": torch.randn(n, 6, generator=g),
+            "action": torch.rand(n, 4, generator=g) * 2 - 1,
+            "next": {
+                "observation": torch.randn(n, 6, generator=g),
+                "reward": torch.full((n, 1), reward),
+                "done": torch.zeros(n, 1, dtype=torch.bool),
+                "terminated": torch.zeros(n, 1, dtype=torch.bool),
+            },
+        },
+        [n],
+    )
 
 
 def agent(**overrides) -> DDPGAgent:
@@ -78,8 +86,9 @@ def test_update_and_soft_update() -> None:
     online_before = a.loss.value_network_params.clone()
     losses = a.update()
     assert set(losses) == {"loss_value", "loss_actor"}
-    assert not torch.equal(a.loss.value_network_params["module", "net", "0", "weight"],
-                           online_before["module", "net", "0", "weight"])
+    assert not torch.equal(
+        a.loss.value_network_params["module", "net", "0", "weight"], online_before["module", "net", "0", "weight"]
+    )
     a.soft_update()
     for key, old in before.items():
         expected = 0.95 * old + 0.05 * a.loss.value_network_params[key]
@@ -116,12 +125,18 @@ def test_update_gradients_equal_ddpg_loss_plus_the_action_penalty() -> None:
     captured: list[torch.Tensor] = []
     for optimizer in (a.critic_optimizer, a.actor_optimizer):  # read the gradients the update steps with
         optimizer.step = lambda *args, o=optimizer, **kw: captured.extend(  # type: ignore[method-assign]
-            p.grad.clone() for g in o.param_groups for p in g["params"])
+            p.grad.clone() for g in o.param_groups for p in g["params"]
+        )
     got = a.update()
     assert got["loss_value"] == pytest.approx(losses["loss_value"].item(), abs=1e-6)
     assert got["loss_actor"] == pytest.approx((losses["loss_actor"] + penalty).item(), abs=1e-6)
-    by_ptr = {p.data_ptr(): g for p, g in zip(
-        [p for o in (a.critic_optimizer, a.actor_optimizer) for g in o.param_groups for p in g["params"]],
-        captured, strict=True)}
+    by_ptr = {
+        p.data_ptr(): g
+        for p, g in zip(
+            [p for o in (a.critic_optimizer, a.actor_optimizer) for g in o.param_groups for p in g["params"]],
+            captured,
+            strict=True,
+        )
+    }
     for p, e in zip(params, expected, strict=True):
         assert torch.allclose(by_ptr[p.data_ptr()], e, atol=1e-6, rtol=1e-5)

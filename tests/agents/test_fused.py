@@ -27,20 +27,35 @@ from ..line_env import LineEnv
 PATTERNS = [SubgoalSeries([Cell(4, 9), Cell(11, 9)]), SubgoalSeries([Cell(1, 11), Cell(11, 1), Cell(10, 6)])]
 
 
-def setup(method: str, n: int, abstract_states: int, max_steps: int, step_cost: bool = False,
-          start: str = "nonpositive", zero_terminal: bool = True,
-          learners: list[int] | None = None) -> tuple[object, SoftmaxSarsa]:
+def setup(
+    method: str,
+    n: int,
+    abstract_states: int,
+    max_steps: int,
+    step_cost: bool = False,
+    start: str = "nonpositive",
+    zero_terminal: bool = True,
+    learners: list[int] | None = None,
+) -> tuple[object, SoftmaxSarsa]:
     """Learners ``0..n-1`` (or the given ones of those): learner ``b`` follows pattern ``b % 2``
     and has the ``b``-th seed derived from 7, whatever batch it runs in."""
     cfg = SARSA_PRESETS["released"]
     learners = list(range(n)) if learners is None else learners
     m = len(learners)
-    env = FourRoomsEnv(m, max_steps=max_steps, goal_reward=0.0 if step_cost else 1.0,
-                       step_reward=-1.0 if step_cost else 0.0)
+    env = FourRoomsEnv(
+        m, max_steps=max_steps, goal_reward=0.0 if step_cost else 1.0, step_reward=-1.0 if step_cost else 0.0
+    )
     shaping = shaping_transform(
-        paper_methods("SARSA")[method], env.batch_size, gamma=cfg.gamma, value_lr=cfg.value_lr,
-        patterns=PATTERNS, pattern_index=torch.tensor(learners) % 2, aggregation=room_aggregation(),
-        eta=1.0, observation_key="cell", start_potential=start,  # type: ignore[arg-type]
+        paper_methods("SARSA")[method],
+        env.batch_size,
+        gamma=cfg.gamma,
+        value_lr=cfg.value_lr,
+        patterns=PATTERNS,
+        pattern_index=torch.tensor(learners) % 2,
+        aggregation=room_aggregation(),
+        eta=1.0,
+        observation_key="cell",
+        start_potential=start,  # type: ignore[arg-type]
         zero_terminal_potential=zero_terminal,
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
@@ -55,16 +70,30 @@ def _tables(env: object, agent: SoftmaxSarsa) -> tuple[torch.Tensor, torch.Tenso
 
 @pytest.mark.parametrize(
     ("method", "abstract_states", "step_cost", "start", "zero_terminal"),
-    [("SARSA", 1, False, "nonpositive", True), ("HRS", 1, False, "nonpositive", True),
-     ("HRS", 4, False, "value", False), ("NRS", 1, False, "nonpositive", True),
-     ("SARSA-RS", 1, False, "zero", True), ("HRS", 1, True, "zero", True), ("SARSA-RS", 1, True, "value", False)],
+    [
+        ("SARSA", 1, False, "nonpositive", True),
+        ("HRS", 1, False, "nonpositive", True),
+        ("HRS", 4, False, "value", False),
+        ("NRS", 1, False, "nonpositive", True),
+        ("SARSA-RS", 1, False, "zero", True),
+        ("HRS", 1, True, "zero", True),
+        ("SARSA-RS", 1, True, "value", False),
+    ],
 )
-def test_fused_equals_torchrl(method: str, abstract_states: int, step_cost: bool, start: str,
-                              zero_terminal: bool) -> None:
+def test_fused_equals_torchrl(
+    method: str, abstract_states: int, step_cost: bool, start: str, zero_terminal: bool
+) -> None:
     results = {}
     for engine in ("torchrl", "fused"):
-        env, agent = setup(method, n=12, abstract_states=abstract_states, max_steps=150, step_cost=step_cost,
-                           start=start, zero_terminal=zero_terminal)
+        env, agent = setup(
+            method,
+            n=12,
+            abstract_states=abstract_states,
+            max_steps=150,
+            step_cost=step_cost,
+            start=start,
+            zero_terminal=zero_terminal,
+        )
         records = run_episodes(env, agent, 25, engine=engine)
         results[engine] = (records, *_tables(env, agent))
     (a, qa, va), (b, qb, vb) = results["torchrl"], results["fused"]
@@ -85,9 +114,17 @@ def test_fused_equals_torchrl(method: str, abstract_states: int, step_cost: bool
 def test_learner_is_independent_of_its_batch(method: str, abstract_states: int) -> None:
     """A learner's records and final tables depend on its seed only: the same in a batch of 12,
     in batches of 5 and 7, and alone (also with the TorchRL loop, which then stops with it)."""
+
     def run(learners: list[int], engine: str = "fused") -> tuple[torch.Tensor, ...]:
-        env, agent = setup(method, n=12, abstract_states=abstract_states, max_steps=150, start="value",
-                           zero_terminal=False, learners=learners)
+        env, agent = setup(
+            method,
+            n=12,
+            abstract_states=abstract_states,
+            max_steps=150,
+            start="value",
+            zero_terminal=False,
+            learners=learners,
+        )
         records = run_episodes(env, agent, 25, engine=engine)  # type: ignore[arg-type]
         q, v = _tables(env, agent)
         return records.steps, records.returns, q, (v if v is not None else torch.zeros(len(learners)))
@@ -113,8 +150,14 @@ def test_fused_equals_torchrl_with_a_region_aggregation() -> None:
     for engine in ("torchrl", "fused"):
         env = FourRoomsEnv(8, max_steps=150)
         halves = StateAggregation.from_regions([Box((25.5,), (26.0,), (0,)), Box((77.5,), (26.0,), (0,))], 1)
-        shaping = shaping_transform(paper_methods("SARSA")["SARSA-RS"], env.batch_size, gamma=cfg.gamma,
-                                    value_lr=cfg.value_lr, aggregation=halves, observation_key="cell")
+        shaping = shaping_transform(
+            paper_methods("SARSA")["SARSA-RS"],
+            env.batch_size,
+            gamma=cfg.gamma,
+            value_lr=cfg.value_lr,
+            aggregation=halves,
+            observation_key="cell",
+        )
         learning_env = TransformedEnv(env, shaping)
         agent = SoftmaxSarsa(8, 104, 4, cfg, seed=learner_keys(7, 8))
         records = run_episodes(learning_env, agent, 25, engine=engine)  # type: ignore[arg-type]
@@ -138,12 +181,18 @@ def test_fused_rejects_other_setups() -> None:
         run_episodes(FourRoomsEnv(2), agent, 1, engine="jax")  # type: ignore[arg-type]
     with pytest.raises(TypeError, match="LineEnv with SoftmaxSarsa do not: use engine='torchrl'"):  # no kernel_state()
         run_episodes(LineEnv(2), agent, 1, engine="fused")
-    with pytest.raises(TypeError, match=r"^LineState and SarsaKernelState do not implement the fused engine's "
-                                        r"env_scratch, env_observe, env_step, env_reset, env_shaping_observation "):
+    with pytest.raises(
+        TypeError,
+        match=r"^LineState and SarsaKernelState do not implement the fused engine's "
+        r"env_scratch, env_observe, env_step, env_reset, env_shaping_observation ",
+    ):
         run_episodes(LineWithRecord(2), agent, 1, engine="fused")
     actor_critic = FourierActorCritic(2, torch.zeros(4), torch.ones(4), 3, AC_PRESETS["released"], seed=0)
-    with pytest.raises(TypeError, match=r"the fused loop does not compile for GridKernelState with "
-                                        r"ActorCriticKernelState"):  # both registered, but not for each other
+    with pytest.raises(
+        TypeError,
+        match=r"the fused loop does not compile for GridKernelState with "
+        r"ActorCriticKernelState",
+    ):  # both registered, but not for each other
         run_episodes(FourRoomsEnv(2), actor_critic, 1, engine="fused")
 
 
@@ -165,21 +214,38 @@ def pinball_setup(method: str, n: int, max_steps: int, preset: str = "released")
 
     cfg = AC_PRESETS[preset]
     env = PinBallEnv(n, seed=3, max_steps=max_steps, step_penalty=-1.0, thrust_penalty=-5.0)
-    patterns = [SubgoalSeries([Circle((0.2, 0.85), 0.04), Circle((0.25, 0.8), 0.04)]),
-                SubgoalSeries([Circle((0.22, 0.9), 0.05)])]
+    patterns = [
+        SubgoalSeries([Circle((0.2, 0.85), 0.04), Circle((0.25, 0.8), 0.04)]),
+        SubgoalSeries([Circle((0.22, 0.9), 0.05)]),
+    ]
     thirds = StateAggregation.from_regions([Box((c,), (1 / 6,), (0,)) for c in (1 / 6, 1 / 2, 5 / 6)], 4)
     shaping = shaping_transform(
-        paper_methods("AC")[method], env.batch_size, gamma=cfg.gamma, value_lr=cfg.value_lr, patterns=patterns,
-        pattern_index=torch.arange(n) % 2, aggregation=thirds, eta=100.0, aggregation_key="observation",
+        paper_methods("AC")[method],
+        env.batch_size,
+        gamma=cfg.gamma,
+        value_lr=cfg.value_lr,
+        patterns=patterns,
+        pattern_index=torch.arange(n) % 2,
+        aggregation=thirds,
+        eta=100.0,
+        aggregation_key="observation",
     )
     spec = env.observation_spec["observation"]
     agent = FourierActorCritic(n, spec.low[0], spec.high[0], 5, cfg, seed=np.arange(n) + 5)
     return (TransformedEnv(env, shaping) if shaping is not None else env), agent
 
 
-@pytest.mark.parametrize(("method", "preset"), [("AC", "released"), ("HRS", "released"), ("NRS", "released"),
-                                                ("SARSA-RS", "released"), ("AC", "released-td"),
-                                                ("HRS", "released-td")])
+@pytest.mark.parametrize(
+    ("method", "preset"),
+    [
+        ("AC", "released"),
+        ("HRS", "released"),
+        ("NRS", "released"),
+        ("SARSA-RS", "released"),
+        ("AC", "released-td"),
+        ("HRS", "released-td"),
+    ],
+)
 def test_pinball_fused_equals_torchrl(method: str, preset: str) -> None:
     """The Q-based actor-critic (released) and the TD-error one (released-td), with the classic penalties."""
     results = {}

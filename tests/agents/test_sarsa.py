@@ -54,8 +54,7 @@ def test_softmax_follows_the_temperature() -> None:
 def test_same_seed_same_results() -> None:
     def run(seed: int) -> torch.Tensor:
         env = FourRoomsEnv(6)
-        agent = SoftmaxSarsa(6, env.num_states, 4, SARSA_PRESETS["released"],
-                             seed=seed)
+        agent = SoftmaxSarsa(6, env.num_states, 4, SARSA_PRESETS["released"], seed=seed)
         return run_episodes(env, agent, 4).steps
 
     assert torch.equal(run(1), run(1))
@@ -92,8 +91,13 @@ def test_learned_potential_does_not_change_the_optimum(method: str) -> None:
     cfg = SARSA_PRESETS["released"]
     patterns = [SubgoalSeries([Cell(4, 9), Cell(11, 9)]), SubgoalSeries([Cell(5, 2), Cell(10, 5)])]
     shaping = shaping_transform(
-        paper_methods("SARSA")[method], torch.Size([n]), gamma=cfg.gamma, value_lr=cfg.value_lr,
-        patterns=patterns, pattern_index=torch.arange(n) % 2, aggregation=room_aggregation(),
+        paper_methods("SARSA")[method],
+        torch.Size([n]),
+        gamma=cfg.gamma,
+        value_lr=cfg.value_lr,
+        patterns=patterns,
+        pattern_index=torch.arange(n) % 2,
+        aggregation=room_aggregation(),
         observation_key="cell",
     )
     assert shaping is not None

@@ -37,8 +37,14 @@ def learn(method: str, reward: str, conventions: dict[str, Any]) -> torch.Tensor
     goal_reward, step_reward = (1.0, 0.0) if reward == "goal" else (0.0, -1.0)
     env = FourRoomsEnv(N, goal_reward=goal_reward, step_reward=step_reward)
     shaping = shaping_transform(
-        paper_methods("SARSA")[method], env.batch_size, gamma=cfg.gamma, value_lr=cfg.value_lr, patterns=PATTERNS,
-        pattern_index=torch.arange(N) % len(PATTERNS), aggregation=room_aggregation(), observation_key="cell",
+        paper_methods("SARSA")[method],
+        env.batch_size,
+        gamma=cfg.gamma,
+        value_lr=cfg.value_lr,
+        patterns=PATTERNS,
+        pattern_index=torch.arange(N) % len(PATTERNS),
+        aggregation=room_aggregation(),
+        observation_key="cell",
         **conventions,
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
@@ -74,4 +80,6 @@ def test_the_guards_tell_the_conventions_apart() -> None:
     assert asymptote(learn("HRS", "goal", OLD_LIBRARY)) > 20 + 1  # 25.8: Q ≈ Q* − V(z) leaves no action gap
     assert asymptote(learn("HRS", "step-cost", AUTHORS)) > 20 + 1  # 21.7: γ^T V(z_T) < 0 pays for long episodes
     sarsa = time_to_50(learn("SARSA", "step-cost", {}))
-    assert time_to_50(learn("HRS", "step-cost", START_ANCHORED)) > sarsa  # 92.8 vs 46.0: the goal pays V(z_T) − V(0) back
+    assert (
+        time_to_50(learn("HRS", "step-cost", START_ANCHORED)) > sarsa
+    )  # 92.8 vs 46.0: the goal pays V(z_T) − V(0) back

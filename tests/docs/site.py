@@ -1,6 +1,6 @@
 """Build the documentation site and serve it on a loopback port, for the browser test and the screenshots.
 
-    .venv/bin/python -m tests.docs.site docs/images     # screenshots of the home page and a tutorial
+.venv/bin/python -m tests.docs.site docs/images     # screenshots of the home page and a tutorial
 """
 
 from __future__ import annotations
@@ -23,8 +23,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def build(site_dir: Path) -> None:
     """``mkdocs build --strict`` into ``site_dir``; raises with mkdocs' output if it fails."""
-    done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(site_dir)],
-                          cwd=ROOT, capture_output=True, text=True, env={**os.environ, "NO_MKDOCS_2_WARNING": "1"})
+    done = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(site_dir)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "NO_MKDOCS_2_WARNING": "1"},
+    )
     if done.returncode != 0:
         raise RuntimeError(f"mkdocs build --strict failed:\n{done.stderr[-4000:]}")
 

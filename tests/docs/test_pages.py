@@ -35,9 +35,12 @@ HISTORY = {
 
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
 def test_page_names_no_history(page: Path) -> None:
-    found = [f"{page.relative_to(ROOT)}:{number}: {why}: {line.strip()[:120]}"
-             for number, line in enumerate(page.read_text().splitlines(), 1)
-             for pattern, why in HISTORY.items() if re.search(pattern, line, re.IGNORECASE)]
+    found = [
+        f"{page.relative_to(ROOT)}:{number}: {why}: {line.strip()[:120]}"
+        for number, line in enumerate(page.read_text().splitlines(), 1)
+        for pattern, why in HISTORY.items()
+        if re.search(pattern, line, re.IGNORECASE)
+    ]
     assert not found, "history belongs in CHANGELOG.md:\n" + "\n".join(found)
 
 
@@ -65,15 +68,19 @@ def test_the_benchmarks_page_runs_every_benchmark() -> None:
 
 def test_the_benchmarks_page_keeps_no_time_stamp_or_temporary_path() -> None:
     clean = _docs_page().clean
-    out = ("\x1b[32mraw\x1b[0m 994 env-steps/s\n"
-           "2026-01-02 03:04:05,678 [torchrl][INFO]    Initialized LazyTensorStorage\n"
-           "Results: `/tmp/bench-docs-x/four_rooms`, 1000 episodes per learner.\n")
-    assert clean(out, Path("/tmp/bench-docs-x")) == ("raw 994 env-steps/s\n"
-                                                    "Results: `RESULTS/four_rooms`, 1000 episodes per learner.\n")
+    out = (
+        "\x1b[32mraw\x1b[0m 994 env-steps/s\n"
+        "2026-01-02 03:04:05,678 [torchrl][INFO]    Initialized LazyTensorStorage\n"
+        "Results: `/tmp/bench-docs-x/four_rooms`, 1000 episodes per learner.\n"
+    )
+    assert clean(out, Path("/tmp/bench-docs-x")) == (
+        "raw 994 env-steps/s\nResults: `RESULTS/four_rooms`, 1000 episodes per learner.\n"
+    )
 
 
-def test_the_readme_snippet_shapes_a_collector_and_learns_the_potential(tmp_path: Path,
-                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_readme_snippet_shapes_a_collector_and_learns_the_potential(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """The README's 'Use it on your env' code, as printed, on a four-rooms batch behind a collector: the
     reward is shaped and the potential trains only on steps that close a transition."""
     from torchrl.collectors import Collector
@@ -83,7 +90,9 @@ def test_the_readme_snippet_shapes_a_collector_and_learns_the_potential(tmp_path
 
     text = (ROOT / "README.md").read_text()
     start = text.index("## Use it on your env")
-    code = text[text.index("```python\n", start) + len("```python\n"):text.index("```", text.index("```python\n", start) + 3)]
+    code = text[
+        text.index("```python\n", start) + len("```python\n") : text.index("```", text.index("```python\n", start) + 3)
+    ]
     monkeypatch.chdir(tmp_path)
     save_patterns(tmp_path / "my_subgoals.yaml", {"alice": SubgoalSeries([State(25), State(62)], name="alice")})
     namespace: dict = {"base_env": FourRoomsEnv(num_envs=4, goal_reward=0.0, step_reward=-1.0)}

@@ -20,8 +20,9 @@ def test_site_renders_offline() -> None:
         pytest.skip(message)
     with built_site() as url, chromium() as browser:
         outside: list[str] = []
-        browser.on("request", lambda r: None if r.url.startswith(url) or r.url.startswith("data:")
-                   else outside.append(r.url))
+        browser.on(
+            "request", lambda r: None if r.url.startswith(url) or r.url.startswith("data:") else outside.append(r.url)
+        )
         home = open_page(browser, url)
         assert "torchrl_subgoal" in home.title()
         assert "def past_halfway(td)" in home.locator("article").inner_text()  # the quick start, included

@@ -17,8 +17,12 @@ EXPECTED = {
     "adding_a_domain": [r"^HRS: mean steps per episode \d", r"^SARSA: mean steps per episode \d"],
     "shape_your_env": [r"^unshaped ", r"^shaped ", r"learned potential, mean of the shaped learners: Φ\(0\)="],
     "quickstart": [r"^unshaped: \d+ episodes", r"^shaped: \d+ episodes"],
-    "train_the_potential": [r"^first batch: 256 steps, \d+ SMDP transitions", r"^V at start \(z=0\)",
-                            r"^V at above_goal \(z=3\)", r"buffer holds \d+"],
+    "train_the_potential": [
+        r"^first batch: 256 steps, \d+ SMDP transitions",
+        r"^V at start \(z=0\)",
+        r"^V at above_goal \(z=3\)",
+        r"buffer holds \d+",
+    ],
 }
 
 
@@ -32,8 +36,14 @@ def test_tutorial_runs_at_a_tiny_budget(script: Path, tmp_path: Path) -> None:
     what its page shows, and the scripts with a figure write it and the printed text to ``--out``."""
     figures = script.stem != "quickstart"  # the home page's snippet takes no arguments
     args = ["--tiny", "--out", str(tmp_path)] if figures else []
-    done = subprocess.run([sys.executable, str(script), *args], capture_output=True, text=True, timeout=600,
-                          cwd=tmp_path, env={**os.environ, "TUTORIAL_TINY": "1"})
+    done = subprocess.run(
+        [sys.executable, str(script), *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=tmp_path,
+        env={**os.environ, "TUTORIAL_TINY": "1"},
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     for pattern in EXPECTED[script.stem]:
         assert re.search(pattern, done.stdout, re.MULTILINE), f"{pattern!r} not in:\n{done.stdout}"

@@ -43,21 +43,13 @@ class Obstacle:
         self.min_y, self.max_y = min(ys), max(ys)
 
     def edges(self) -> list[tuple[tuple[float, float], tuple[float, float]]]:
-        return [
-            (self.points[k], self.points[(k + 1) % len(self.points)])
-            for k in range(len(self.points))
-        ]
+        return [(self.points[k], self.points[(k + 1) % len(self.points)]) for k in range(len(self.points))]
 
     def hit_edges(
         self, x: float, y: float, vx: float, vy: float, radius: float
     ) -> list[tuple[tuple[float, float], tuple[float, float]]]:
         """The edges the ball hits now (empty when its bounding box rules it out)."""
-        if (
-            x + radius < self.min_x
-            or x - radius > self.max_x
-            or y + radius < self.min_y
-            or y - radius > self.max_y
-        ):
+        if x + radius < self.min_x or x - radius > self.max_x or y + radius < self.min_y or y - radius > self.max_y:
             return []
         found = []
         for p, q in self.edges():
@@ -81,9 +73,7 @@ class Obstacle:
         return 2.0 * along * ux - vx, 2.0 * along * uy - vy, False
 
 
-def closest_point(
-    p: tuple[float, float], q: tuple[float, float], x: float, y: float
-) -> tuple[float, float]:
+def closest_point(p: tuple[float, float], q: tuple[float, float], x: float, y: float) -> tuple[float, float]:
     ex, ey = q[0] - p[0], q[1] - p[1]
     s = ((x - p[0]) * ex + (y - p[1]) * ey) / (ex * ex + ey * ey)
     s = 0.0 if s < 0.0 else 1.0 if s > 1.0 else s

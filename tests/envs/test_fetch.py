@@ -58,12 +58,14 @@ def _observations(rows: list[dict[str, list[float]]]) -> torch.Tensor:
 def test_participants_boxes_on_hand_made_observations() -> None:
     series = fetch.human_patterns()["participants"]
     rel, fingers = "object_relative_position", "finger_joints"
-    obs = _observations([
-        {rel: [0.009, -0.009, 0.0], fingers: [0.04, 0.04]},  # gripper at the object (inside ±0.01)
-        {rel: [0.011, 0.0, 0.0], fingers: [0.02, 0.02]},     # 0.011 off in x: not at the object
-        {rel: [0.0, 0.0, 0.005], fingers: [0.025, 0.015]},   # at the object, fingers closed on it
-        {rel: [0.0, 0.0, 0.005], fingers: [0.035, 0.02]},    # one finger 0.015 open: not grasped
-    ])
+    obs = _observations(
+        [
+            {rel: [0.009, -0.009, 0.0], fingers: [0.04, 0.04]},  # gripper at the object (inside ±0.01)
+            {rel: [0.011, 0.0, 0.0], fingers: [0.02, 0.02]},  # 0.011 off in x: not at the object
+            {rel: [0.0, 0.0, 0.005], fingers: [0.025, 0.015]},  # at the object, fingers closed on it
+            {rel: [0.0, 0.0, 0.005], fingers: [0.035, 0.02]},  # one finger 0.015 open: not grasped
+        ]
+    )
     tables = SubgoalTables([series], torch.zeros(4, dtype=torch.long), fetch.OBSERVATION_SIZE)
     assert tables.inside(obs).tolist() == [[True, False], [False, False], [True, True], [True, False]]
     # in order: from z = 0 only the first box counts, from z = 1 only the second

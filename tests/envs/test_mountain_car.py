@@ -24,8 +24,9 @@ def test_env_steps_with_a_step_cost_and_truncates_at_200() -> None:
     td = env.reset()
     assert td["observation"].shape == (3, 2) and bool((td["observation"][:, 1] == 0).all())
     assert bool(((td["observation"][:, 0] >= -0.6) & (td["observation"][:, 0] <= -0.4)).all())
-    no_push = TensorDictModule(lambda obs: torch.ones(obs.shape[:-1], dtype=torch.long), in_keys=["observation"],
-                               out_keys=["action"])  # never gets there
+    no_push = TensorDictModule(
+        lambda obs: torch.ones(obs.shape[:-1], dtype=torch.long), in_keys=["observation"], out_keys=["action"]
+    )  # never gets there
     rollout = env.rollout(250, no_push, break_when_any_done=False)
     assert bool((rollout["next", "reward"] == -1).all())
     done = rollout["next", "done"].squeeze(-1)
@@ -40,8 +41,13 @@ def _z(points: list[tuple[float, float]]) -> list[int]:
     obs = torch.tensor(points, dtype=torch.float32)
     n = len(points) - 1
     false = torch.zeros(1, n, 1, dtype=torch.bool)
-    data = TensorDict({"observation": obs[None, :-1], "next": {
-        "observation": obs[None, 1:], "reward": -torch.ones(1, n, 1), "done": false, "terminated": false}}, [1, n])
+    data = TensorDict(
+        {
+            "observation": obs[None, :-1],
+            "next": {"observation": obs[None, 1:], "reward": -torch.ones(1, n, 1), "done": false, "terminated": false},
+        },
+        [1, n],
+    )
     return transform(data)["next", "subgoal_index"].flatten().tolist()
 
 

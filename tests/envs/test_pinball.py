@@ -106,9 +106,7 @@ def test_reflection_off_slanted_edge(backend: str) -> None:
     angle = math.radians(30.0)
     ux, uy = math.cos(angle), math.sin(angle)
     # triangle whose lower edge rises at 30 degrees; the ball comes straight up at it
-    sim = physics(
-        FAR_START + f"polygon 0.2 0.2 0.8 {0.2 + 0.6 * math.tan(angle)} 0.2 0.7\n", backend
-    )
+    sim = physics(FAR_START + f"polygon 0.2 0.2 0.8 {0.2 + 0.6 * math.tan(angle)} 0.2 0.7\n", backend)
     edge_y = 0.2 + 0.3 * math.tan(angle)
     pos, vel = ball(0.5, edge_y - 0.021 / ux, 0.0, 1.0)
     sim.step(pos, vel, act(NONE))
@@ -206,9 +204,7 @@ def test_named_maps_load() -> None:
 def test_reaching_the_target_terminates_with_goal_reward(tmp_path: Path) -> None:
     path = tmp_path / "near.cfg"
     path.write_text("ball 0.02\ntarget 0.545 0.5 0.04\nstart 0.5 0.5\n")
-    env = PinBallEnv(
-        2, path, random_action_prob=0.0, goal_reward=100.0, thrust_penalty=-5.0, step_penalty=-1.0
-    )
+    env = PinBallEnv(2, path, random_action_prob=0.0, goal_reward=100.0, thrust_penalty=-5.0, step_penalty=-1.0)
     td = env.reset()
     td["action"] = act(PLUS_X, MINUS_X)
     td, td = env.step_and_maybe_reset(td)
@@ -364,9 +360,7 @@ def test_check_env_specs_parallel() -> None:
         (HEADER + "polygon 0.8 0.8 1.0 0.8 0.9 1.0\n", 2, "target centre"),
     ],
 )
-def test_config_errors_name_file_and_line(
-    tmp_path: Path, text: str, line: int, message: str
-) -> None:
+def test_config_errors_name_file_and_line(tmp_path: Path, text: str, line: int, message: str) -> None:
     path = tmp_path / "broken.cfg"
     path.write_text(text)
     with pytest.raises(ValueError, match=re.escape(f"{path}, line {line}: ")) as error:

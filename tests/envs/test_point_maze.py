@@ -73,8 +73,13 @@ def _through(maze: str, points: list[tuple[float, float]]) -> list[int]:
     obs = torch.tensor([[x, y, 0.0, 0.0] for x, y in points], dtype=torch.float32)
     n = len(points) - 1
     false = torch.zeros(1, n, 1, dtype=torch.bool)
-    data = TensorDict({"observation": obs[None, :-1], "next": {
-        "observation": obs[None, 1:], "reward": torch.zeros(1, n, 1), "done": false, "terminated": false}}, [1, n])
+    data = TensorDict(
+        {
+            "observation": obs[None, :-1],
+            "next": {"observation": obs[None, 1:], "reward": torch.zeros(1, n, 1), "done": false, "terminated": false},
+        },
+        [1, n],
+    )
     return transform(data)["next", "subgoal_index"].flatten().tolist()
 
 
@@ -98,14 +103,15 @@ def test_waypoints_on_hand_made_observations(maze: str) -> None:
 
 
 @pytest.mark.parametrize("maze, seed", [("umaze", 0), ("medium", 1)])
-def test_a_driven_ball_passes_the_waypoints_in_order_and_ends_at_the_goal_with_reward_one(maze: str,
-                                                                                         seed: int) -> None:
+def test_a_driven_ball_passes_the_waypoints_in_order_and_ends_at_the_goal_with_reward_one(maze: str, seed: int) -> None:
     """A proportional controller steered through the route's corners: the transform advances z at each
     waypoint, in order; the episode terminates at the goal with reward 1 (0 before), within the time limit."""
     task = point_maze_task(maze, seed)
     series = task.pattern()
-    env = TransformedEnv(make_point_maze(maze, 1, seed),
-                         SubgoalPotentialTransform(series, TabularPotential(series.num_abstract_states), gamma=0.99))
+    env = TransformedEnv(
+        make_point_maze(maze, 1, seed),
+        SubgoalPotentialTransform(series, TabularPotential(series.num_abstract_states), gamma=0.99),
+    )
     targets = [torch.tensor(cell_centre(maze, c)) for c in (*task.route.corners, task.route.goal)]
     td, k, zs, rewards = env.reset(), 0, [], []
     for _ in range(MAX_EPISODE_STEPS[maze]):

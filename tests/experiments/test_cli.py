@@ -26,20 +26,24 @@ class Settings:
 
 def test_defaults_and_conversions() -> None:
     assert parse_config(Settings, []) == Settings()
-    cfg = parse_config(Settings, ["--episodes", "3", "--rate", "1e-2", "--name", "b", "--backend", "ray",
-                                  "--overwrite"])
+    cfg = parse_config(
+        Settings, ["--episodes", "3", "--rate", "1e-2", "--name", "b", "--backend", "ray", "--overwrite"]
+    )
     assert cfg == Settings(episodes=3, rate=0.01, name="b", backend="ray", overwrite=True)
     assert parse_config(Settings, ["--no-overwrite"]).overwrite is False
 
 
-@pytest.mark.parametrize(("argv", "message"), [
-    (["--name", "c"], "--name: invalid choice: 'c'"),
-    (["--backend", "slurm"], "--backend: invalid choice: 'slurm'"),
-    (["--episodes", "many"], "--episodes: invalid int value: 'many'"),
-    (["--rate", "fast"], "--rate: invalid float value: 'fast'"),
-    (["--episodes"], "--episodes: expected one argument"),
-    (["--bogus", "1"], "unrecognized arguments: --bogus 1"),
-])
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--name", "c"], "--name: invalid choice: 'c'"),
+        (["--backend", "slurm"], "--backend: invalid choice: 'slurm'"),
+        (["--episodes", "many"], "--episodes: invalid int value: 'many'"),
+        (["--rate", "fast"], "--rate: invalid float value: 'fast'"),
+        (["--episodes"], "--episodes: expected one argument"),
+        (["--bogus", "1"], "unrecognized arguments: --bogus 1"),
+    ],
+)
 def test_bad_values_name_the_flag(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exit_:
         parse_config(Settings, argv)

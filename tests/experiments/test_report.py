@@ -23,8 +23,9 @@ REPO = Path(__file__).resolve().parents[2]
 
 def make_results(path: Path, domain: str, window: int = 1) -> Path:
     methods = toy_domain.toy_methods(4, ("HRS", "RRS", "SARSA", "NRS", "SARSA-RS"))
-    Sweep(domain, path, methods, toy_domain.run_chunk, toy_domain.toy_config(40, window),
-          seed=2, chunk_size=8).run(workers=0, progress=False)
+    Sweep(domain, path, methods, toy_domain.run_chunk, toy_domain.toy_config(40, window), seed=2, chunk_size=8).run(
+        workers=0, progress=False
+    )
     return path
 
 
@@ -122,8 +123,14 @@ def test_pinball_patterns_reach_the_pinball_hook(tmp_path: Path) -> None:
     methods = toy_domain.toy_methods(1, ("HRS",))
     config = toy_domain.toy_config(12)
     config["patterns"] = {
-        "p1": [{"circle": {"centre": [0.59, 0.65], "radius": 0.04}}, {"circle": {"centre": [0.64, 0.32], "radius": 0.04}}],
-        "p2": [{"circle": {"centre": [0.28, 0.26], "radius": 0.04}}, {"circle": {"centre": [0.69, 0.31], "radius": 0.04}}],
+        "p1": [
+            {"circle": {"centre": [0.59, 0.65], "radius": 0.04}},
+            {"circle": {"centre": [0.64, 0.32], "radius": 0.04}},
+        ],
+        "p2": [
+            {"circle": {"centre": [0.28, 0.26], "radius": 0.04}},
+            {"circle": {"centre": [0.69, 0.31], "radius": 0.04}},
+        ],
     }
     config["report"]["map"] = {"config": "simple"}
     Sweep("pinball", tmp_path, methods, toy_domain.run_chunk, config).run(workers=0, progress=False)
@@ -139,8 +146,9 @@ def test_a_sweep_named_after_its_recipe_draws_the_map_of_its_config_domain(
     drawn: list[str] = []
     register(Domain("hooked2", parts=(ReportMap(lambda ax, patterns, options: drawn.extend(patterns)),)))
     config = toy_domain.toy_config(12) | {"domain": "hooked2"}
-    Sweep("a2c_hooked2", tmp_path, toy_domain.toy_methods(1, ("HRS",)), toy_domain.run_chunk,
-          config).run(workers=0, progress=False)
+    Sweep("a2c_hooked2", tmp_path, toy_domain.toy_methods(1, ("HRS",)), toy_domain.run_chunk, config).run(
+        workers=0, progress=False
+    )
     markdown = write_report(tmp_path, n_boot=50).markdown
     assert drawn == ["p1", "p2"] and "![subgoal patterns](patterns.png)" in markdown, markdown
 
@@ -155,7 +163,9 @@ def test_report_spec_reads_the_config_section() -> None:
         ReportSpec(metric="reward")
 
 
-def test_console_entry_point_prints_tables(four_rooms_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_console_entry_point_prints_tables(
+    four_rooms_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert main([str(four_rooms_dir), "--out", str(tmp_path), "--n-boot", "100"]) == 0
     printed = capsys.readouterr().out
     assert "## Time to threshold" in printed and "| threshold | method |" in printed
@@ -167,9 +177,21 @@ def test_console_entry_point_prints_tables(four_rooms_dir: Path, tmp_path: Path,
 @pytest.mark.slow
 def test_module_entry_point_runs(four_rooms_dir: Path, tmp_path: Path) -> None:
     done = subprocess.run(
-        [sys.executable, "-m", "torchrl_subgoal.experiments.report", str(four_rooms_dir),
-         "--out", str(tmp_path), "--n-boot", "50"],
-        capture_output=True, text=True, cwd=REPO, timeout=120, check=False,
+        [
+            sys.executable,
+            "-m",
+            "torchrl_subgoal.experiments.report",
+            str(four_rooms_dir),
+            "--out",
+            str(tmp_path),
+            "--n-boot",
+            "50",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=120,
+        check=False,
     )
     assert done.returncode == 0, done.stderr
     assert "## Asymptotic performance" in done.stdout
@@ -187,9 +209,7 @@ def test_recipe_script_calls_the_report(
 
 def test_learners_that_never_reach_a_threshold_count_as_n_episodes(tmp_path: Path) -> None:
     methods = toy_domain.toy_methods(2, ("HRS", "STUCK"))
-    Sweep("toy", tmp_path, methods, toy_domain.run_chunk, toy_domain.toy_config(40)).run(
-        workers=0, progress=False
-    )
+    Sweep("toy", tmp_path, methods, toy_domain.run_chunk, toy_domain.toy_config(40)).run(workers=0, progress=False)
     output = write_report(tmp_path, n_boot=50)
     stuck = output.summary["time_to_threshold"][1]["methods"]["STUCK"]
     assert stuck["not_reached"] == stuck["n"] == 4

@@ -132,9 +132,7 @@ def test_probability_of_improvement() -> None:
     x, y = rng.integers(0, 5, 40), rng.integers(0, 5, 30)  # many ties
     pairs = (x[:, None] > y[None, :]) + 0.5 * (x[:, None] == y[None, :])
     assert stats.probability_of_improvement(x, y) == pytest.approx(pairs.mean())
-    assert stats.probability_of_improvement(x, y, lower_is_better=True) == pytest.approx(
-        1 - pairs.mean()
-    )
+    assert stats.probability_of_improvement(x, y, lower_is_better=True) == pytest.approx(1 - pairs.mean())
 
 
 def test_mean_and_sem() -> None:

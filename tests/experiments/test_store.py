@@ -127,8 +127,15 @@ def test_diff_fields_names_nested_paths() -> None:
 
 @pytest.fixture
 def results_dir(tmp_path: Path) -> Path:
-    Sweep(toy_domain.DOMAIN, tmp_path, toy_domain.toy_methods(2), toy_domain.run_chunk,
-          toy_domain.toy_config(6), seed=1, chunk_size=3).run(workers=0, progress=False)
+    Sweep(
+        toy_domain.DOMAIN,
+        tmp_path,
+        toy_domain.toy_methods(2),
+        toy_domain.run_chunk,
+        toy_domain.toy_config(6),
+        seed=1,
+        chunk_size=3,
+    ).run(workers=0, progress=False)
     return tmp_path
 
 
@@ -163,6 +170,8 @@ def test_load_results_errors_name_what_is_wrong(results_dir: Path) -> None:
         load_results(results_dir)
     partial = load_results(results_dir, allow_incomplete=True)
     assert partial.missing == ("HRS/00001",) and partial.methods["HRS"].table.n_learners == 3
-    store.chunk_path(Chunk.from_json(json.loads((results_dir / "config.json").read_text())["chunks"][0])).write_bytes(b"x")
+    store.chunk_path(Chunk.from_json(json.loads((results_dir / "config.json").read_text())["chunks"][0])).write_bytes(
+        b"x"
+    )
     with pytest.raises(CorruptChunkError, match=r"00000\.parquet"):
         load_results(results_dir, allow_incomplete=True)

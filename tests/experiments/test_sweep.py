@@ -75,7 +75,11 @@ def test_plan_chunks_never_mixes_methods_and_respects_size() -> None:
     methods = [MethodSpec("HRS", ["a", "b", "c"], 3), MethodSpec("SARSA", ["none"], 5)]
     chunks = plan_chunks(methods, seed=0, chunk_size=4)
     assert [(c.method, c.index, c.n_learners) for c in chunks] == [
-        ("HRS", 0, 4), ("HRS", 1, 4), ("HRS", 2, 1), ("SARSA", 0, 4), ("SARSA", 1, 1),
+        ("HRS", 0, 4),
+        ("HRS", 1, 4),
+        ("HRS", 2, 1),
+        ("SARSA", 0, 4),
+        ("SARSA", 1, 1),
     ]
     assert chunks[0].learners == (("a", 0), ("a", 1), ("a", 2), ("b", 0))  # may mix patterns
     learners = [(c.method, *lrn) for c in chunks for lrn in c.learners]
@@ -113,8 +117,13 @@ def test_sigkill_then_resume_recomputes_nothing_finished(
 ) -> None:
     results, log = tmp_path / "results", tmp_path / "log.txt"
     # three chunks finish, the others wait for a gate that never opens: killed at a known point
-    env = {**os.environ, "TOY_LOG": str(log), "TOY_TAG": "first", "TOY_GATE": str(tmp_path / "never"),
-           "TOY_FREE": "HRS/00000,HRS/00001,HRS/00002"}
+    env = {
+        **os.environ,
+        "TOY_LOG": str(log),
+        "TOY_TAG": "first",
+        "TOY_GATE": str(tmp_path / "never"),
+        "TOY_FREE": "HRS/00000,HRS/00001,HRS/00002",
+    }
     process = subprocess.Popen(
         [sys.executable, "-m", "tests.experiments.toy_domain", "sweep", str(results), "--workers", "2"],
         cwd=REPO,
@@ -289,8 +298,12 @@ def test_a_directory_that_is_not_ours_is_refused_before_anything_is_written(tmp_
 
 def test_overwrite_removes_only_files_the_store_can_identify(tmp_path: Path) -> None:
     make_sweep(tmp_path).run(workers=0, progress=False)
-    mine = [tmp_path / "chunks" / "HRS" / "keep.txt", tmp_path / "chunks" / "other" / "data.csv",
-            tmp_path / "chunks" / "HRS" / "00000.parquet.bak", tmp_path / "notes.md"]
+    mine = [
+        tmp_path / "chunks" / "HRS" / "keep.txt",
+        tmp_path / "chunks" / "other" / "data.csv",
+        tmp_path / "chunks" / "HRS" / "00000.parquet.bak",
+        tmp_path / "notes.md",
+    ]
     for path in mine:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text("mine\n")

@@ -81,7 +81,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Any) -> Episode
     noise = rng.lognormal(0.0, 0.3, size=(n, e))
     steps = np.minimum(1000, np.round(20 + 980 * np.exp(-episode / scale) * noise)).astype(np.int64)
     success = steps < 1000
-    returns = success * 0.99 ** steps
+    returns = success * 0.99**steps
     sleep = float(os.environ.get("TOY_SLEEP", "0"))
     for _ in range(n):
         time.sleep(sleep / n)
@@ -101,8 +101,9 @@ def paper_scale(results_dir: Path) -> None:
     config = toy_config(1000)
     config["report"]["thresholds"] = [500, 300, 100, 50]
     config["report"]["asymptotic_window"] = [990, 1000]
-    Sweep("four_rooms", results_dir, methods, run_chunk, config, seed=0, chunk_size=100,
-          n_episodes=1000).run(workers=0, progress=False)
+    Sweep("four_rooms", results_dir, methods, run_chunk, config, seed=0, chunk_size=100, n_episodes=1000).run(
+        workers=0, progress=False
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -117,9 +118,16 @@ def main(argv: Sequence[str] | None = None) -> None:
     if args.command == "paper-scale":
         paper_scale(args.results_dir)
         return
-    Sweep(DOMAIN, args.results_dir, toy_methods(args.learnings), run_chunk,
-          toy_config(args.episodes), seed=7, chunk_size=args.chunk_size,
-          n_episodes=args.episodes).run(workers=args.workers, progress=False)
+    Sweep(
+        DOMAIN,
+        args.results_dir,
+        toy_methods(args.learnings),
+        run_chunk,
+        toy_config(args.episodes),
+        seed=7,
+        chunk_size=args.chunk_size,
+        n_episodes=args.episodes,
+    ).run(workers=args.workers, progress=False)
 
 
 if __name__ == "__main__":

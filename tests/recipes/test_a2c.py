@@ -12,8 +12,22 @@ from .test_recipes import recipe
 
 def test_a2c_recipe_four_rooms_every_method(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     a2c = recipe("a2c")
-    args = ["--domain", "four_rooms", "--methods", "A2C,HRS,RRS,NRS,SARSA-RS", "--learnings", "1",
-            "--total-frames", "1024", "--random-patterns", "2", "--workers", "0", "--results", str(tmp_path)]
+    args = [
+        "--domain",
+        "four_rooms",
+        "--methods",
+        "A2C,HRS,RRS,NRS,SARSA-RS",
+        "--learnings",
+        "1",
+        "--total-frames",
+        "1024",
+        "--random-patterns",
+        "2",
+        "--workers",
+        "0",
+        "--results",
+        str(tmp_path),
+    ]
     assert a2c.main(args) == 0
     out = capsys.readouterr().out
     assert "| 100 | HRS |" in out
@@ -31,19 +45,38 @@ def test_a2c_recipe_four_rooms_every_method(tmp_path: Path, capsys: pytest.Captu
 
 def test_a2c_recipe_pinball_runs(tmp_path: Path) -> None:
     a2c = recipe("a2c")
-    args = ["--domain", "pinball", "--methods", "A2C,HRS", "--total-frames", "512", "--workers", "0",
-            "--subgoals", str(Path(__file__).resolve().parents[2] / "torchrl_subgoal" / "data" /
-                              "pinball_participants.yaml"), "--results", str(tmp_path)]
+    args = [
+        "--domain",
+        "pinball",
+        "--methods",
+        "A2C,HRS",
+        "--total-frames",
+        "512",
+        "--workers",
+        "0",
+        "--subgoals",
+        str(Path(__file__).resolve().parents[2] / "torchrl_subgoal" / "data" / "pinball_participants.yaml"),
+        "--results",
+        str(tmp_path),
+    ]
     assert a2c.main(args) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["methods"]["HRS"]["learners"] == 10
 
 
-@pytest.mark.parametrize(("flag", "value"), [("--num-envs", "0"), ("--value-lr", "0"),
-                                             ("--methods", "DQN"), ("--frames-per-batch", "100"),
-                                             ("--reward-scale", "-1")])
-def test_a2c_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str], flag: str,
-                                        value: str) -> None:
+@pytest.mark.parametrize(
+    ("flag", "value"),
+    [
+        ("--num-envs", "0"),
+        ("--value-lr", "0"),
+        ("--methods", "DQN"),
+        ("--frames-per-batch", "100"),
+        ("--reward-scale", "-1"),
+    ],
+)
+def test_a2c_bad_settings_name_the_flag(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], flag: str, value: str
+) -> None:
     a2c = recipe("a2c")
     assert a2c.main([flag, value, "--results", str(tmp_path)]) == 2
     err = capsys.readouterr().err
@@ -56,8 +89,22 @@ def test_a_resumed_learner_logs_one_series(tmp_path: Path, capsys: pytest.Captur
     subgoals = tmp_path / "one.yaml"
     subgoals.write_text("domain: four_rooms\npatterns:\n  p: {subgoals: [{cell: [3, 6]}, {cell: [7, 9]}]}\n")
     results = tmp_path / "res"
-    args = ["--domain", "four_rooms", "--methods", "A2C,HRS", "--subgoals", str(subgoals), "--learnings", "1",
-            "--total-frames", "1024", "--workers", "0", "--results", str(results)]
+    args = [
+        "--domain",
+        "four_rooms",
+        "--methods",
+        "A2C,HRS",
+        "--subgoals",
+        str(subgoals),
+        "--learnings",
+        "1",
+        "--total-frames",
+        "1024",
+        "--workers",
+        "0",
+        "--results",
+        str(results),
+    ]
     a2c = recipe("a2c")
     assert a2c.main(args) == 0
     capsys.readouterr()
@@ -65,8 +112,10 @@ def test_a_resumed_learner_logs_one_series(tmp_path: Path, capsys: pytest.Captur
     steps = [256, 512, 768, 1024]
 
     def logged(scalars: Path) -> dict[str, list[int]]:
-        return {f.name: [int(line.split(",")[0]) for line in f.read_text().splitlines()]
-                for f in sorted(scalars.glob("*.csv"))}
+        return {
+            f.name: [int(line.split(",")[0]) for line in f.read_text().splitlines()]
+            for f in sorted(scalars.glob("*.csv"))
+        }
 
     first = logged(hrs)
     assert set(first) >= {"episode_length.csv", "loss_potential.csv"} and first["episode_length.csv"] == steps

@@ -64,8 +64,9 @@ def test_a_directory_that_is_not_a_results_directory_is_refused_and_left_alone(
     assert sorted(p.name for p in res.iterdir()) == ["chunks", "report.md"]  # not even a lock file
 
 
-def test_overwrite_removes_only_the_sweeps_own_files(finished: Path, tmp_path: Path,
-                                                     capsys: pytest.CaptureFixture[str]) -> None:
+def test_overwrite_removes_only_the_sweeps_own_files(
+    finished: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     res = copy_of(finished, tmp_path)
     (res / "chunks" / "SARSA" / "notes.txt").write_text("mine\n")
     (res / "chunks" / "mine").mkdir()
@@ -87,8 +88,9 @@ def test_results_path_that_is_a_file(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert (tmp_path / "f").read_text() == "keep me\n"
 
 
-def test_results_path_that_is_not_writable(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                           monkeypatch: pytest.MonkeyPatch) -> None:
+def test_results_path_that_is_not_writable(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     parent = tmp_path / "ro"
     parent.mkdir()
     if os.geteuid() == 0:  # root writes anywhere: make the directory creation fail as it would
@@ -118,20 +120,25 @@ def test_a_different_experiment_names_the_fields_and_the_fix(
 ) -> None:
     res = copy_of(finished, tmp_path)
     before = {p: p.stat().st_mtime_ns for p in res.rglob("*.parquet")}
-    code, err = run(["--episodes", "3", "--learnings", "1", "--workers", "0", "--methods", "SARSA",
-                     "--results", str(res)], capsys)
+    code, err = run(
+        ["--episodes", "3", "--learnings", "1", "--workers", "0", "--methods", "SARSA", "--results", str(res)], capsys
+    )
     assert code == 2 and "differing fields" in err and "config.episodes" in err and "overwrite" in err
     assert {p: p.stat().st_mtime_ns for p in res.rglob("*.parquet")} == before
 
 
-@pytest.mark.parametrize(("content", "message"), [
-    ("{not json", "is not valid JSON"),
-    ('{"format": 1, "domain": "four_rooms"}', "field 'methods' is missing or malformed"),
-    ('{"format": 99}', "is not a torchrl_subgoal results file"),
-    (b"\xff\xfe\x00binary", "cannot read"),
-])
-def test_a_corrupt_config_json(finished: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                               content: str | bytes, message: str) -> None:
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        ("{not json", "is not valid JSON"),
+        ('{"format": 1, "domain": "four_rooms"}', "field 'methods' is missing or malformed"),
+        ('{"format": 99}', "is not a torchrl_subgoal results file"),
+        (b"\xff\xfe\x00binary", "cannot read"),
+    ],
+)
+def test_a_corrupt_config_json(
+    finished: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], content: str | bytes, message: str
+) -> None:
     res = copy_of(finished, tmp_path)
     if isinstance(content, bytes):
         (res / "config.json").write_bytes(content)
@@ -145,23 +152,26 @@ def test_a_corrupt_config_json(finished: Path, tmp_path: Path, capsys: pytest.Ca
 # -- settings -----------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("flags", "message"), [
-    (["--episodes", "0"], "--episodes: must be >= 1"),
-    (["--episodes", "many"], "--episodes: invalid int value: 'many'"),
-    (["--eta", "inf"], "--eta: must be a finite number, got inf"),
-    (["--eta", "nan"], "--eta: must be a finite number, got nan"),
-    (["--seed", "-1"], "--seed: must be >= 0, got -1"),
-    (["--methods", ","], "--methods: give at least one method"),
-    (["--methods", "HRS,XYZ"], "--methods: unknown method(s) ['XYZ']"),
-    (["--workers", "-1"], "--workers: must be >= 0"),
-    (["--chunk-size", "0"], "--chunk-size: must be >= 1"),
-    (["--backend", "slurm"], "--backend: invalid choice: 'slurm'"),
-])
-def test_bad_flag_values(tmp_path: Path, capsys: pytest.CaptureFixture[str], flags: list[str],
-                         message: str) -> None:
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--episodes", "0"], "--episodes: must be >= 1"),
+        (["--episodes", "many"], "--episodes: invalid int value: 'many'"),
+        (["--eta", "inf"], "--eta: must be a finite number, got inf"),
+        (["--eta", "nan"], "--eta: must be a finite number, got nan"),
+        (["--seed", "-1"], "--seed: must be >= 0, got -1"),
+        (["--methods", ","], "--methods: give at least one method"),
+        (["--methods", "HRS,XYZ"], "--methods: unknown method(s) ['XYZ']"),
+        (["--workers", "-1"], "--workers: must be >= 0"),
+        (["--chunk-size", "0"], "--chunk-size: must be >= 1"),
+        (["--backend", "slurm"], "--backend: invalid choice: 'slurm'"),
+    ],
+)
+def test_bad_flag_values(tmp_path: Path, capsys: pytest.CaptureFixture[str], flags: list[str], message: str) -> None:
     code, err = (
         run([*flags, "--results", str(tmp_path / "r")], capsys)
-        if "invalid" not in message else _argparse_exit(flags, tmp_path, capsys)
+        if "invalid" not in message
+        else _argparse_exit(flags, tmp_path, capsys)
     )
     assert code == 2 and message in err
     assert not (tmp_path / "r").exists()
@@ -180,23 +190,36 @@ def _argparse_exit(flags: list[str], tmp_path: Path, capsys: pytest.CaptureFixtu
 
 SUBGOAL_FILES: list[tuple[str, bytes, str]] = [
     ("binary.yaml", b"\x89PNG\r\n\x1a\n\x00\x00", "not a text file (byte 0x89 at offset 0 is not UTF-8)"),
-    ("dup.yaml", b"patterns:\n  p: {subgoals: [{cell: [3, 6]}]}\n  p: {subgoals: [{cell: [7, 9]}]}\n",
-     "patterns: duplicate pattern name 'p' (line 3)"),
-    ("dup.json", b'{"patterns": {"p": {"subgoals": [{"cell": [3, 6]}]}, "p": {"subgoals": []}}}',
-     "patterns: duplicate pattern name 'p'"),
-    ("dupsg.yaml", b"patterns:\n  p:\n    subgoals: {a: {cell: [3, 6]}, a: {cell: [7, 9]}}\n    order: []\n",
-     "pattern 'p': subgoals: duplicate subgoal name 'a' (line 3)"),
-    ("state.yaml", b"patterns:\n  p: {subgoals: [{state: 5}]}\n",
-     "pattern 'p': subgoals[0].state: a state predicate reads a scalar state index or a one-hot state but "
-     "the observation 'cell' has 2 entries"),
+    (
+        "dup.yaml",
+        b"patterns:\n  p: {subgoals: [{cell: [3, 6]}]}\n  p: {subgoals: [{cell: [7, 9]}]}\n",
+        "patterns: duplicate pattern name 'p' (line 3)",
+    ),
+    (
+        "dup.json",
+        b'{"patterns": {"p": {"subgoals": [{"cell": [3, 6]}]}, "p": {"subgoals": []}}}',
+        "patterns: duplicate pattern name 'p'",
+    ),
+    (
+        "dupsg.yaml",
+        b"patterns:\n  p:\n    subgoals: {a: {cell: [3, 6]}, a: {cell: [7, 9]}}\n    order: []\n",
+        "pattern 'p': subgoals: duplicate subgoal name 'a' (line 3)",
+    ),
+    (
+        "state.yaml",
+        b"patterns:\n  p: {subgoals: [{state: 5}]}\n",
+        "pattern 'p': subgoals[0].state: a state predicate reads a scalar state index or a one-hot state but "
+        "the observation 'cell' has 2 entries",
+    ),
     ("alias.yaml", b"x: &a {cell: [3, 6]}\npatterns:\n  p: {subgoals: [*a]}\n", "used again through a YAML alias"),
     ("huge.yaml", b"#" * (2 << 20), "larger than 1048576 bytes"),
 ]
 
 
 @pytest.mark.parametrize(("name", "content", "message"), SUBGOAL_FILES, ids=[f[0] for f in SUBGOAL_FILES])
-def test_bad_subgoal_files(tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, content: bytes,
-                           message: str) -> None:
+def test_bad_subgoal_files(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, content: bytes, message: str
+) -> None:
     path = tmp_path / name
     path.write_bytes(content)
     code, err = run([*QUICK, "--subgoals", str(path), "--results", str(tmp_path / "r")], capsys)
@@ -262,22 +285,25 @@ def test_a_failing_first_chunk_needs_no_overwrite_after_the_fix(
 # -- the report --------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("flags", "message"), [
-    (["--n-boot", "0"], "--n-boot: must lie in [1, 100000], got 0"),
-    (["--n-boot", "-5"], "--n-boot: must lie in [1, 100000], got -5"),
-    (["--n-boot", "lots"], "invalid int value: 'lots'"),
-    (["--seed", "-1"], "--seed: must be >= 0"),
-])
-def test_report_bad_flags(finished: Path, capsys: pytest.CaptureFixture[str], flags: list[str],
-                          message: str) -> None:
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--n-boot", "0"], "--n-boot: must lie in [1, 100000], got 0"),
+        (["--n-boot", "-5"], "--n-boot: must lie in [1, 100000], got -5"),
+        (["--n-boot", "lots"], "invalid int value: 'lots'"),
+        (["--seed", "-1"], "--seed: must be >= 0"),
+    ],
+)
+def test_report_bad_flags(finished: Path, capsys: pytest.CaptureFixture[str], flags: list[str], message: str) -> None:
     with pytest.raises(SystemExit) as info:
         report_main([str(finished), *flags])
     err = capsys.readouterr().err.strip()
     assert info.value.code == 2 and len(err.splitlines()) == 1 and message in err
 
 
-def test_report_never_overwrites_files_it_did_not_write(finished: Path, tmp_path: Path,
-                                                        capsys: pytest.CaptureFixture[str]) -> None:
+def test_report_never_overwrites_files_it_did_not_write(
+    finished: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "paper"
     out.mkdir()
     (out / "summary.json").write_text('{"mine": 1}\n')
@@ -290,12 +316,14 @@ def test_report_never_overwrites_files_it_did_not_write(finished: Path, tmp_path
     assert report_main([str(finished), "--out", str(fresh), "--n-boot", "10"]) == 0  # its own: replaced
 
 
-@pytest.mark.parametrize(("target", "message"), [
-    ("missing", "holds no results"),
-    ("a file", "is a file"),
-])
-def test_report_bad_results_dir(tmp_path: Path, capsys: pytest.CaptureFixture[str], target: str,
-                                message: str) -> None:
+@pytest.mark.parametrize(
+    ("target", "message"),
+    [
+        ("missing", "holds no results"),
+        ("a file", "is a file"),
+    ],
+)
+def test_report_bad_results_dir(tmp_path: Path, capsys: pytest.CaptureFixture[str], target: str, message: str) -> None:
     path = tmp_path / "x"
     if target == "a file":
         path.write_text("x")
@@ -307,8 +335,12 @@ def test_report_bad_results_dir(tmp_path: Path, capsys: pytest.CaptureFixture[st
 def test_the_command_line_prints_no_traceback(tmp_path: Path) -> None:
     """The recipe as a user runs it: one line, exit 2."""
     (tmp_path / "f").write_text("x")
-    done = subprocess.run([sys.executable, str(ROOT / "recipes" / "four_rooms.py"), "--results",
-                           str(tmp_path / "f")], capture_output=True, text=True, timeout=300)
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "recipes" / "four_rooms.py"), "--results", str(tmp_path / "f")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 2 and done.stderr.strip().splitlines() == [
         f"error: {tmp_path / 'f'} is a file, not a results directory; choose a directory"
     ]
@@ -320,8 +352,9 @@ def test_the_command_line_prints_no_traceback(tmp_path: Path) -> None:
 def one_error_line(code: int, capsys: pytest.CaptureFixture[str]) -> str:
     """The one line on stderr of a recipe that refused its settings (exit 2); the notice gymnasium_robotics
     prints when the pick-and-place recipe first imports it is not the recipe's."""
-    lines = [line for line in capsys.readouterr().err.splitlines()
-             if line.strip() and "gymnasium-robotics==" not in line]
+    lines = [
+        line for line in capsys.readouterr().err.splitlines() if line.strip() and "gymnasium-robotics==" not in line
+    ]
     assert code == 2 and len(lines) == 1 and lines[0].startswith("error: "), (code, lines)
     return lines[0]
 
@@ -360,8 +393,9 @@ SHAPING = [
 def test_pick_and_place_shaping_options_are_checked_before_anything_runs(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], options: str, message: str
 ) -> None:
-    code = recipe("pick_and_place").main([*PICK_AND_PLACE, "--methods", "HRS", "--shaping", options,
-                                          "--results", str(tmp_path / "r")])
+    code = recipe("pick_and_place").main(
+        [*PICK_AND_PLACE, "--methods", "HRS", "--shaping", options, "--results", str(tmp_path / "r")]
+    )
     assert message in one_error_line(code, capsys)
     assert not (tmp_path / "r").exists()  # refused before the sweep wrote anything
 
@@ -370,9 +404,18 @@ def test_pick_and_place_shaping_options_that_fit_are_taken(tmp_path: Path) -> No
     pick_and_place = recipe("pick_and_place")
     from torchrl_subgoal.experiments.cli import parse_config
 
-    cfg = parse_config(pick_and_place.Config, [*PICK_AND_PLACE, "--methods", "HRS,NRS,SARSA-RS", "--shaping",
-                                               '{"zero_terminal_potential": false, "backend": "torch"}',
-                                               "--results", str(tmp_path / "r")])
+    cfg = parse_config(
+        pick_and_place.Config,
+        [
+            *PICK_AND_PLACE,
+            "--methods",
+            "HRS,NRS,SARSA-RS",
+            "--shaping",
+            '{"zero_terminal_potential": false, "backend": "torch"}',
+            "--results",
+            str(tmp_path / "r"),
+        ],
+    )
     assert pick_and_place.plan(cfg).config["shaping"] == {"zero_terminal_potential": False, "backend": "torch"}
 
 
@@ -383,8 +426,9 @@ def test_pick_and_place_device_is_checked_before_anything_runs(
     import torch
 
     device = device.format(unavailable=torch.cuda.device_count() + 7)  # the issue's cuda:7, on any machine
-    code = recipe("pick_and_place").main([*PICK_AND_PLACE, "--methods", "DDPG", "--device", device,
-                                          "--results", str(tmp_path / "r")])
+    code = recipe("pick_and_place").main(
+        [*PICK_AND_PLACE, "--methods", "DDPG", "--device", device, "--results", str(tmp_path / "r")]
+    )
     line = one_error_line(code, capsys)
     assert line.startswith(f"error: --device: {device}" if ":" in device else "error: --device: 'gpu0'")
     assert ("is not available on this machine" in line) == (":" in device)
@@ -397,13 +441,20 @@ def long_pattern_file(tmp_path: Path, length: int = 1000) -> Path:
 
     cells = [list(c) for c in free_cells() if c not in (START, GOAL)]
     path = tmp_path / "long.json"
-    path.write_text(json.dumps({"domain": "four_rooms", "patterns": {
-        "long": {"subgoals": [{"cell": cells[i % len(cells)]} for i in range(length)]}}}))
+    path.write_text(
+        json.dumps(
+            {
+                "domain": "four_rooms",
+                "patterns": {"long": {"subgoals": [{"cell": cells[i % len(cells)]} for i in range(length)]}},
+            }
+        )
+    )
     return path
 
 
-def test_a_limit_of_random_patterns_applies_only_when_rrs_runs(tmp_path: Path,
-                                                               capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_limit_of_random_patterns_applies_only_when_rrs_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     path = long_pattern_file(tmp_path)
     hrs = ["--subgoals", str(path), "--episodes", "2", "--learnings", "1", "--workers", "0"]
     assert recipe("four_rooms").main([*hrs, "--methods", "HRS,SARSA", "--results", str(tmp_path / "hrs")]) == 0
@@ -412,8 +463,10 @@ def test_a_limit_of_random_patterns_applies_only_when_rrs_runs(tmp_path: Path,
     assert len(config["config"]["patterns"]["long"]["subgoals"]) == 1000
     code = recipe("four_rooms").main([*hrs, "--methods", "HRS,RRS", "--results", str(tmp_path / "rrs")])
     line = one_error_line(code, capsys)
-    assert line == (f"error: {path}: pattern 'long': has 1000 subgoals, more than the 102 candidate subgoals "
-                    "random patterns (RRS) of that length are drawn from")
+    assert line == (
+        f"error: {path}: pattern 'long': has 1000 subgoals, more than the 102 candidate subgoals "
+        "random patterns (RRS) of that length are drawn from"
+    )
     assert not (tmp_path / "rrs").exists()
 
 
@@ -423,8 +476,10 @@ def test_pick_and_place_rrs_ranges_apply_only_when_rrs_runs(tmp_path: Path) -> N
 
     pick_and_place = recipe("pick_and_place")
     path = tmp_path / "rotation.yaml"
-    path.write_text("domain: pick_and_place\npatterns:\n  turned:\n    subgoals:\n"
-                    "      - {box: {centre: [0.0, 0.0, 0.0], margin: 0.1, dims: [11, 12, 13]}}\n")
+    path.write_text(
+        "domain: pick_and_place\npatterns:\n  turned:\n    subgoals:\n"
+        "      - {box: {centre: [0.0, 0.0, 0.0], margin: 0.1, dims: [11, 12, 13]}}\n"
+    )
     flags = [*PICK_AND_PLACE, "--subgoals", str(path), "--results", str(tmp_path / "r")]
     sweep = pick_and_place.plan(parse_config(pick_and_place.Config, [*flags, "--methods", "HRS,NRS,DDPG"]))
     assert [s.name for s in sweep.specs] == ["HRS", "NRS", "DDPG"]
@@ -432,46 +487,58 @@ def test_pick_and_place_rrs_ranges_apply_only_when_rrs_runs(tmp_path: Path) -> N
         pick_and_place.plan(parse_config(pick_and_place.Config, [*flags, "--methods", "HRS,RRS"]))
 
 
-@pytest.mark.parametrize(("flags", "message"), [
-    (["--total-frames", "1"], "--total-frames: 1 is less than one batch of 256 frames (--frames-per-batch); "
-                              "give at least 256"),
-    (["--total-frames", "255"], "--total-frames: 255 is less than one batch of 256 frames"),
-    (["--total-frames", "64", "--frames-per-batch", "128"], "--total-frames: 64 is less than one batch of 128"),
-])
-def test_a2c_budget_smaller_than_one_batch(tmp_path: Path, capsys: pytest.CaptureFixture[str], flags: list[str],
-                                          message: str) -> None:
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (
+            ["--total-frames", "1"],
+            "--total-frames: 1 is less than one batch of 256 frames (--frames-per-batch); give at least 256",
+        ),
+        (["--total-frames", "255"], "--total-frames: 255 is less than one batch of 256 frames"),
+        (["--total-frames", "64", "--frames-per-batch", "128"], "--total-frames: 64 is less than one batch of 128"),
+    ],
+)
+def test_a2c_budget_smaller_than_one_batch(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], flags: list[str], message: str
+) -> None:
     code = recipe("a2c").main([*flags, "--methods", "A2C", "--workers", "0", "--results", str(tmp_path / "r")])
     assert one_error_line(code, capsys).startswith(f"error: {message}")
     assert not (tmp_path / "r").exists()
 
 
 def test_pinball_unknown_map_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    code = recipe("pinball").main(["--map", "moon", "--methods", "AC", "--workers", "0",
-                                   "--results", str(tmp_path / "r")])
+    code = recipe("pinball").main(
+        ["--map", "moon", "--methods", "AC", "--workers", "0", "--results", str(tmp_path / "r")]
+    )
     assert one_error_line(code, capsys) == (
-        "error: --map: PinBall config 'moon' is neither one of ('simple', 'hard') nor an existing file")
+        "error: --map: PinBall config 'moon' is neither one of ('simple', 'hard') nor an existing file"
+    )
     assert not (tmp_path / "r").exists()
 
 
 # -- the report while a sweep runs ---------------------------------------------------------------------
 
 
-def test_the_report_refuses_a_directory_a_sweep_is_writing_into(finished: Path, tmp_path: Path,
-                                                                capsys: pytest.CaptureFixture[str]) -> None:
+def test_the_report_refuses_a_directory_a_sweep_is_writing_into(
+    finished: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     res = copy_of(finished, tmp_path)
     for name in ("report.md", "summary.json"):
         (res / name).unlink()
     with ResultsStore(res).lock():  # as the sweep holds it while it runs
         assert report_main([str(res), "--n-boot", "10"]) == 2
         err = capsys.readouterr().err.strip()
-        assert err == (f"error: a sweep is running into {res} (it holds {res / '.lock'}), so its results are not "
-                       "final; wait for it to finish, or pass --allow-incomplete to report on the chunks finished "
-                       "so far")
+        assert err == (
+            f"error: a sweep is running into {res} (it holds {res / '.lock'}), so its results are not "
+            "final; wait for it to finish, or pass --allow-incomplete to report on the chunks finished "
+            "so far"
+        )
         assert not (res / "report.md").exists() and not (res / "summary.json").exists()
         assert report_main([str(res), "--n-boot", "10", "--allow-incomplete"]) == 0
         err = capsys.readouterr().err
-        assert err.splitlines()[0] == (f"warning: a sweep is running into {res}; this report covers the chunks it "
-                                       "has finished so far")
+        assert err.splitlines()[0] == (
+            f"warning: a sweep is running into {res}; this report covers the chunks it has finished so far"
+        )
         assert (res / "report.md").exists()
     assert report_main([str(res), "--n-boot", "10"]) == 0  # the sweep is over: no word about it
     assert "sweep is running" not in capsys.readouterr().err

@@ -31,8 +31,9 @@ def fetch_env(num_envs: int, potential: NeuralPotential, parallel: bool):
     base = ParallelEnv(num_envs, make) if parallel else make()
     series = fetch.human_patterns()["participants"]
     # Φ = V (not the library's default "nonpositive" level), to compare F with V directly
-    return TransformedEnv(base, SubgoalPotentialTransform(series, potential, gamma=GAMMA, transitions_key="smdp",
-                                                          start_potential="value"))
+    return TransformedEnv(
+        base, SubgoalPotentialTransform(series, potential, gamma=GAMMA, transitions_key="smdp", start_potential="value")
+    )
 
 
 def test_neural_potential_step_matches_the_smdp_target() -> None:
@@ -50,8 +51,11 @@ def test_neural_potential_step_matches_the_smdp_target() -> None:
     anchor, next_anchor = emitted["subgoal_anchor"], emitted["next", "subgoal_anchor"]
     delta = emitted["next", "reward"] + GAMMA**50 * (next_anchor @ w.T + b) - (anchor @ w.T + b)
     pick_and_place = recipe("pick_and_place")
-    trainer = pick_and_place.PotentialTrainer(env.transform, SubgoalValueLoss(potential, reduction="mean").make_value_estimator(gamma=GAMMA),
-                                              torch.optim.SGD(potential.parameters(), lr=lr))
+    trainer = pick_and_place.PotentialTrainer(
+        env.transform,
+        SubgoalValueLoss(potential, reduction="mean").make_value_estimator(gamma=GAMMA),
+        torch.optim.SGD(potential.parameters(), lr=lr),
+    )
     trainer.step(data)
     assert torch.allclose(potential.network.weight, w + lr * delta * anchor, atol=1e-6)
     assert torch.allclose(potential.network.bias, b + lr * delta.flatten(), atol=1e-6)
@@ -90,12 +94,25 @@ def test_collector_workers_shape_with_the_trained_potential_and_act_with_the_tra
     torch.manual_seed(0)
     config = {"eta": 0.1, "shaping": {"start_potential": "value"}, "value_lr": 0.1, "ddpg": {"hidden": (8,)}}
     shaping, trainer = pick_and_place.make_shaping("HRS", fetch.human_patterns()["participants"], config, GAMMA)
-    agent = DDPGAgent(fetch.OBSERVATION_SIZE, fetch.make_fetch_env(5).action_spec_unbatched,
-                      DDPGConfig(hidden=(8,), batch_size=16))
-    factory = EnvFactory(shaped_env, make_env=batched(partial(fetch.make_fetch_env, 5)), num_envs=1,
-                         shaping=shaping, potential=shaping.potential, gamma=GAMMA)
-    collector = MultiSyncCollector([factory] * 2, agent.greedy, frames_per_batch=100, total_frames=-1,
-                                   cat_results="stack", auto_register_policy_transforms=False)
+    agent = DDPGAgent(
+        fetch.OBSERVATION_SIZE, fetch.make_fetch_env(5).action_spec_unbatched, DDPGConfig(hidden=(8,), batch_size=16)
+    )
+    factory = EnvFactory(
+        shaped_env,
+        make_env=batched(partial(fetch.make_fetch_env, 5)),
+        num_envs=1,
+        shaping=shaping,
+        potential=shaping.potential,
+        gamma=GAMMA,
+    )
+    collector = MultiSyncCollector(
+        [factory] * 2,
+        agent.greedy,
+        frames_per_batch=100,
+        total_frames=-1,
+        cat_results="stack",
+        auto_register_policy_transforms=False,
+    )
     batches = iter(collector)
     for _ in range(2):
         data = next(batches)
@@ -133,12 +150,17 @@ def test_recipe_all_methods_and_report(tmp_path: Path, capsys: pytest.CaptureFix
     assert (frame["steps"] == 200).all() and frame["return"].between(-50.0, 0.0).all()
 
 
-@pytest.mark.parametrize("processes", [
-    [],
-    ["--envs", "2", "--collector-workers", "2"],  # MuJoCo, policy noise and shaping in 2 worker processes
-], ids=["in-process", "collector-workers"])
-def test_kill_and_resume_equals_an_uninterrupted_learning(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                                          processes: list[str]) -> None:
+@pytest.mark.parametrize(
+    "processes",
+    [
+        [],
+        ["--envs", "2", "--collector-workers", "2"],  # MuJoCo, policy noise and shaping in 2 worker processes
+    ],
+    ids=["in-process", "collector-workers"],
+)
+def test_kill_and_resume_equals_an_uninterrupted_learning(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, processes: list[str]
+) -> None:
     pick_and_place = recipe("pick_and_place")
     args = [*TINY, "--epochs", "3", "--methods", "HRS", *processes]
     assert pick_and_place.main([*args, "--results", str(tmp_path / "whole")]) == 0
@@ -160,8 +182,10 @@ def test_kill_and_resume_equals_an_uninterrupted_learning(tmp_path: Path, monkey
     assert pick_and_place.main([*args, "--results", str(tmp_path / "resumed")]) == 0
 
     assert load_frame(tmp_path / "whole").equals(load_frame(tmp_path / "resumed"))
-    whole, resumed = (torch.load(tmp_path / d / "checkpoints" / "HRS" / "00000" / "state.pt", weights_only=False)
-                      for d in ("whole", "resumed"))
+    whole, resumed = (
+        torch.load(tmp_path / d / "checkpoints" / "HRS" / "00000" / "state.pt", weights_only=False)
+        for d in ("whole", "resumed")
+    )
     for part in ("agent", "potential"):
         a, b = (whole[part]["modules"], resumed[part]["modules"]) if part == "agent" else (whole[part], resumed[part])
         assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
@@ -174,15 +198,20 @@ def test_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert pick_and_place.main(["--shaping", "{bad", "--results", str(tmp_path)]) == 2
     assert "--shaping: not valid JSON" in capsys.readouterr().err
     assert pick_and_place.main(["--envs", "6", "--collector-workers", "4", "--results", str(tmp_path)]) == 2
-    assert "--envs: 6 envs do not split evenly over --collector-workers 4 x --env-processes 0" in capsys.readouterr().err
+    assert (
+        "--envs: 6 envs do not split evenly over --collector-workers 4 x --env-processes 0" in capsys.readouterr().err
+    )
 
 
-def test_a_pattern_rrs_cannot_randomise_is_one_line_naming_the_file(tmp_path: Path,
-                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_pattern_rrs_cannot_randomise_is_one_line_naming_the_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     # a first pattern over gripper velocities: a valid file, but RRS has no range to draw its centres from
     path = tmp_path / "velocities.yaml"
-    path.write_text("format: torchrl_subgoal/v1\npatterns:\n  moving:\n    subgoals:\n"
-                    "    - box: {centre: [0, 0, 0], margin: 0.01, slice: [20, 23]}\n")
+    path.write_text(
+        "format: torchrl_subgoal/v1\npatterns:\n  moving:\n    subgoals:\n"
+        "    - box: {centre: [0, 0, 0], margin: 0.01, slice: [20, 23]}\n"
+    )
     pick_and_place = recipe("pick_and_place")
     assert pick_and_place.main(["--subgoals", str(path), "--results", str(tmp_path / "out")]) == 2
     last = capsys.readouterr().err.strip().splitlines()[-1]  # (gymnasium-robotics may warn on import before it)
@@ -190,10 +219,12 @@ def test_a_pattern_rrs_cannot_randomise_is_one_line_naming_the_file(tmp_path: Pa
     assert "'gripper_velocity'" in last and not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize(("mode", "unshaped", "shaped"), [("unshaped", True, False), ("all", True, True),
-                                                          ("none", False, False)])
-def test_clip_positive_chooses_whose_targets_are_clipped_above(tmp_path: Path, mode: str, unshaped: bool,
-                                                                shaped: bool) -> None:
+@pytest.mark.parametrize(
+    ("mode", "unshaped", "shaped"), [("unshaped", True, False), ("all", True, True), ("none", False, False)]
+)
+def test_clip_positive_chooses_whose_targets_are_clipped_above(
+    tmp_path: Path, mode: str, unshaped: bool, shaped: bool
+) -> None:
     pick_and_place = recipe("pick_and_place")
     cfg = parse_config(pick_and_place.Config, ["--clip-positive", mode, "--results", str(tmp_path)])
     config = pick_and_place.plan(cfg).config
@@ -212,9 +243,19 @@ def shaped_targets(agent: DDPGAgent) -> list[float]:
     for net in (agent.loss.target_value_network_params, agent.loss.value_network_params):
         net.apply(lambda p: p.data.zero_())  # Q ≡ 0
     obs = torch.zeros(2, fetch.OBSERVATION_SIZE)
-    batch = TensorDict({"observation": obs, "action": torch.zeros(2, 4), "next": {
-        "observation": obs, "reward": rewards, "done": torch.zeros(2, 1, dtype=torch.bool),
-        "terminated": torch.zeros(2, 1, dtype=torch.bool)}}, [2])
+    batch = TensorDict(
+        {
+            "observation": obs,
+            "action": torch.zeros(2, 4),
+            "next": {
+                "observation": obs,
+                "reward": rewards,
+                "done": torch.zeros(2, 1, dtype=torch.bool),
+                "terminated": torch.zeros(2, 1, dtype=torch.bool),
+            },
+        },
+        [2],
+    )
     batch.set("observation_normalized", agent.norm(obs))
     batch.set(("next", "observation_normalized"), agent.norm(obs))
     return agent.loss.loss_value(batch)[1]["target_value"].tolist()
@@ -226,8 +267,9 @@ def test_shaped_learner_tells_success_from_failure_only_with_the_top_open(tmp_pa
     config = pick_and_place.plan(parse_config(pick_and_place.Config, ["--results", str(tmp_path)])).config
     spec = Bounded(-1.0, 1.0, shape=(4,))
     small = {**config, "ddpg": {**config["ddpg"], "hidden": [8]}}
-    clipped = DDPGAgent(fetch.OBSERVATION_SIZE, spec, pick_and_place.agent_config({**small, "shaped_clip_positive": True},
-                                                                                  shaped=True))
+    clipped = DDPGAgent(
+        fetch.OBSERVATION_SIZE, spec, pick_and_place.agent_config({**small, "shaped_clip_positive": True}, shaped=True)
+    )
     assert shaped_targets(clipped) == [0.0, 0.0]  # the authors' clip: success and failure look the same
     default = DDPGAgent(fetch.OBSERVATION_SIZE, spec, pick_and_place.agent_config(small, shaped=True))
     assert shaped_targets(default) == pytest.approx([0.0, 1.0])

@@ -13,8 +13,20 @@ from .test_recipes import recipe
 
 def test_qlearning_recipe_four_rooms_every_method(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     qlearning = recipe("qlearning")
-    args = ["--task", "four_rooms", "--reward", "goal", "--learnings", "1", "--episodes", "3", "--workers", "0",
-            "--results", str(tmp_path)]
+    args = [
+        "--task",
+        "four_rooms",
+        "--reward",
+        "goal",
+        "--learnings",
+        "1",
+        "--episodes",
+        "3",
+        "--workers",
+        "0",
+        "--results",
+        str(tmp_path),
+    ]
     assert qlearning.main(args) == 0
     assert "| 50 | HRS-mean |" in capsys.readouterr().out
     summary = json.loads((tmp_path / "summary.json").read_text())
@@ -31,17 +43,31 @@ def test_qlearning_recipe_four_rooms_every_method(tmp_path: Path, capsys: pytest
 
 def test_qlearning_recipe_taxi_runs(tmp_path: Path) -> None:
     qlearning = recipe("qlearning")
-    args = ["--task", "taxi", "--methods", "Q,HRS", "--learnings", "2", "--episodes", "2", "--workers", "0",
-            "--results", str(tmp_path)]
+    args = [
+        "--task",
+        "taxi",
+        "--methods",
+        "Q,HRS",
+        "--learnings",
+        "2",
+        "--episodes",
+        "2",
+        "--workers",
+        "0",
+        "--results",
+        str(tmp_path),
+    ]
     assert qlearning.main(args) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["methods"]["HRS"]["learners"] == 2
 
 
-@pytest.mark.parametrize(("flag", "value"), [("--expectile", "1.0"), ("--lr", "0"), ("--methods", "SARSA"),
-                                             ("--epsilon", "1.5")])
-def test_qlearning_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str], flag: str,
-                                              value: str) -> None:
+@pytest.mark.parametrize(
+    ("flag", "value"), [("--expectile", "1.0"), ("--lr", "0"), ("--methods", "SARSA"), ("--epsilon", "1.5")]
+)
+def test_qlearning_bad_settings_name_the_flag(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], flag: str, value: str
+) -> None:
     qlearning = recipe("qlearning")
     assert qlearning.main([flag, value, "--results", str(tmp_path)]) == 2
     err = capsys.readouterr().err

@@ -47,8 +47,20 @@ def test_four_rooms_engines_agree(tmp_path: Path) -> None:
     frames = []
     for engine in ("torchrl", "fused"):
         out = tmp_path / engine
-        args = ["--episodes", "8", "--learnings", "1", "--workers", "0", "--methods", "HRS,NRS",
-                "--engine", engine, "--results", str(out)]
+        args = [
+            "--episodes",
+            "8",
+            "--learnings",
+            "1",
+            "--workers",
+            "0",
+            "--methods",
+            "HRS,NRS",
+            "--engine",
+            engine,
+            "--results",
+            str(out),
+        ]
         assert four_rooms.main(args) == 0
         from torchrl_subgoal.experiments import load_frame
 
@@ -63,14 +75,38 @@ def test_results_do_not_depend_on_chunking_or_workers(tmp_path: Path, domain: st
     the same records with one chunk per method, with chunks of 3 on two workers, and of 7 inline."""
     from torchrl_subgoal.experiments import load_frame
 
-    tiny = (["--episodes", "6", "--learnings", "1", "--methods", "HRS,NRS,SARSA-RS"] if domain == "four_rooms"
-            else ["--episodes", "10", "--learnings", "1", "--max-steps", "60", "--methods", "HRS,AC",
-                  "--step-penalty", "-1", "--thrust-penalty", "-5"])  # returns tell the learners apart
+    tiny = (
+        ["--episodes", "6", "--learnings", "1", "--methods", "HRS,NRS,SARSA-RS"]
+        if domain == "four_rooms"
+        else [
+            "--episodes",
+            "10",
+            "--learnings",
+            "1",
+            "--max-steps",
+            "60",
+            "--methods",
+            "HRS,AC",
+            "--step-penalty",
+            "-1",
+            "--thrust-penalty",
+            "-5",
+        ]
+    )  # returns tell the learners apart
     frames = []
     for chunk_size, workers in (("1000", "0"), ("3", "2"), ("7", "0")):
         out = tmp_path / f"{chunk_size}-{workers}"
-        cmd = [sys.executable, str(ROOT / "recipes" / f"{domain}.py"), *tiny, "--chunk-size", chunk_size,
-               "--workers", workers, "--results", str(out)]
+        cmd = [
+            sys.executable,
+            str(ROOT / "recipes" / f"{domain}.py"),
+            *tiny,
+            "--chunk-size",
+            chunk_size,
+            "--workers",
+            workers,
+            "--results",
+            str(out),
+        ]
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
         assert done.returncode == 0, done.stderr[-2000:]
         frames.append(load_frame(out).sort_values(["method", "pattern", "learning", "episode"], ignore_index=True))
@@ -78,13 +114,17 @@ def test_results_do_not_depend_on_chunking_or_workers(tmp_path: Path, domain: st
     assert len(frames[0][["steps", "return"]].drop_duplicates()) > 3  # the learners did differ
 
 
-@pytest.mark.parametrize(("flag", "value", "message"), [
-    ("--episodes", "0", "--episodes: must be >= 1"),
-    ("--methods", "HRS,XYZ", "--methods: unknown method(s) ['XYZ']"),
-    ("--eta", "-1", "--eta: must be >= 0"),
-])
-def test_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str], flag: str, value: str,
-                                    message: str) -> None:
+@pytest.mark.parametrize(
+    ("flag", "value", "message"),
+    [
+        ("--episodes", "0", "--episodes: must be >= 1"),
+        ("--methods", "HRS,XYZ", "--methods: unknown method(s) ['XYZ']"),
+        ("--eta", "-1", "--eta: must be >= 0"),
+    ],
+)
+def test_bad_settings_name_the_flag(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], flag: str, value: str, message: str
+) -> None:
     assert recipe("four_rooms").main([flag, value, "--results", str(tmp_path)]) == 2
     assert message in capsys.readouterr().err
 
@@ -98,8 +138,7 @@ def test_bad_subgoal_file_names_file_and_field(tmp_path: Path, capsys: pytest.Ca
 
 def test_pinball_recipe(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pinball = recipe("pinball")
-    args = ["--episodes", "12", "--learnings", "1", "--max-steps", "300", "--workers", "0",
-            "--results", str(tmp_path)]
+    args = ["--episodes", "12", "--learnings", "1", "--max-steps", "300", "--workers", "0", "--results", str(tmp_path)]
     assert pinball.main(args) == 0
     out = capsys.readouterr().out
     assert "| 3000 | HRS |" in out
@@ -116,9 +155,24 @@ def test_four_rooms_on_ray_equals_local(tmp_path: Path) -> None:
     frames = []
     for backend in ("local", "ray"):
         out = tmp_path / backend
-        cmd = [sys.executable, str(ROOT / "recipes" / "four_rooms.py"), "--episodes", "15", "--learnings", "1",
-               "--methods", "HRS,SARSA", "--chunk-size", "5", "--backend", backend, "--workers", "2",
-               "--results", str(out)]
+        cmd = [
+            sys.executable,
+            str(ROOT / "recipes" / "four_rooms.py"),
+            "--episodes",
+            "15",
+            "--learnings",
+            "1",
+            "--methods",
+            "HRS,SARSA",
+            "--chunk-size",
+            "5",
+            "--backend",
+            backend,
+            "--workers",
+            "2",
+            "--results",
+            str(out),
+        ]
         env = {**os.environ, "RAY_ADDRESS": "local"}  # not a cluster someone else runs on this machine
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
         assert done.returncode == 0, done.stderr[-2000:]
@@ -141,15 +195,32 @@ def test_reproductions_default_to_the_authors_conventions() -> None:
 def test_four_rooms_step_cost_and_library_conventions(tmp_path: Path) -> None:
     from torchrl_subgoal.experiments import load_frame
 
-    args = ["--episodes", "6", "--learnings", "1", "--methods", "HRS,SARSA", "--reward", "step-cost",
-            "--zero-terminal-potential", "--start-potential", "nonpositive", "--workers", "0",
-            "--results", str(tmp_path)]
+    args = [
+        "--episodes",
+        "6",
+        "--learnings",
+        "1",
+        "--methods",
+        "HRS,SARSA",
+        "--reward",
+        "step-cost",
+        "--zero-terminal-potential",
+        "--start-potential",
+        "nonpositive",
+        "--workers",
+        "0",
+        "--results",
+        str(tmp_path),
+    ]
     assert recipe("four_rooms").main(args) == 0
     frame = load_frame(tmp_path)
     assert (frame["return"] == -(frame["steps"] - frame["success"].astype(int))).all()  # −1 per step, 0 at the goal
     config = json.loads((tmp_path / "config.json").read_text())["config"]
     assert (config["reward"], config["zero_terminal_potential"], config["start_potential"]) == (
-        "step-cost", True, "nonpositive")
+        "step-cost",
+        True,
+        "nonpositive",
+    )
 
 
 def test_pinball_shorter_than_the_report_window(tmp_path: Path) -> None:

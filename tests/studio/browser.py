@@ -25,8 +25,14 @@ REBOUND_HOST = "evil.example"
 #: Flags for a closed network and a root user (see the machine notes): no sandbox, no background traffic;
 #: and :data:`REBOUND_HOST` resolving to the loopback address.
 CHROMIUM_ARGS = [
-    "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
-    "--disable-component-update", "--disable-sync", f"--host-resolver-rules=MAP {REBOUND_HOST} 127.0.0.1",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    f"--host-resolver-rules=MAP {REBOUND_HOST} 127.0.0.1",
 ]
 #: Generous: CI machines can be busy. Waits poll for a state; nothing sleeps for a fixed time.
 TIMEOUT_MS = 120_000
@@ -58,7 +64,10 @@ def chromium() -> Iterator[Any]:
 
     with tempfile.TemporaryDirectory(prefix="studio-chromium-") as profile, sync_playwright() as p:
         context = p.chromium.launch_persistent_context(
-            profile, executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS,
+            profile,
+            executable_path=CHROMIUM,
+            headless=True,
+            args=CHROMIUM_ARGS,
             viewport={"width": 1100, "height": 1000},
         )
         try:

@@ -1,7 +1,7 @@
 """Screenshots of the studio for ``docs/studio.md``, taken in headless Chromium like the browser tests.
 
-    .venv/bin/python -m tests.studio.screenshots docs/images                  # all
-    .venv/bin/python -m tests.studio.screenshots docs/images pick_and_place   # only the form
+.venv/bin/python -m tests.studio.screenshots docs/images                  # all
+.venv/bin/python -m tests.studio.screenshots docs/images pick_and_place   # only the form
 """
 
 from __future__ import annotations
@@ -33,8 +33,9 @@ def pick_and_place(browser: Any, url: str, folder: Path, out: Path) -> None:
     page.check('#box-form .components input[value="object_position"]')
     page.click("#add-box")
     for j, value in enumerate(("0", "0", "0", "0.02", "0.02")):
-        page.fill(f'[aria-label="{"object_relative_position" if j < 3 else "finger_joints"}[{j % 3}] of subgoal 1"]',
-                  value)
+        page.fill(
+            f'[aria-label="{"object_relative_position" if j < 3 else "finger_joints"}[{j % 3}] of subgoal 1"]', value
+        )
     for j, value in enumerate(("1.3", "0.75", "0.6")):
         page.fill(f'[aria-label="object_position[{j}] of subgoal 2"]', value)
     page.fill('[aria-label="margin of subgoal 2"]', "0.03, 0.03, 0.05")

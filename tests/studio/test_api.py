@@ -61,13 +61,22 @@ def test_extra_pinball_map_file(tmp_path: Path) -> None:
 
 
 def test_save_open_round_trip_with_names_partial_order_and_several_patterns(client: FlaskClient, app: Flask) -> None:
-    body = {"domain": "four_rooms", "patterns": [
-        {"name": "chain", "subgoals": [{"cell": [3, 6]}, {"cell": [7, 9]}], "order": None},
-        {"name": "dag", "subgoals": [{"name": "west", "cell": [6, 2]}, {"name": "east", "cell": [3, 6]},
-                                     {"name": "door", "cell": [10, 6]}],
-         "order": [["west", "door"], ["east", "door"]]},
-        {"name": "named_chain", "subgoals": [{"name": "a", "cell": [1, 2]}, {"cell": [2, 2]}], "order": None},
-    ]}
+    body = {
+        "domain": "four_rooms",
+        "patterns": [
+            {"name": "chain", "subgoals": [{"cell": [3, 6]}, {"cell": [7, 9]}], "order": None},
+            {
+                "name": "dag",
+                "subgoals": [
+                    {"name": "west", "cell": [6, 2]},
+                    {"name": "east", "cell": [3, 6]},
+                    {"name": "door", "cell": [10, 6]},
+                ],
+                "order": [["west", "door"], ["east", "door"]],
+            },
+            {"name": "named_chain", "subgoals": [{"name": "a", "cell": [1, 2]}, {"cell": [2, 2]}], "order": None},
+        ],
+    }
     saved = client.put("/api/files/mine", json=body)
     assert saved.status_code == 200, saved.json
     path = Path(saved.json["path"])
@@ -79,10 +88,17 @@ def test_save_open_round_trip_with_names_partial_order_and_several_patterns(clie
     assert patterns["named_chain"].names == ("a", "sg2") and patterns["named_chain"].is_chain
     opened = client.get("/api/files/mine.yaml").json
     assert opened["domain"] == "four_rooms"
-    assert opened["patterns"][0] == {"name": "chain", "order": None, "description": None,
-                                     "subgoals": [{"name": None, "cell": [3, 6]}, {"name": None, "cell": [7, 9]}]}
+    assert opened["patterns"][0] == {
+        "name": "chain",
+        "order": None,
+        "description": None,
+        "subgoals": [{"name": None, "cell": [3, 6]}, {"name": None, "cell": [7, 9]}],
+    }
     assert opened["patterns"][1]["order"] == [["west", "door"], ["east", "door"]]
-    assert client.put("/api/files/again.yaml", json={"domain": "four_rooms", "patterns": opened["patterns"]}).status_code == 200
+    assert (
+        client.put("/api/files/again.yaml", json={"domain": "four_rooms", "patterns": opened["patterns"]}).status_code
+        == 200
+    )
     assert load_patterns(path.with_name("again.yaml")) == patterns  # a round trip changes nothing
     assert [f["name"] for f in client.get("/api/files").json["files"]] == ["again.yaml", "mine.yaml"]
     assert client.get("/files/mine.yaml").data == path.read_bytes()
@@ -114,44 +130,94 @@ def test_state_subgoals_open_as_cells(client: FlaskClient, app: Flask) -> None:
 # --------------------------------------------------------------------------- bad drawings
 
 
-@pytest.mark.parametrize(("body", "message"), [
-    (four_rooms((3, 6), (0, 6)), "drawing.yaml: pattern 'p': subgoals[1].cell: (0, 6) is a wall"),
-    (four_rooms((20, 3)), "drawing.yaml: pattern 'p': subgoals[0].cell: (20, 3) is off the 13x13 grid"),
-    (four_rooms((-1, 3)), "subgoals[0].cell: (-1, 3) is off the 13x13 grid"),
-    (pinball((1.2, 0.5, 0.04)), "subgoals[0].circle: centre (1.2, 0.5) is off the table"),
-    (pinball((0.4, 0.8, 0.04)), "subgoals[0].circle: centre (0.4, 0.8) lies inside obstacle 7 of the 'simple' map"),
-    (pinball((0.5, 0.5, 0.04), map_="hard"), "lies inside obstacle"),
-    (pinball((0.5, 0.5, -0.1)), "subgoals[0].circle.radius: must be positive, got -0.1"),
-    (named([["a", "b"], ["b", "a"]], a=(3, 6), b=(7, 9)), "pattern 'p': order: the order has a cycle through subgoal 'a'"),
-    (named([["a", "a"]], a=(3, 6)), "order: invalid pair (0, 0)"),
-    (named([["a", "zz"]], a=(3, 6)), "order[0]: unknown subgoal 'zz'"),
-    (named(None, a=(3, 6), b=(7, 9)) | {"patterns": [{"name": "p", "order": None, "subgoals": [
-        {"name": "a", "cell": [3, 6]}, {"name": "a", "cell": [7, 9]}]}]}, "the subgoal name 'a' is used twice"),
-    (four_rooms(), "pattern 'p': a pattern needs at least one subgoal"),
-    (four_rooms((3, 6)) | {"patterns": [{"name": "p", "subgoals": [{"cell": [3, 6]}]}] * 2},
-     "patterns: the name 'p' is used by two patterns"),
-    ({"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [{"cell": "a3"}]}]},
-     "subgoals[0].cell: expected a non-empty list of numbers, got 'a3'"),
-    ({"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [{"cell": [3.5, 6]}]}]},
-     "subgoals[0].cell[0]: expected an integer, got 3.5"),
-    ({"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [{"name": "x"}]}]},
-     "give exactly one predicate among state, cell, circle, box"),
-    ({"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [{"circle": {"centre": [3, 6], "radius": 1}}]}]},
-     "four-rooms subgoals are cells or states, not circle"),
-    ({"domain": "pinball", "patterns": [{"name": "p", "subgoals": [{"cell": [3, 6]}]}]},
-     "pinball subgoals are circles over (x, y), not cell"),
-    ({"domain": "chess", "patterns": []}, "request: domain: expected one of ['four_rooms', 'pick_and_place', 'pinball'], got 'chess'"),
-    (pinball((0.5, 0.5, 0.04), map_="moon"), "request: map: expected one of ['simple', 'hard'], got 'moon'"),
-    ({"domain": "four_rooms", "patterns": []}, "request: patterns: expected a non-empty list"),
-    ({"domain": "four_rooms", "patterns": {"p": []}}, "request: patterns: expected a non-empty list"),
-    ({"domain": "four_rooms", "patterns": [{"name": "", "subgoals": []}]}, "patterns[0].name: expected a non-empty string"),
-    ({"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": "here"}]}, "patterns[0].subgoals: expected a list"),
-    ({"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [[3, 6]]}]}, "patterns[0].subgoals[0]: expected an object"),
-    ({"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [], "colour": 1}]}, "unknown field(s) ['colour']"),
-    ({"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [], "order": "any"}]}, "patterns[0].order: expected null"),
-    ({"domain": "four_rooms", "patterns": [], "extra": 1}, "request: unknown field(s) ['extra']"),
-    ([1, 2], "request: expected a JSON object"),
-])
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        (four_rooms((3, 6), (0, 6)), "drawing.yaml: pattern 'p': subgoals[1].cell: (0, 6) is a wall"),
+        (four_rooms((20, 3)), "drawing.yaml: pattern 'p': subgoals[0].cell: (20, 3) is off the 13x13 grid"),
+        (four_rooms((-1, 3)), "subgoals[0].cell: (-1, 3) is off the 13x13 grid"),
+        (pinball((1.2, 0.5, 0.04)), "subgoals[0].circle: centre (1.2, 0.5) is off the table"),
+        (pinball((0.4, 0.8, 0.04)), "subgoals[0].circle: centre (0.4, 0.8) lies inside obstacle 7 of the 'simple' map"),
+        (pinball((0.5, 0.5, 0.04), map_="hard"), "lies inside obstacle"),
+        (pinball((0.5, 0.5, -0.1)), "subgoals[0].circle.radius: must be positive, got -0.1"),
+        (
+            named([["a", "b"], ["b", "a"]], a=(3, 6), b=(7, 9)),
+            "pattern 'p': order: the order has a cycle through subgoal 'a'",
+        ),
+        (named([["a", "a"]], a=(3, 6)), "order: invalid pair (0, 0)"),
+        (named([["a", "zz"]], a=(3, 6)), "order[0]: unknown subgoal 'zz'"),
+        (
+            named(None, a=(3, 6), b=(7, 9))
+            | {
+                "patterns": [
+                    {
+                        "name": "p",
+                        "order": None,
+                        "subgoals": [{"name": "a", "cell": [3, 6]}, {"name": "a", "cell": [7, 9]}],
+                    }
+                ]
+            },
+            "the subgoal name 'a' is used twice",
+        ),
+        (four_rooms(), "pattern 'p': a pattern needs at least one subgoal"),
+        (
+            four_rooms((3, 6)) | {"patterns": [{"name": "p", "subgoals": [{"cell": [3, 6]}]}] * 2},
+            "patterns: the name 'p' is used by two patterns",
+        ),
+        (
+            {"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [{"cell": "a3"}]}]},
+            "subgoals[0].cell: expected a non-empty list of numbers, got 'a3'",
+        ),
+        (
+            {"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [{"cell": [3.5, 6]}]}]},
+            "subgoals[0].cell[0]: expected an integer, got 3.5",
+        ),
+        (
+            {"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [{"name": "x"}]}]},
+            "give exactly one predicate among state, cell, circle, box",
+        ),
+        (
+            {
+                "domain": "four_rooms",
+                "patterns": [{"name": "p", "subgoals": [{"circle": {"centre": [3, 6], "radius": 1}}]}],
+            },
+            "four-rooms subgoals are cells or states, not circle",
+        ),
+        (
+            {"domain": "pinball", "patterns": [{"name": "p", "subgoals": [{"cell": [3, 6]}]}]},
+            "pinball subgoals are circles over (x, y), not cell",
+        ),
+        (
+            {"domain": "chess", "patterns": []},
+            "request: domain: expected one of ['four_rooms', 'pick_and_place', 'pinball'], got 'chess'",
+        ),
+        (pinball((0.5, 0.5, 0.04), map_="moon"), "request: map: expected one of ['simple', 'hard'], got 'moon'"),
+        ({"domain": "four_rooms", "patterns": []}, "request: patterns: expected a non-empty list"),
+        ({"domain": "four_rooms", "patterns": {"p": []}}, "request: patterns: expected a non-empty list"),
+        (
+            {"domain": "four_rooms", "patterns": [{"name": "", "subgoals": []}]},
+            "patterns[0].name: expected a non-empty string",
+        ),
+        (
+            {"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": "here"}]},
+            "patterns[0].subgoals: expected a list",
+        ),
+        (
+            {"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [[3, 6]]}]},
+            "patterns[0].subgoals[0]: expected an object",
+        ),
+        (
+            {"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [], "colour": 1}]},
+            "unknown field(s) ['colour']",
+        ),
+        (
+            {"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [], "order": "any"}]},
+            "patterns[0].order: expected null",
+        ),
+        ({"domain": "four_rooms", "patterns": [], "extra": 1}, "request: unknown field(s) ['extra']"),
+        ([1, 2], "request: expected a JSON object"),
+    ],
+)
 def test_bad_drawings_are_400_with_the_field(client: FlaskClient, body: Any, message: str) -> None:
     for method, url in (("post", "/api/validate"), ("put", "/api/files/bad")):
         response = getattr(client, method)(url, json=body)
@@ -168,15 +234,22 @@ def test_messages_name_the_file_being_saved(client: FlaskClient) -> None:
     assert response.json["error"].startswith("other.yml: pattern 'p'")
 
 
-@pytest.mark.parametrize(("data", "status", "message"), [
-    (b"{not json", 400, "request: not valid JSON: Expecting property name"),
-    (b"", 400, "request: not valid JSON"),
-    (b"\xff\xfe{}", 400, "request: the body is not UTF-8 text"),
-    (b'{"domain": "four_rooms", "domain": "pinball"}', 400, "the key 'domain' appears twice"),
-    (b'{"domain": "pinball", "patterns": [{"name": "p", "subgoals": [{"circle": {"centre": [NaN, 0.5], '
-     b'"radius": 0.04}}]}]}', 400, "request: NaN is not a JSON number"),
-    (b"[" * (MAX_REQUEST_BYTES + 10), 413, f"over the limit of {MAX_REQUEST_BYTES} bytes"),
-])
+@pytest.mark.parametrize(
+    ("data", "status", "message"),
+    [
+        (b"{not json", 400, "request: not valid JSON: Expecting property name"),
+        (b"", 400, "request: not valid JSON"),
+        (b"\xff\xfe{}", 400, "request: the body is not UTF-8 text"),
+        (b'{"domain": "four_rooms", "domain": "pinball"}', 400, "the key 'domain' appears twice"),
+        (
+            b'{"domain": "pinball", "patterns": [{"name": "p", "subgoals": [{"circle": {"centre": [NaN, 0.5], '
+            b'"radius": 0.04}}]}]}',
+            400,
+            "request: NaN is not a JSON number",
+        ),
+        (b"[" * (MAX_REQUEST_BYTES + 10), 413, f"over the limit of {MAX_REQUEST_BYTES} bytes"),
+    ],
+)
 def test_malformed_and_oversized_requests(client: FlaskClient, data: bytes, status: int, message: str) -> None:
     for method, url in (("post", "/api/validate"), ("put", "/api/files/x"), ("post", "/api/try")):
         response = getattr(client, method)(url, data=data, content_type="application/json")
@@ -187,9 +260,21 @@ def test_malformed_and_oversized_requests(client: FlaskClient, data: bytes, stat
 # --------------------------------------------------------------------------- files
 
 
-@pytest.mark.parametrize("name", [
-    "..%2Fescape", "../escape", "a/b", "%2Fetc%2Fpasswd", ".hidden", "-flag", "x" * 81, "a..b", "sp ace", "%00nul",
-])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "..%2Fescape",
+        "../escape",
+        "a/b",
+        "%2Fetc%2Fpasswd",
+        ".hidden",
+        "-flag",
+        "x" * 81,
+        "a..b",
+        "sp ace",
+        "%00nul",
+    ],
+)
 def test_file_names_cannot_escape_the_folder(client: FlaskClient, app: Flask, tmp_path: Path, name: str) -> None:
     response = client.put(f"/api/files/{name}", json=four_rooms((3, 6)))
     assert response.status_code in (400, 404), response.json
@@ -241,16 +326,19 @@ def gated(monkeypatch: pytest.MonkeyPatch) -> Iterator[threading.Event]:
     gate.set()
 
 
-@pytest.mark.parametrize(("fields", "message"), [
-    ({"episodes": 0}, "episodes: must be from 1 to 2000, got 0"),
-    ({"episodes": 1_000_000}, "episodes: must be from 1 to 2000, got 1000000"),
-    ({"learners": 201}, "learners: must be from 1 to 200, got 201"),
-    ({"learners": 2.5}, "learners: expected a whole number from 1 to 200, got 2.5"),
-    ({"episodes": "10"}, "episodes: expected a whole number from 1 to 2000, got '10'"),
-    ({"episodes": True}, "episodes: expected a whole number"),
-    ({"max_steps": 10}, "max_steps: must be from 50 to 1000, got 10"),
-    ({"pattern": "q"}, "pattern: expected one of ['p'], got 'q'"),
-])
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"episodes": 0}, "episodes: must be from 1 to 2000, got 0"),
+        ({"episodes": 1_000_000}, "episodes: must be from 1 to 2000, got 1000000"),
+        ({"learners": 201}, "learners: must be from 1 to 200, got 201"),
+        ({"learners": 2.5}, "learners: expected a whole number from 1 to 200, got 2.5"),
+        ({"episodes": "10"}, "episodes: expected a whole number from 1 to 2000, got '10'"),
+        ({"episodes": True}, "episodes: expected a whole number"),
+        ({"max_steps": 10}, "max_steps: must be from 50 to 1000, got 10"),
+        ({"pattern": "q"}, "pattern: expected one of ['p'], got 'q'"),
+    ],
+)
 def test_try_settings_are_bounded(client: FlaskClient, fields: dict[str, Any], message: str) -> None:
     response = client.post("/api/try", json=four_rooms((3, 6)) | fields)
     assert response.status_code == 400 and message in response.json["error"]

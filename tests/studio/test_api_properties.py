@@ -21,29 +21,78 @@ from hypothesis import strategies as st
 
 from torchrl_subgoal.studio import server
 
-PROPERTY = settings(max_examples=200, deadline=None, derandomize=True, database=None,
-                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+PROPERTY = settings(
+    max_examples=200,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 
-KEYS = ["domain", "map", "patterns", "name", "subgoals", "order", "description", "file", "cell", "circle",
-        "centre", "radius", "box", "components", "margin", "state", "episodes", "learners", "pattern",
-        "max_steps", "call", "\ud800", ""]
-LEAVES = (st.none() | st.booleans() | st.integers(-10**6, 10**6) | st.integers()
-          | st.floats(allow_nan=False, allow_infinity=False) | st.text(max_size=12)
-          | st.sampled_from(["four_rooms", "pinball", "pick_and_place", "simple", "hard", "p", "sg1",
-                             "finger_joints", "object_relative_position"]))
+KEYS = [
+    "domain",
+    "map",
+    "patterns",
+    "name",
+    "subgoals",
+    "order",
+    "description",
+    "file",
+    "cell",
+    "circle",
+    "centre",
+    "radius",
+    "box",
+    "components",
+    "margin",
+    "state",
+    "episodes",
+    "learners",
+    "pattern",
+    "max_steps",
+    "call",
+    "\ud800",
+    "",
+]
+LEAVES = (
+    st.none()
+    | st.booleans()
+    | st.integers(-(10**6), 10**6)
+    | st.integers()
+    | st.floats(allow_nan=False, allow_infinity=False)
+    | st.text(max_size=12)
+    | st.sampled_from(
+        [
+            "four_rooms",
+            "pinball",
+            "pick_and_place",
+            "simple",
+            "hard",
+            "p",
+            "sg1",
+            "finger_joints",
+            "object_relative_position",
+        ]
+    )
+)
 JSON = st.recursive(
     LEAVES,
-    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.sampled_from(KEYS) | st.text(max_size=6), inner,
-                                                                  max_size=5),
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.sampled_from(KEYS) | st.text(max_size=6), inner, max_size=5)
+    ),
     max_leaves=30,
 )
 CELL = st.lists(st.integers(-2, 14), min_size=2, max_size=2)
-CIRCLE = st.fixed_dictionaries({"centre": st.lists(st.floats(-0.5, 1.5), min_size=2, max_size=2),
-                                "radius": st.floats(-0.1, 0.6)})
-BOX = st.fixed_dictionaries({"components": st.lists(st.sampled_from(["finger_joints", "object_position", "x"]),
-                                                     min_size=0, max_size=2),
-                             "centre": st.lists(st.floats(-2, 2), max_size=6),
-                             "margin": st.floats(-0.1, 0.1) | st.lists(st.floats(0, 0.1), max_size=6)})
+CIRCLE = st.fixed_dictionaries(
+    {"centre": st.lists(st.floats(-0.5, 1.5), min_size=2, max_size=2), "radius": st.floats(-0.1, 0.6)}
+)
+BOX = st.fixed_dictionaries(
+    {
+        "components": st.lists(st.sampled_from(["finger_joints", "object_position", "x"]), min_size=0, max_size=2),
+        "centre": st.lists(st.floats(-2, 2), max_size=6),
+        "margin": st.floats(-0.1, 0.1) | st.lists(st.floats(0, 0.1), max_size=6),
+    }
+)
 SUBGOAL = st.one_of(
     st.builds(lambda c: {"cell": c}, CELL),
     st.builds(lambda c: {"circle": c}, CIRCLE),
@@ -53,20 +102,33 @@ SUBGOAL = st.one_of(
 )
 # drawings that are nearly right: valid structure, random values and now and then a random subtree
 DRAWING = st.fixed_dictionaries(
-    {"domain": st.sampled_from(["four_rooms", "pinball", "pick_and_place"]) | JSON,
-     "patterns": st.lists(st.fixed_dictionaries(
-         {"name": st.sampled_from(["p", "q"]) | st.text(max_size=4) | JSON,
-          "subgoals": st.lists(SUBGOAL, max_size=4) | JSON},
-         optional={"order": st.none() | st.lists(st.lists(st.sampled_from(["sg1", "sg2", "a"]), min_size=2,
-                                                          max_size=2), max_size=3) | JSON,
-                   "description": st.text(max_size=8) | JSON})
-     , max_size=3) | JSON},
-    optional={"map": st.sampled_from(["", "simple", "hard", "moon"]) | JSON,
-              "description": st.text(max_size=8) | JSON,
-              "file": st.sampled_from(["a.yaml", "../x", ".hidden", "b"]) | JSON,
-              "pattern": st.sampled_from(["p", "q"]) | JSON,
-              "episodes": st.integers(-5, 3000) | JSON,
-              "learners": st.integers(-5, 300) | JSON},
+    {
+        "domain": st.sampled_from(["four_rooms", "pinball", "pick_and_place"]) | JSON,
+        "patterns": st.lists(
+            st.fixed_dictionaries(
+                {
+                    "name": st.sampled_from(["p", "q"]) | st.text(max_size=4) | JSON,
+                    "subgoals": st.lists(SUBGOAL, max_size=4) | JSON,
+                },
+                optional={
+                    "order": st.none()
+                    | st.lists(st.lists(st.sampled_from(["sg1", "sg2", "a"]), min_size=2, max_size=2), max_size=3)
+                    | JSON,
+                    "description": st.text(max_size=8) | JSON,
+                },
+            ),
+            max_size=3,
+        )
+        | JSON,
+    },
+    optional={
+        "map": st.sampled_from(["", "simple", "hard", "moon"]) | JSON,
+        "description": st.text(max_size=8) | JSON,
+        "file": st.sampled_from(["a.yaml", "../x", ".hidden", "b"]) | JSON,
+        "pattern": st.sampled_from(["p", "q"]) | JSON,
+        "episodes": st.integers(-5, 3000) | JSON,
+        "learners": st.integers(-5, 300) | JSON,
+    },
 )
 
 
@@ -126,8 +188,9 @@ def test_any_bytes_get_a_4xx_or_an_answer(body: bytes) -> None:
 
 HOSTS = st.sampled_from(["localhost", "127.0.0.1:8765", "[::1]", "evil.example", "localhost.evil", "", "a b"])
 ORIGINS = st.none() | st.sampled_from(["http://localhost", "http://evil.example", "null", "http://localhost:1"])
-TYPES = st.sampled_from(["application/json", "application/json; charset=utf-8", "text/plain",
-                         "application/x-www-form-urlencoded", ""])
+TYPES = st.sampled_from(
+    ["application/json", "application/json; charset=utf-8", "text/plain", "application/x-www-form-urlencoded", ""]
+)
 
 
 @PROPERTY
@@ -138,8 +201,7 @@ def test_a_save_succeeds_exactly_when_host_origin_and_content_type_are_the_studi
     drawing = {"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [{"cell": [3, 6]}], "order": None}]}
     with studio() as (client, folder):
         headers = {"Host": host} | ({"Origin": origin} if origin is not None else {})
-        response = client.put("/api/files/h.yaml", data=json.dumps(drawing), content_type=content_type,
-                              headers=headers)
+        response = client.put("/api/files/h.yaml", data=json.dumps(drawing), content_type=content_type, headers=headers)
         check_answer(response)
         served = host in ("localhost", "127.0.0.1:8765", "[::1]")
         same_origin = origin is None or origin == f"http://{host}"

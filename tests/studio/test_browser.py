@@ -58,8 +58,20 @@ def test_place_two_subgoals_save_reload_and_train_with_the_recipe(
     saved = folder / "hallways.yaml"
     assert load_patterns(saved, domain="four_rooms")["pattern_1"].predicates == (Cell(3, 6), Cell(7, 9))
     results = tmp_path / "results"
-    args = ["--subgoals", str(saved), "--methods", "HRS,SARSA", "--episodes", "5", "--learnings", "1",
-            "--workers", "0", "--results", str(results)]
+    args = [
+        "--subgoals",
+        str(saved),
+        "--methods",
+        "HRS,SARSA",
+        "--episodes",
+        "5",
+        "--learnings",
+        "1",
+        "--workers",
+        "0",
+        "--results",
+        str(results),
+    ]
     assert recipe("four_rooms").main(args) == 0
     capsys.readouterr()
     config = json.loads((results / "config.json").read_text())
@@ -175,9 +187,24 @@ def test_pinball_circles_on_the_hard_map_and_the_recipe(
     assert all(p.radius == 0.05 for p in series.predicates if isinstance(p, Circle))
     (x0, y0), (x1, y1) = (p.centre for p in series.predicates if isinstance(p, Circle))
     assert abs(x0 - 0.25) < 0.01 and abs(y0 - 0.15) < 0.01 and abs(x1 - 0.45) < 0.01 and abs(y1 - 0.3) < 0.01
-    args = ["--subgoals", str(folder / "hard_circles.yaml"), "--map", "hard", "--methods", "HRS",
-            "--episodes", "10", "--learnings", "1", "--max-steps", "100", "--workers", "0",
-            "--results", str(tmp_path / "results")]
+    args = [
+        "--subgoals",
+        str(folder / "hard_circles.yaml"),
+        "--map",
+        "hard",
+        "--methods",
+        "HRS",
+        "--episodes",
+        "10",
+        "--learnings",
+        "1",
+        "--max-steps",
+        "100",
+        "--workers",
+        "0",
+        "--results",
+        str(tmp_path / "results"),
+    ]
     assert recipe("pinball").main(args) == 0
     capsys.readouterr()
 
@@ -203,8 +230,7 @@ def test_pick_and_place_form_two_boxes_save_reload(browser: Any, studio: Studio)
     expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
     page.fill('[aria-label="margin of subgoal 1"]', "-0.01")  # an invalid margin: the loader's message
     page.locator('[aria-label="margin of subgoal 1"]').press("Tab")
-    expect(page.locator("#message")).to_contain_text("subgoals[0].box.margin: must be non-negative",
-                                                     timeout=TIMEOUT_MS)
+    expect(page.locator("#message")).to_contain_text("subgoals[0].box.margin: must be non-negative", timeout=TIMEOUT_MS)
     page.fill('[aria-label="margin of subgoal 1"]', "0.01")
     page.locator('[aria-label="margin of subgoal 1"]').press("Tab")
     expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
@@ -212,8 +238,10 @@ def test_pick_and_place_form_two_boxes_save_reload(browser: Any, studio: Studio)
     expect(page.locator("#box-form .box-card")).to_have_count(2, timeout=TIMEOUT_MS)
     assert page.input_value("#domain") == "pick_and_place"
     assert page.input_value("#pattern-name") == "grasp"
-    assert subgoal_rows(page) == ["object_relative_position = [0, 0, 0] ± 0.01",
-                                  "object_relative_position + finger_joints = [0, 0, 0, 0.02, 0.02] ± 0.01"]
+    assert subgoal_rows(page) == [
+        "object_relative_position = [0, 0, 0] ± 0.01",
+        "object_relative_position + finger_joints = [0, 0, 0, 0.02, 0.02] ± 0.01",
+    ]
     assert page.input_value('[aria-label="finger_joints[1] of subgoal 2"]') == "0.02"
 
     patterns = fetch.human_patterns(str(folder / "grasp.yaml"))  # what the recipe reads

@@ -40,8 +40,9 @@ def test_the_page_works_with_its_token_and_not_without(browser: Any, studio: Stu
     page.click("#save")
     expect(page.locator("#message")).to_contain_text("Saved", timeout=TIMEOUT_MS)
     assert "token=" in page.url and "file=mine.yaml" in page.url  # a reload keeps both
-    expect(page.locator("#download")).to_have_attribute("href", re.compile(r"^/files/mine\.yaml\?token="),
-                                                        timeout=TIMEOUT_MS)
+    expect(page.locator("#download")).to_have_attribute(
+        "href", re.compile(r"^/files/mine\.yaml\?token="), timeout=TIMEOUT_MS
+    )
     href = page.locator("#download").get_attribute("href")
     body = page.evaluate("async (href) => { const r = await fetch(href); return [r.status, await r.text()]; }", href)
     assert body == [200, (folder / "mine.yaml").read_text()]
@@ -113,13 +114,16 @@ def test_a_rebinding_page_can_neither_list_read_nor_overwrite_files(browser: Any
     with open_studio(browser, tmp_path) as (page, url, _, folder, _):
         kept = (folder / "kept.yaml").read_bytes()
         # to the browser these are same-origin requests: readable, with any content type
-        rebound = page.evaluate("""async (body) => {
+        rebound = page.evaluate(
+            """async (body) => {
             const list = await fetch("/api/files");
             const read = await fetch("/api/files/kept.yaml");
             const put = await fetch("/api/files/kept.yaml?overwrite=1",
                 {method: "PUT", headers: {"Content-Type": "application/json"}, body});
             return [list.status, await list.text(), read.status, put.status];
-        }""", json.dumps(DRAWING))
+        }""",
+            json.dumps(DRAWING),
+        )
         assert rebound[0] == 403 and "kept.yaml" not in rebound[1], rebound
         assert rebound[2:] == [403, 403], rebound
         assert (folder / "kept.yaml").read_bytes() == kept
@@ -138,11 +142,14 @@ def test_another_sites_simple_post_and_form_start_nothing(browser: Any, tmp_path
         # a "simple" cross-site POST (text/plain: no preflight) to start a learning; the request reaches
         # the studio, and its answer, opaque to the page anyway, is blocked by the browser as
         # Cross-Origin-Resource-Policy asks, hence the catch
-        page.evaluate("""async ([target, body]) => {
+        page.evaluate(
+            """async ([target, body]) => {
             try {
                 await fetch(target, {method: "POST", mode: "no-cors", headers: {"Content-Type": "text/plain"}, body});
             } catch (e) {}
-        }""", [f"http://127.0.0.1:{port}/api/try", json.dumps(DRAWING)])
+        }""",
+            [f"http://127.0.0.1:{port}/api/try", json.dumps(DRAWING)],
+        )
         # and a form posted to it (a navigation, no script at all): a text/plain form sends
         # "NAME=VALUE", here a drawing of another pattern whose description takes the "="
         name = '{"domain": "four_rooms", "patterns": [{"name": "q", "subgoals": [{"cell": [7, 9]}]}], "description": "'

@@ -21,8 +21,12 @@ BIN = Path(sys.executable).parent
 
 
 def test_serves_on_loopback_and_stops_on_ctrl_c(tmp_path: Path) -> None:
-    proc = subprocess.Popen([sys.executable, "-m", "torchrl_subgoal.studio", "--port", "0", "--folder",
-                             str(tmp_path / "files")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "torchrl_subgoal.studio", "--port", "0", "--folder", str(tmp_path / "files")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stdout is not None
         line = proc.stdout.readline()  # the address, once it listens (nothing if it failed)
@@ -70,11 +74,14 @@ def test_a_taken_given_port_is_a_clear_error(tmp_path: Path, capsys: pytest.Capt
     assert f"error: --host 127.0.0.1 --port {port}: cannot listen" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize(("argv", "message"), [
-    (["--pinball-map", "mine={bad}"], "error: {bad}, line 2: 'target' expects 3 number(s), got 2"),
-    (["--pinball-map", "simple={good}"], "error: PinBall map name 'simple' is taken"),
-    (["--max-jobs", "0"], "error: --max-jobs: must be >= 1"),
-])
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--pinball-map", "mine={bad}"], "error: {bad}, line 2: 'target' expects 3 number(s), got 2"),
+        (["--pinball-map", "simple={good}"], "error: PinBall map name 'simple' is taken"),
+        (["--max-jobs", "0"], "error: --max-jobs: must be >= 1"),
+    ],
+)
 def test_bad_options(tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], message: str) -> None:
     from torchrl_subgoal.envs.pinball import _DATA_DIR
 

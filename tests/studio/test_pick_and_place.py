@@ -18,8 +18,7 @@ def box(components: list[str], centre: list[float], margin: Any = 0.01, **extra:
 
 
 def drawing(*patterns: tuple[str, list[dict[str, Any]]]) -> dict[str, Any]:
-    return {"domain": "pick_and_place",
-            "patterns": [{"name": n, "subgoals": s, "order": None} for n, s in patterns]}
+    return {"domain": "pick_and_place", "patterns": [{"name": n, "subgoals": s, "order": None} for n, s in patterns]}
 
 
 AT_OBJECT = box(["object_relative_position"], [0.0, 0.0, 0.0])
@@ -34,12 +33,15 @@ def test_geometry_is_a_form_over_the_components(client: FlaskClient) -> None:
     assert geometry["kind"] == "form"
     assert geometry["default_margin"] == fetch.SUBGOAL_MARGIN
     assert [(c["name"], c["start"], c["size"]) for c in geometry["components"]] == [
-        (n, s.start, s.stop - s.start) for n, s in fetch.COMPONENTS.items()]
+        (n, s.start, s.stop - s.start) for n, s in fetch.COMPONENTS.items()
+    ]
 
 
 def test_save_writes_what_the_recipe_loads_and_opens_back(client: FlaskClient, tmp_path: Path) -> None:
-    request = drawing(("participants", [AT_OBJECT, GRASPED]),
-                      ("lift", [box(["object_position"], [1.3, 0.7, 0.6], margin=[0.02, 0.02, 0.05])]))
+    request = drawing(
+        ("participants", [AT_OBJECT, GRASPED]),
+        ("lift", [box(["object_position"], [1.3, 0.7, 0.6], margin=[0.02, 0.02, 0.05])]),
+    )
     response = client.put("/api/files/mine", json=request)
     assert response.status_code == 200, response.get_json()
     assert response.get_json()["recipe"].startswith("python recipes/pick_and_place.py --subgoals ")
@@ -70,29 +72,45 @@ def test_the_participants_file_opens_and_saves_back_equivalently(client: FlaskCl
 
 def test_a_file_of_partial_components_is_refused_with_where(client: FlaskClient, tmp_path: Path) -> None:
     (tmp_path / "files" / "part.yaml").write_text(
-        "patterns:\n  p:\n    subgoals:\n      - {box: {centre: [0.0, 0.0], margin: 0.01, dims: [6, 7]}}\n")
+        "patterns:\n  p:\n    subgoals:\n      - {box: {centre: [0.0, 0.0], margin: 0.01, dims: [6, 7]}}\n"
+    )
     response = client.get("/api/files/part.yaml")
     assert response.status_code == 422
-    assert "part.yaml: pattern 'p': subgoals[0]: box entries [6, 7] are not whole observation components" in (
-        response.get_json()["error"])
+    assert (
+        "part.yaml: pattern 'p': subgoals[0]: box entries [6, 7] are not whole observation components"
+        in (response.get_json()["error"])
+    )
 
 
-@pytest.mark.parametrize(("subgoal", "message"), [
-    (box(["object_relativ_position"], [0.0, 0.0, 0.0]),
-     "patterns[0].subgoals[0].box.components: unknown observation component(s) ['object_relativ_position']"),
-    (box(["finger_joints"], [0.02, 0.02, 0.02]),
-     "patterns[0].subgoals[0].box.centre: 3 values, but finger_joints has 2 coordinates"),
-    (box(["finger_joints"], [0.02, 0.02], margin=-0.01),
-     "pattern 'p': subgoals[0].box.margin: must be non-negative"),
-    (box(["finger_joints"], [0.02, 0.02], margin=[0.01, 0.01, 0.01]),
-     "pattern 'p': subgoals[0].box.margin: has 3 entries but the centre has 2"),
-    (box(["finger_joints"], [0.02, None]), "pattern 'p': subgoals[0].box.centre"),
-    (box([], []), "patterns[0].subgoals[0].box.components: expected a non-empty list"),
-    (box(["finger_joints"], [0.0, 0.0], dims=[9, 10]), "give 'components' or 'dims'/'slice', not both"),
-    ({"circle": {"centre": [0.5, 0.5], "radius": 0.1}},
-     "pattern 'p': subgoals[0].circle: pick-and-place subgoals are boxes"),
-    ({"box": {"centre": [0.0], "margin": 0.01, "dims": [40]}}, "box entries [40] lie outside the 25-d observation"),
-])
+@pytest.mark.parametrize(
+    ("subgoal", "message"),
+    [
+        (
+            box(["object_relativ_position"], [0.0, 0.0, 0.0]),
+            "patterns[0].subgoals[0].box.components: unknown observation component(s) ['object_relativ_position']",
+        ),
+        (
+            box(["finger_joints"], [0.02, 0.02, 0.02]),
+            "patterns[0].subgoals[0].box.centre: 3 values, but finger_joints has 2 coordinates",
+        ),
+        (
+            box(["finger_joints"], [0.02, 0.02], margin=-0.01),
+            "pattern 'p': subgoals[0].box.margin: must be non-negative",
+        ),
+        (
+            box(["finger_joints"], [0.02, 0.02], margin=[0.01, 0.01, 0.01]),
+            "pattern 'p': subgoals[0].box.margin: has 3 entries but the centre has 2",
+        ),
+        (box(["finger_joints"], [0.02, None]), "pattern 'p': subgoals[0].box.centre"),
+        (box([], []), "patterns[0].subgoals[0].box.components: expected a non-empty list"),
+        (box(["finger_joints"], [0.0, 0.0], dims=[9, 10]), "give 'components' or 'dims'/'slice', not both"),
+        (
+            {"circle": {"centre": [0.5, 0.5], "radius": 0.1}},
+            "pattern 'p': subgoals[0].circle: pick-and-place subgoals are boxes",
+        ),
+        ({"box": {"centre": [0.0], "margin": 0.01, "dims": [40]}}, "box entries [40] lie outside the 25-d observation"),
+    ],
+)
 def test_bad_boxes_are_4xx_with_their_message(client: FlaskClient, subgoal: dict[str, Any], message: str) -> None:
     for method, url in (("post", "/api/validate"), ("put", "/api/files/bad")):
         response = getattr(client, method)(url, json=drawing(("p", [subgoal])))
@@ -110,7 +128,8 @@ def test_descriptions_survive_open_and_save(client: FlaskClient, tmp_path: Path)
     folder = tmp_path / "files"
     (folder / "described.yaml").write_text(
         "description: two tries\npatterns:\n  p:\n    description: the participants' boxes\n    subgoals:\n"
-        "      - {box: {centre: [0.0, 0.0, 0.0], margin: 0.01, slice: [6, 9]}}\n")
+        "      - {box: {centre: [0.0, 0.0, 0.0], margin: 0.01, slice: [6, 9]}}\n"
+    )
     opened = client.get("/api/files/described.yaml").get_json()
     assert opened["description"] == "two tries"
     assert opened["patterns"][0]["description"] == "the participants' boxes"

@@ -131,8 +131,9 @@ def test_links_out_of_the_folder_are_neither_listed_nor_read(client: FlaskClient
 # --------------------------------------------------------------------------- hosts, origins, content types
 
 
-def requests_of_every_kind(client: FlaskClient, headers: dict[str, str], content_type: str = "application/json",
-                           job: str = "nope") -> dict[str, int]:
+def requests_of_every_kind(
+    client: FlaskClient, headers: dict[str, str], content_type: str = "application/json", job: str = "nope"
+) -> dict[str, int]:
     """One request to every route with ``headers``: route -> status."""
     import json
 
@@ -144,15 +145,27 @@ def requests_of_every_kind(client: FlaskClient, headers: dict[str, str], content
         "download": client.get("/files/kept.yaml", headers=headers).status_code,
         "validate": client.post("/api/validate", data=body, content_type=content_type, headers=headers).status_code,
         "save": client.put("/api/files/new.yaml", data=body, content_type=content_type, headers=headers).status_code,
-        "overwrite": client.put("/api/files/kept.yaml?overwrite=1", data=body, content_type=content_type,
-                                headers=headers).status_code,
+        "overwrite": client.put(
+            "/api/files/kept.yaml?overwrite=1", data=body, content_type=content_type, headers=headers
+        ).status_code,
         "try": client.post("/api/try", data=body, content_type=content_type, headers=headers).status_code,
         "cancel": client.delete(f"/api/try/{job}", headers=headers).status_code,
     }
 
 
-@pytest.mark.parametrize("host", ["evil.example", "evil.example:8765", "127.0.0.1.evil.example", "localhost.example",
-                                  "10.0.0.1", "[::2]:80", "", "bad host"])
+@pytest.mark.parametrize(
+    "host",
+    [
+        "evil.example",
+        "evil.example:8765",
+        "127.0.0.1.evil.example",
+        "localhost.example",
+        "10.0.0.1",
+        "[::2]:80",
+        "",
+        "bad host",
+    ],
+)
 def test_a_foreign_host_is_refused_and_changes_nothing(
     client: FlaskClient, app: Flask, gated: threading.Event, host: str
 ) -> None:
@@ -170,13 +183,23 @@ def test_a_foreign_host_is_refused_and_changes_nothing(
     assert [j.id for j in jobs.running()] == [job]  # no job started, the running one not cancelled
 
 
-@pytest.mark.parametrize("host", ["localhost", "localhost:8765", "127.0.0.1:8765", "127.0.0.2", "[::1]:8765",
-                                  "LOCALHOST:1"])
+@pytest.mark.parametrize(
+    "host", ["localhost", "localhost:8765", "127.0.0.1:8765", "127.0.0.2", "[::1]:8765", "LOCALHOST:1"]
+)
 def test_loopback_hosts_are_served(client: FlaskClient, gated: threading.Event, host: str) -> None:
     assert client.put("/api/files/kept.yaml", json=OTHER).status_code == 200
     statuses = requests_of_every_kind(client, {"Host": host})
-    assert statuses == {"page": 200, "list": 200, "open": 200, "download": 200, "validate": 200, "save": 200,
-                        "overwrite": 200, "try": 202, "cancel": 404}
+    assert statuses == {
+        "page": 200,
+        "list": 200,
+        "open": 200,
+        "download": 200,
+        "validate": 200,
+        "save": 200,
+        "overwrite": 200,
+        "try": 202,
+        "cancel": 404,
+    }
 
 
 def test_the_bound_address_and_allowed_hosts_are_served(tmp_path: Path) -> None:
@@ -188,8 +211,10 @@ def test_the_bound_address_and_allowed_hosts_are_served(tmp_path: Path) -> None:
     assert server.served_hosts("192.168.1.5") == ["192.168.1.5"]
 
 
-@pytest.mark.parametrize("origin", ["http://evil.example", "http://localhost:1", "https://localhost", "null",
-                                    "http://127.0.0.1.evil.example"])
+@pytest.mark.parametrize(
+    "origin",
+    ["http://evil.example", "http://localhost:1", "https://localhost", "null", "http://127.0.0.1.evil.example"],
+)
 @pytest.mark.parametrize("content_type", ["application/json", "text/plain"])
 def test_a_foreign_origin_is_refused_and_changes_nothing(
     client: FlaskClient, app: Flask, gated: threading.Event, origin: str, content_type: str
@@ -202,8 +227,10 @@ def test_a_foreign_origin_is_refused_and_changes_nothing(
     statuses = requests_of_every_kind(client, {"Origin": origin}, content_type=content_type, job=job)
     assert all(400 <= s < 500 for s in statuses.values()), statuses
     assert statuses["try"] == statuses["save"] == statuses["list"] == 403
-    assert "from another site" in client.post("/api/try", data="{}", content_type=content_type,
-                                              headers={"Origin": origin}).json["error"]
+    assert (
+        "from another site"
+        in client.post("/api/try", data="{}", content_type=content_type, headers={"Origin": origin}).json["error"]
+    )
     assert snapshot(folder) == before
     assert [j.id for j in app.extensions["studio"].jobs.running()] == [job]
 
@@ -215,8 +242,7 @@ def test_the_studios_own_origin_is_served(client: FlaskClient, gated: threading.
 
 
 @pytest.mark.parametrize("site", ["cross-site", "same-site"])
-def test_requests_a_browser_marks_as_from_another_site_are_refused(client: FlaskClient, app: Flask,
-                                                                   site: str) -> None:
+def test_requests_a_browser_marks_as_from_another_site_are_refused(client: FlaskClient, app: Flask, site: str) -> None:
     """Navigations and ``<img>``/``<script>`` loads carry no Origin; ``Sec-Fetch-Site`` says where they come from."""
     (folder_of(app) / "kept.yaml").write_text("patterns: {p: {subgoals: [{cell: [3, 6]}]}}\n")
     for url in ("/files/kept.yaml", "/api/files/kept.yaml", "/api/files"):
@@ -225,8 +251,10 @@ def test_requests_a_browser_marks_as_from_another_site_are_refused(client: Flask
     assert client.get("/", headers={"Sec-Fetch-Site": site}).status_code == 200  # a link to the page is fine
 
 
-@pytest.mark.parametrize("content_type", ["text/plain", "application/x-www-form-urlencoded", "multipart/form-data",
-                                          "", "application/jsonx", "text/json"])
+@pytest.mark.parametrize(
+    "content_type",
+    ["text/plain", "application/x-www-form-urlencoded", "multipart/form-data", "", "application/jsonx", "text/json"],
+)
 def test_state_changing_requests_must_be_json(
     client: FlaskClient, app: Flask, gated: threading.Event, content_type: str
 ) -> None:
@@ -282,7 +310,7 @@ def test_the_printed_address_carries_the_token() -> None:
 
 
 NESTED = [
-    b"[" * 100_000,                                   # the issue's RecursionError, within the size limit
+    b"[" * 100_000,  # the issue's RecursionError, within the size limit
     b"[" * 5000 + b"]" * 5000,
     b'{"a":' * 20_000 + b"1" + b"}" * 20_000,
     b"[" * (MAX_DEPTH + 1) + b"]" * (MAX_DEPTH + 1),
@@ -290,8 +318,7 @@ NESTED = [
 ]
 
 
-@pytest.mark.parametrize("body", NESTED, ids=["open-100000", "closed-5000", "objects-20000", "just-over",
-                                              "in-a-field"])
+@pytest.mark.parametrize("body", NESTED, ids=["open-100000", "closed-5000", "objects-20000", "just-over", "in-a-field"])
 def test_deep_nesting_is_a_400_not_a_500(client: FlaskClient, body: bytes) -> None:
     assert len(body) <= MAX_REQUEST_BYTES
     for method, url in (("post", "/api/validate"), ("put", "/api/files/x"), ("post", "/api/try")):
@@ -303,19 +330,28 @@ def test_deep_nesting_is_a_400_not_a_500(client: FlaskClient, body: bytes) -> No
 
 def test_nesting_up_to_the_limit_and_brackets_in_strings_are_fine(client: FlaskClient) -> None:
     body = b"[" * MAX_DEPTH + b"]" * MAX_DEPTH
-    assert "expected a JSON object" in client.post("/api/validate", data=body, content_type="application/json").json["error"]
+    assert (
+        "expected a JSON object"
+        in client.post("/api/validate", data=body, content_type="application/json").json["error"]
+    )
     name = "[" * 1000
     drawing = {**DRAWING, "patterns": [{"name": name, "subgoals": [{"cell": [3, 6]}], "order": None}]}
     assert client.post("/api/validate", json=drawing).json == {"ok": True, "patterns": [name]}
 
 
-@pytest.mark.parametrize(("body", "message"), [
-    (b'{"domain": ' + b"1" * 5000 + b"}", "request: not valid JSON: Exceeds the limit"),
-    (b'{"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [{"circle": {"centre": [1e400, 0.5], '
-     b'"radius": 0.04}}]}]}', "request: a number is too large to be finite (inf)"),
-    (b'{"domain": "four_rooms", "description": "\\ud800", "patterns": []}', "lone surrogate"),
-    (b'{"\\udfff": 1}', "lone surrogate"),
-])
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        (b'{"domain": ' + b"1" * 5000 + b"}", "request: not valid JSON: Exceeds the limit"),
+        (
+            b'{"domain": "four_rooms", "patterns": [{"name": "p", "subgoals": [{"circle": {"centre": [1e400, 0.5], '
+            b'"radius": 0.04}}]}]}',
+            "request: a number is too large to be finite (inf)",
+        ),
+        (b'{"domain": "four_rooms", "description": "\\ud800", "patterns": []}', "lone surrogate"),
+        (b'{"\\udfff": 1}', "lone surrogate"),
+    ],
+)
 def test_numbers_and_strings_json_cannot_hold_are_400(client: FlaskClient, body: bytes, message: str) -> None:
     for method, url in (("post", "/api/validate"), ("put", "/api/files/x"), ("post", "/api/try")):
         response = getattr(client, method)(url, data=body, content_type="application/json")

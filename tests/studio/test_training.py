@@ -1,4 +1,4 @@
-""""Try it": both methods on the same seeds through the fused engine, progress, cancelling, bounds."""
+""" "Try it": both methods on the same seeds through the fused engine, progress, cancelling, bounds."""
 
 from __future__ import annotations
 
@@ -16,9 +16,14 @@ HALLWAYS = SubgoalSeries([Cell(3, 6), Cell(7, 9)], name="hallways")
 CIRCLES = SubgoalSeries([Circle((0.5877, 0.6486), 0.04), Circle((0.6442, 0.3202), 0.04)], name="p1")
 
 
-@pytest.mark.parametrize(("domain", "series", "map_"), [
-    ("four_rooms", HALLWAYS, None), ("pinball", CIRCLES, "simple"), ("pinball", CIRCLES, "hard"),
-])
+@pytest.mark.parametrize(
+    ("domain", "series", "map_"),
+    [
+        ("four_rooms", HALLWAYS, None),
+        ("pinball", CIRCLES, "simple"),
+        ("pinball", CIRCLES, "hard"),
+    ],
+)
 def test_both_curves_progress_and_potential(domain: str, series: SubgoalSeries, map_: str | None) -> None:
     settings = TrySettings(episodes=4, learners=3, max_steps=200)
     done: list[int] = []
@@ -77,8 +82,11 @@ def test_unknown_domain() -> None:
 
 def test_a_domain_without_a_learner_is_named() -> None:
     """The learner comes from the domain's registration; pick-and-place registers none."""
-    with pytest.raises(ValueError, match=r"^no learner \(StudioDomain.learner\) for domain 'pick_and_place'; known: "
-                                         r"\['four_rooms', 'pinball'"):
+    with pytest.raises(
+        ValueError,
+        match=r"^no learner \(StudioDomain.learner\) for domain 'pick_and_place'; known: "
+        r"\['four_rooms', 'pinball'",
+    ):
         try_pattern("pick_and_place", HALLWAYS, TrySettings(1, 1))
 
 

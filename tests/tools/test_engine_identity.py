@@ -25,6 +25,7 @@ def test_engine_identity_fingerprints_and_compares(tmp_path: Path) -> None:
     arrays[key] = arrays[key] + 1
     changed = tmp_path / "changed.npz"
     np.savez(changed, **arrays)  # type: ignore[arg-type]
-    differs = subprocess.run([sys.executable, str(TOOL), "--compare", str(out), str(changed)], capture_output=True,
-                             text=True)
+    differs = subprocess.run(
+        [sys.executable, str(TOOL), "--compare", str(out), str(changed)], capture_output=True, text=True
+    )
     assert differs.returncode == 1 and f"differs: {key}" in differs.stdout

@@ -32,8 +32,9 @@ class Corridor(EnvBase):
         else:
             self.action_spec = Categorical(2, shape=n, dtype=torch.long)
         self.reward_spec = Unbounded(shape=(*n, 1))
-        self.done_spec = Composite({key: Categorical(2, (*n, 1), dtype=torch.bool)
-                                    for key in ("done", "terminated", "truncated")}, shape=n)
+        self.done_spec = Composite(
+            {key: Categorical(2, (*n, 1), dtype=torch.bool) for key in ("done", "terminated", "truncated")}, shape=n
+        )
         self.pos = torch.zeros(num_envs)
         self.steps = torch.zeros(num_envs, dtype=torch.long)
 
@@ -46,8 +47,10 @@ class Corridor(EnvBase):
         self.pos.masked_fill_(mask, 0.0)
         self.steps.masked_fill_(mask, 0)
         false = torch.zeros(*self.batch_size, 1, dtype=torch.bool)
-        return TensorDict({"observation": self._obs(), "done": false, "terminated": false.clone(),
-                           "truncated": false.clone()}, self.batch_size)
+        return TensorDict(
+            {"observation": self._obs(), "done": false, "terminated": false.clone(), "truncated": false.clone()},
+            self.batch_size,
+        )
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = tensordict.get("action")
@@ -56,8 +59,16 @@ class Corridor(EnvBase):
         self.steps += 1
         terminated = (self.pos >= self.length).unsqueeze(-1)
         truncated = (self.steps >= self.max_steps).unsqueeze(-1) & ~terminated
-        return TensorDict({"observation": self._obs(), "reward": terminated.float(), "done": terminated | truncated,
-                           "terminated": terminated, "truncated": truncated}, self.batch_size)
+        return TensorDict(
+            {
+                "observation": self._obs(),
+                "reward": terminated.float(),
+                "done": terminated | truncated,
+                "terminated": terminated,
+                "truncated": truncated,
+            },
+            self.batch_size,
+        )
 
     def _set_seed(self, seed: int | None) -> None:
         pass

@@ -30,8 +30,9 @@ class PenaltyGrid(EnvBase):
         self.observation_spec = Composite(observation=Categorical(width * width, shape=n, dtype=torch.long), shape=n)
         self.action_spec = Categorical(5, shape=n, dtype=torch.long)
         self.reward_spec = Unbounded(shape=(*n, 1))
-        self.done_spec = Composite({key: Categorical(2, (*n, 1), dtype=torch.bool)
-                                    for key in ("done", "terminated", "truncated")}, shape=n)
+        self.done_spec = Composite(
+            {key: Categorical(2, (*n, 1), dtype=torch.bool) for key in ("done", "terminated", "truncated")}, shape=n
+        )
         self.pos = torch.zeros(num_envs, 2, dtype=torch.long)
         self.steps = torch.zeros(num_envs, dtype=torch.long)
 
@@ -48,8 +49,10 @@ class PenaltyGrid(EnvBase):
         self.pos[mask] = 0
         self.steps.masked_fill_(mask, 0)
         false = torch.zeros(*self.batch_size, 1, dtype=torch.bool)
-        return TensorDict({"observation": self._obs(), "done": false, "terminated": false.clone(),
-                           "truncated": false.clone()}, self.batch_size)
+        return TensorDict(
+            {"observation": self._obs(), "done": false, "terminated": false.clone(), "truncated": false.clone()},
+            self.batch_size,
+        )
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = tensordict.get("action").reshape(-1)
@@ -58,8 +61,16 @@ class PenaltyGrid(EnvBase):
         terminated = (self.pos == self.width - 1).all(-1, keepdim=True)
         truncated = (self.steps >= self.max_steps).unsqueeze(-1) & ~terminated
         reward = torch.where(action == 4, self.penalty, -1.0).unsqueeze(-1)
-        return TensorDict({"observation": self._obs(), "reward": reward, "done": terminated | truncated,
-                           "terminated": terminated, "truncated": truncated}, self.batch_size)
+        return TensorDict(
+            {
+                "observation": self._obs(),
+                "reward": reward,
+                "done": terminated | truncated,
+                "terminated": terminated,
+                "truncated": truncated,
+            },
+            self.batch_size,
+        )
 
     def _set_seed(self, seed: int | None) -> None:
         pass

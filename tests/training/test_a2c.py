@@ -38,8 +38,9 @@ def test_fourier_features_equal_the_fused_kernels() -> None:
     ours = basis(obs)
     scratch, ref = _feature_scratch(3, 2, 4, 256)
     for b in range(5):
-        fourier_features(obs[b].double().numpy(), low.double().numpy(), (1 / (high - low)).double().numpy(),
-                                  3, 2, scratch, ref)
+        fourier_features(
+            obs[b].double().numpy(), low.double().numpy(), (1 / (high - low)).double().numpy(), 3, 2, scratch, ref
+        )
         assert np.allclose(ours[b].numpy(), ref, atol=1e-5)
 
 
@@ -66,8 +67,11 @@ def test_shaped_env_in_env_workers_keeps_the_potential_in_this_process() -> None
     assert data.batch_size == (2, 2, 40)
     nxt = data["next"]
     table = potential.table.detach()
-    expected = nxt["env_reward"] + 0.9 * table[nxt["subgoal_index"]].masked_fill(nxt["terminated"], 0) - \
-        table[data["subgoal_index"]]
+    expected = (
+        nxt["env_reward"]
+        + 0.9 * table[nxt["subgoal_index"]].masked_fill(nxt["terminated"], 0)
+        - table[data["subgoal_index"]]
+    )
     assert torch.allclose(nxt["reward"], expected) and (nxt["subgoal_index"] > 0).any()
 
 
@@ -92,8 +96,9 @@ def test_a2c_with_a_multisync_collector(online: bool) -> None:
     """Envs in a worker process; the potential trained in the main process (or online in the worker)."""
     potential = TabularPotential(3)
     shaping = Shaping(SubgoalSeries([State(1), State(3)]), potential)
-    config = A2CConfig(features="one_hot", hidden=(), total_frames=2048, collector_workers=1,
-                       online_potential=online, value_lr=0.1)
+    config = A2CConfig(
+        features="one_hot", hidden=(), total_frames=2048, collector_workers=1, online_potential=online, value_lr=0.1
+    )
     curve = train_a2c(lambda n: LineEnv(n, length=4), config, shaping=shaping, seed=1, episode_cap=100)
     assert len(curve.frames) == 8
     assert curve.episodes[-1] > 0 and bool((potential.table.detach() > 0.5).all())
@@ -102,8 +107,9 @@ def test_a2c_with_a_multisync_collector(online: bool) -> None:
 def test_a2c_with_two_collector_workers_takes_a_sweep_seed() -> None:
     """Sweep seeds take 63 bits; a worker seeds numpy with the collector's seed, which takes 32. A batch
     holds frames_per_batch frames of both workers: as many batches as ``iterations`` says."""
-    config = A2CConfig(features="one_hot", hidden=(), num_envs=4, frames_per_batch=64, total_frames=256,
-                       collector_workers=2)
+    config = A2CConfig(
+        features="one_hot", hidden=(), num_envs=4, frames_per_batch=64, total_frames=256, collector_workers=2
+    )
     curve = train_a2c(lambda n: LineEnv(n, length=4), config, seed=2**62 + 5, episode_cap=100)
     assert len(curve.frames) == config.iterations == 4
     assert curve.frames == [64, 128, 192, 256]
@@ -145,8 +151,7 @@ def test_naive_potential_is_not_trained() -> None:
     assert len(curve.frames) == 2
 
 
-@pytest.mark.parametrize("bad", [{"num_envs": 0}, {"frames_per_batch": 100}, {"env_workers": 3},
-                                 {"features": "cnn"}])
+@pytest.mark.parametrize("bad", [{"num_envs": 0}, {"frames_per_batch": 100}, {"env_workers": 3}, {"features": "cnn"}])
 def test_bad_settings(bad: dict) -> None:
     with pytest.raises(ValueError):
         A2CConfig(**bad)

@@ -16,9 +16,19 @@ SERIES = SubgoalSeries([Box((0.625,), (0.375,), (0,)), Box((0.75,), (0.25,), (0,
 
 def _config(**changes: object) -> DDPGTrainConfig:
     # DDPG's deterministic policy learns nothing before its replay holds the goal: 1,024 random frames first
-    settings: dict = {"num_envs": 4, "frames_per_batch": 32, "total_frames": 2560, "learning_starts": 1024,
-                      "updates_per_batch": 16, "batch_size": 64, "hidden": (32, 32), "lr": 1e-3, "gamma": 0.95,
-                      "polyak": 0.95, "noise_eps": 0.3}
+    settings: dict = {
+        "num_envs": 4,
+        "frames_per_batch": 32,
+        "total_frames": 2560,
+        "learning_starts": 1024,
+        "updates_per_batch": 16,
+        "batch_size": 64,
+        "hidden": (32, 32),
+        "lr": 1e-3,
+        "gamma": 0.95,
+        "polyak": 0.95,
+        "noise_eps": 0.3,
+    }
     return DDPGTrainConfig(**{**settings, **changes})
 
 
@@ -35,14 +45,25 @@ def test_ddpg_learns_the_continuous_corridor(changes: dict) -> None:
 def test_shaped_ddpg_that_sees_z_with_reshaped_samples_learns_and_trains_the_potential() -> None:
     torch.set_num_threads(1)
     potential = TabularPotential(SERIES.num_abstract_states)
-    curve = train_ddpg(continuous_corridor, _config(sees_subgoal=True, reshape_samples=True, value_lr=0.1),
-                       shaping=Shaping(SERIES, potential), seed=0)
+    curve = train_ddpg(
+        continuous_corridor,
+        _config(sees_subgoal=True, reshape_samples=True, value_lr=0.1),
+        shaping=Shaping(SERIES, potential),
+        seed=0,
+    )
     assert curve.episode_length[-1] < 9
     assert bool((potential.table.detach() > 0.3).all())
 
 
-@pytest.mark.parametrize("bad, field", [({"polyak": 1.5}, "polyak"), ({"updates_per_batch": 0}, "updates_per_batch"),
-                                        ({"noise_clip": -1.0}, "noise_clip"), ({"frames_per_batch": 30}, "frames_per_batch")])
+@pytest.mark.parametrize(
+    "bad, field",
+    [
+        ({"polyak": 1.5}, "polyak"),
+        ({"updates_per_batch": 0}, "updates_per_batch"),
+        ({"noise_clip": -1.0}, "noise_clip"),
+        ({"frames_per_batch": 30}, "frames_per_batch"),
+    ],
+)
 def test_bad_settings_name_the_field(bad: dict, field: str) -> None:
     with pytest.raises(ValueError, match=f"^{field}"):
         _config(**bad)

@@ -15,14 +15,26 @@ SERIES = SubgoalSeries([Box((0.625,), (0.375,), (0,)), Box((0.75,), (0.25,), (0,
 
 
 def _config(**changes: object) -> DQNConfig:
-    settings: dict = {"num_envs": 4, "frames_per_batch": 32, "total_frames": 3072, "learning_starts": 256,
-                      "gradient_steps": 8, "batch_size": 64, "buffer_size": 5000, "lr": 1e-3, "gamma": 0.95,
-                      "exploration_frames": 1536, "target_update_interval": 50, "hidden": (32,)}
+    settings: dict = {
+        "num_envs": 4,
+        "frames_per_batch": 32,
+        "total_frames": 3072,
+        "learning_starts": 256,
+        "gradient_steps": 8,
+        "batch_size": 64,
+        "buffer_size": 5000,
+        "lr": 1e-3,
+        "gamma": 0.95,
+        "exploration_frames": 1536,
+        "target_update_interval": 50,
+        "hidden": (32,),
+    }
     return DQNConfig(**{**settings, **changes})
 
 
-@pytest.mark.parametrize("changes", [{}, {"double_dqn": True, "target_update": "soft", "tau": 0.05}],
-                         ids=["dqn", "double_soft"])
+@pytest.mark.parametrize(
+    "changes", [{}, {"double_dqn": True, "target_update": "soft", "tau": 0.05}], ids=["dqn", "double_soft"]
+)
 def test_dqn_learns_the_corridor(changes: dict) -> None:
     """A random policy rarely reaches the end within the 40-step cap; the optimum takes 8 steps (ε = 0.05
     at the end)."""
@@ -36,8 +48,12 @@ def test_dqn_learns_the_corridor(changes: dict) -> None:
 def test_shaped_dqn_that_sees_z_with_reshaped_samples_learns_and_trains_the_potential() -> None:
     torch.set_num_threads(1)
     potential = TabularPotential(SERIES.num_abstract_states)
-    curve = train_dqn(discrete_corridor, _config(sees_subgoal=True, reshape_samples=True, value_lr=0.1),
-                      shaping=Shaping(SERIES, potential), seed=0)
+    curve = train_dqn(
+        discrete_corridor,
+        _config(sees_subgoal=True, reshape_samples=True, value_lr=0.1),
+        shaping=Shaping(SERIES, potential),
+        seed=0,
+    )
     assert curve.episode_length[-1] < 12
     assert bool((potential.table.detach() > 0.3).all())
 
@@ -53,9 +69,19 @@ def test_dqn_in_a_collector_worker_explores_with_the_annealed_epsilon() -> None:
 
 def test_mountain_car_preset_is_rl_zoo_s() -> None:
     config = DQNConfig.preset("mountain_car")
-    zoo = {"lr": 4e-3, "batch_size": 128, "buffer_size": 10_000, "learning_starts": 1_000, "gamma": 0.98,
-           "gradient_steps": 8, "frames_per_batch": 16, "eps_end": 0.07, "exploration_frames": 24_000,
-           "hidden": (256, 256), "total_frames": 120_000}
+    zoo = {
+        "lr": 4e-3,
+        "batch_size": 128,
+        "buffer_size": 10_000,
+        "learning_starts": 1_000,
+        "gamma": 0.98,
+        "gradient_steps": 8,
+        "frames_per_batch": 16,
+        "eps_end": 0.07,
+        "exploration_frames": 24_000,
+        "hidden": (256, 256),
+        "total_frames": 120_000,
+    }
     assert {k: getattr(config, k) for k in zoo} == zoo
     assert config.target_update_interval * config.frames_per_batch // config.gradient_steps == 600  # frames
     assert DQNConfig.preset("mountain_car", lr=1e-3).lr == 1e-3 and set(DQN_PRESETS) >= {"torchrl", "mountain_car"}
@@ -63,9 +89,16 @@ def test_mountain_car_preset_is_rl_zoo_s() -> None:
         DQNConfig.preset("cartpole")
 
 
-@pytest.mark.parametrize("bad, field", [({"eps_end": 1.5}, "eps_end"), ({"gradient_steps": 0}, "gradient_steps"),
-                                        ({"target_update": "slow"}, "target_update"), ({"value_lr": 0.0}, "value_lr"),
-                                        ({"learning_starts": -1}, "learning_starts")])
+@pytest.mark.parametrize(
+    "bad, field",
+    [
+        ({"eps_end": 1.5}, "eps_end"),
+        ({"gradient_steps": 0}, "gradient_steps"),
+        ({"target_update": "slow"}, "target_update"),
+        ({"value_lr": 0.0}, "value_lr"),
+        ({"learning_starts": -1}, "learning_starts"),
+    ],
+)
 def test_bad_settings_name_the_field(bad: dict, field: str) -> None:
     with pytest.raises(ValueError, match=f"^{field}"):
         _config(**bad)

@@ -52,7 +52,10 @@ def test_a2c_and_ppo_networks_read_z_one_hot(hidden: tuple[int, ...]) -> None:
     the features with one-hot z); with hidden layers, z is concatenated to the features."""
     env = Corridor(2)
     actor, critic = actor_critic(env, features="mlp", hidden=hidden, subgoal_states=3)
-    assert list(actor.in_keys) == ["observation", "subgoal_index"] and critic.in_keys == ["observation", "subgoal_index"]
+    assert list(actor.in_keys) == ["observation", "subgoal_index"] and critic.in_keys == [
+        "observation",
+        "subgoal_index",
+    ]
     first = next(m for m in critic.module.modules() if isinstance(m, torch.nn.Linear))
     assert first.in_features == (1 * 3 if not hidden else 1 + 3)
     _randomise_heads(critic)
@@ -84,16 +87,23 @@ def test_ppo_gaussian_policy_and_dqn_and_ddpg_read_z() -> None:
         actions = [agent.policy(_td(obs, z))["action"][0].item() for z in range(3)]
         greedy = [agent.greedy(_td(obs, z))["action"][0].item() for z in range(3)]
     assert len(set(actions)) == 3 and actions == pytest.approx(greedy)
-    q_values = [agent.critic(_td(obs, z).set("observation_normalized", obs).set("action", torch.zeros(2, 1)))
-                ["state_action_value"][0].item() for z in range(3)]
+    q_values = [
+        agent.critic(_td(obs, z).set("observation_normalized", obs).set("action", torch.zeros(2, 1)))[
+            "state_action_value"
+        ][0].item()
+        for z in range(3)
+    ]
     assert len(set(q_values)) == 3
     assert ("next", "subgoal_index") in agent.keys  # the replay keeps z' for the target
 
 
-@pytest.mark.parametrize("train, config", [
-    (train_ppo, PPOConfig(num_envs=2, frames_per_batch=16, minibatch_size=8, total_frames=16, sees_subgoal=True)),
-    (train_dqn, DQNConfig(num_envs=2, frames_per_batch=16, total_frames=16, sees_subgoal=True)),
-])
+@pytest.mark.parametrize(
+    "train, config",
+    [
+        (train_ppo, PPOConfig(num_envs=2, frames_per_batch=16, minibatch_size=8, total_frames=16, sees_subgoal=True)),
+        (train_dqn, DQNConfig(num_envs=2, frames_per_batch=16, total_frames=16, sees_subgoal=True)),
+    ],
+)
 def test_seeing_z_needs_shaping(train, config) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(ValueError, match="sees_subgoal needs shaping"):
         train(discrete_corridor, config)
@@ -101,6 +111,7 @@ def test_seeing_z_needs_shaping(train, config) -> None:  # type: ignore[no-untyp
 
 def test_reshape_samples_needs_shaping() -> None:
     from torchrl_subgoal.training import train_ddpg
+
     with pytest.raises(ValueError, match="reshape_samples needs shaping"):
         train_ddpg(continuous_corridor, DDPGTrainConfig(frames_per_batch=8, total_frames=8, reshape_samples=True))
 
@@ -118,10 +129,12 @@ def _collect(potential: TabularPotential, options: dict, num_envs: int = 4, fram
         close_collector(collector)
 
 
-@pytest.mark.parametrize("options, per_env", [({}, False), ({"start_potential": "value"}, False),
-                                              ({"zero_terminal_potential": False}, True)])
-def test_reshaping_a_replay_sample_equals_the_online_shaping_under_a_fixed_potential(options: dict,
-                                                                                    per_env: bool) -> None:
+@pytest.mark.parametrize(
+    "options, per_env", [({}, False), ({"start_potential": "value"}, False), ({"zero_terminal_potential": False}, True)]
+)
+def test_reshaping_a_replay_sample_equals_the_online_shaping_under_a_fixed_potential(
+    options: dict, per_env: bool
+) -> None:
     """Rows of a multi-env collector, shuffled by a replay buffer, re-shaped with the potential that
     shaped them online: the stored shaped reward, row for row (one shared table, or one per env found by
     the learner key). Then with another potential: r + γΦ'(z') − Φ'(z) with the stored z and z'."""

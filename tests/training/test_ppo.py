@@ -15,8 +15,15 @@ SERIES = SubgoalSeries([Box((0.625,), (0.375,), (0,)), Box((0.75,), (0.25,), (0,
 
 
 def _config(**changes: object) -> PPOConfig:
-    settings: dict = {"num_envs": 8, "frames_per_batch": 256, "minibatch_size": 64, "epochs": 4, "lr": 3e-3,
-                      "hidden": (32,), "total_frames": 5120}
+    settings: dict = {
+        "num_envs": 8,
+        "frames_per_batch": 256,
+        "minibatch_size": 64,
+        "epochs": 4,
+        "lr": 3e-3,
+        "hidden": (32,),
+        "total_frames": 5120,
+    }
     return PPOConfig(**{**settings, **changes})
 
 
@@ -40,10 +47,17 @@ def test_shaped_ppo_that_sees_z_learns_and_trains_the_potential() -> None:
     assert bool((potential.table.detach() > 0.3).all())  # V(z) learned from the goal reward
 
 
-@pytest.mark.parametrize("bad, message", [
-    ({"minibatch_size": 100}, "minibatch_size"), ({"epochs": 0}, "epochs"), ({"clip_epsilon": 0.0}, "clip_epsilon"),
-    ({"gae_lambda": 1.5}, "gae_lambda"), ({"num_envs": 3}, "frames_per_batch"), ({"features": "cnn"}, "features"),
-])
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        ({"minibatch_size": 100}, "minibatch_size"),
+        ({"epochs": 0}, "epochs"),
+        ({"clip_epsilon": 0.0}, "clip_epsilon"),
+        ({"gae_lambda": 1.5}, "gae_lambda"),
+        ({"num_envs": 3}, "frames_per_batch"),
+        ({"features": "cnn"}, "features"),
+    ],
+)
 def test_bad_settings_name_the_field(bad: dict, message: str) -> None:
     with pytest.raises(ValueError, match=f"^{message}"):
         _config(**bad)

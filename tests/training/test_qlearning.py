@@ -27,7 +27,9 @@ def _shaped(grid: PenaltyGrid, **target: object) -> tuple[TransformedEnv, Tabula
     series = SubgoalSeries([State(grid.cell(3, 3)), State(grid.cell(6, 6))])
     potential = TabularPotential(series.num_abstract_states, (LEARNERS,))
     update = ValueUpdate(0.25, SubgoalValueLoss(potential, **target).make_value_estimator(gamma=GAMMA))  # type: ignore[arg-type]
-    return TransformedEnv(grid, SubgoalPotentialTransform(series, potential, gamma=GAMMA, value_update=update)), potential
+    return TransformedEnv(
+        grid, SubgoalPotentialTransform(series, potential, gamma=GAMMA, value_update=update)
+    ), potential
 
 
 def _success(env: TransformedEnv | PenaltyGrid) -> float:
@@ -50,12 +52,15 @@ def test_under_a_step_cost_the_default_potential_keeps_the_unshaped_success_and_
     assert unshaped >= 0.9 and shaped >= 0.9
     assert wandering <= 0.7
     assert float(default.table.detach()[:, 0].mean()) == pytest.approx(optimal, abs=4.0)
-    assert (1 - GAMMA) * float(mean.table.detach()[:, 0].mean()) < -1.0  # within z_0, shaping pays more than a step costs
+    assert (1 - GAMMA) * float(
+        mean.table.detach()[:, 0].mean()
+    ) < -1.0  # within z_0, shaping pays more than a step costs
 
 
 def test_epsilon_greedy_breaks_ties_at_random_and_reads_z() -> None:
-    policy = EpsilonGreedyQ(1, states=2, actions=3, abstract_states=2, epsilon=0.0,
-                            generator=torch.Generator().manual_seed(0))
+    policy = EpsilonGreedyQ(
+        1, states=2, actions=3, abstract_states=2, epsilon=0.0, generator=torch.Generator().manual_seed(0)
+    )
     from tensordict import TensorDict
 
     td = TensorDict({"observation": torch.tensor([1]), "subgoal_index": torch.tensor([[1]])}, [1])

@@ -38,8 +38,13 @@ def test_multisync_collector_workers_shape_with_the_trained_potential() -> None:
     batches. Every worker's shaping F = γΦ(z') − Φ(z) uses the table as updated before the batch
     (a MultiSyncCollector's workers wait while the main process trains: no staleness)."""
     potential = TabularPotential(3)
-    collector = MultiSyncCollector([EnvFactory(shaped_four_rooms, potential=potential)] * 2, None,
-                                   frames_per_batch=150, total_frames=750, cat_results="stack")
+    collector = MultiSyncCollector(
+        [EnvFactory(shaped_four_rooms, potential=potential)] * 2,
+        None,
+        frames_per_batch=150,
+        total_frames=750,
+        cat_results="stack",
+    )
     seen_shaping = 0
     try:
         for i, data in enumerate(collector):

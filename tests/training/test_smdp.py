@@ -36,7 +36,8 @@ def test_replay_of_real_transitions_trains_per_env_tables_like_the_paper_update(
     for row in smdp_transitions(data, t).unbind(0):  # the paper's update, one transition at a time
         b, z, z2 = int(row["subgoal_learner"]), int(row["subgoal_index"]), int(row["next", "subgoal_index"])
         target = float(row["next", "reward"]) + gamma ** int(row["steps_to_next_obs"]) * (
-            0.0 if bool(row["next", "terminated"]) else float(before[b, z2]))
+            0.0 if bool(row["next", "terminated"]) else float(before[b, z2])
+        )
         expected[b, z] += lr * (target - float(before[b, z]))
     loss = SubgoalValueLoss(v, expectile=0.5, bootstrap_truncated=True).make_value_estimator(gamma=gamma)
     optimizer = torch.optim.SGD(v.parameters(), lr=lr)

@@ -83,7 +83,7 @@ def fourier_features(obs, low, inv_range, order, half, scratch, out):
     second_re, second_im = second[0], second[1]  # rows: the loop below reads contiguous entries
     for a in range(first.shape[1]):
         first_re, first_im = first[0, a], first[1, a]
-        out_a = out[a * n_second:(a + 1) * n_second]
+        out_a = out[a * n_second : (a + 1) * n_second]
         for b in range(n_second):
             out_a[b] = first_re * second_re[b] - first_im * second_im[b]
 
@@ -126,8 +126,11 @@ def ac_act(theta, phi, probs, obs, low, inv_range, order, half, streams, action_
 def _feature_scratch(order, half, dim, n_features):
     """Scratch arrays of :func:`fourier_features` (the two halves' exponentials and the per-dimension
     ones) and a feature vector."""
-    scratch = (np.empty((2, (order + 1) ** half)), np.empty((2, (order + 1) ** (dim - half))),
-               np.empty((dim, order + 1, 2)))
+    scratch = (
+        np.empty((2, (order + 1) ** half)),
+        np.empty((2, (order + 1) ** (dim - half))),
+        np.empty((dim, order + 1, 2)),
+    )
     return scratch, np.empty(n_features)
 
 
@@ -141,8 +144,30 @@ def _policy_gradient_step(theta_b, phi_b, probs_b, a_taken, lr, scale, signal):
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
-def _ac_learner(b, w, theta, phi, probs, a_taken, reward, obs_next, terminated, done, obs_root, low, inv_range,
-                order, half, streams, actor_lr, critic_lr, gamma, normalize, scratch, phi_next):
+def _ac_learner(
+    b,
+    w,
+    theta,
+    phi,
+    probs,
+    a_taken,
+    reward,
+    obs_next,
+    terminated,
+    done,
+    obs_root,
+    low,
+    inv_range,
+    order,
+    half,
+    streams,
+    actor_lr,
+    critic_lr,
+    gamma,
+    normalize,
+    scratch,
+    phi_next,
+):
     """:func:`ac_step` for learner ``b``; returns its next action."""
     n_features = theta.shape[2]
     fourier_features(obs_next, low, inv_range, order, half, scratch, phi_next)
@@ -166,8 +191,26 @@ def _ac_learner(b, w, theta, phi, probs, a_taken, reward, obs_next, terminated, 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
 def ac_step(
-    w, theta, phi, probs, action, reward, obs_next, terminated, done, obs_root,
-    low, inv_range, order, half, streams, actor_lr, critic_lr, gamma, normalize, action_out,
+    w,
+    theta,
+    phi,
+    probs,
+    action,
+    reward,
+    obs_next,
+    terminated,
+    done,
+    obs_root,
+    low,
+    inv_range,
+    order,
+    half,
+    streams,
+    actor_lr,
+    critic_lr,
+    gamma,
+    normalize,
+    action_out,
 ):
     """One-step actor-critic for every learner.
 
@@ -181,20 +224,63 @@ def ac_step(
     """
     scratch, phi_next = _feature_scratch(order, half, obs_next.shape[1], theta.shape[2])
     for b in range(w.shape[0]):
-        action_out[b] = _ac_learner(b, w, theta, phi, probs, action[b], reward[b], obs_next[b], terminated[b],
-                                    done[b], obs_root[b], low, inv_range, order, half, streams, actor_lr, critic_lr,
-                                    gamma, normalize, scratch, phi_next)
+        action_out[b] = _ac_learner(
+            b,
+            w,
+            theta,
+            phi,
+            probs,
+            action[b],
+            reward[b],
+            obs_next[b],
+            terminated[b],
+            done[b],
+            obs_root[b],
+            low,
+            inv_range,
+            order,
+            half,
+            streams,
+            actor_lr,
+            critic_lr,
+            gamma,
+            normalize,
+            scratch,
+            phi_next,
+        )
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
-def _qac_learner(b, w, theta, phi, probs, a_taken, reward, obs_next, terminated, done, obs_root, low, inv_range,
-                 order, half, streams, actor_lr, critic_lr, gamma, normalize, scratch, phi_next):
+def _qac_learner(
+    b,
+    w,
+    theta,
+    phi,
+    probs,
+    a_taken,
+    reward,
+    obs_next,
+    terminated,
+    done,
+    obs_root,
+    low,
+    inv_range,
+    order,
+    half,
+    streams,
+    actor_lr,
+    critic_lr,
+    gamma,
+    normalize,
+    scratch,
+    phi_next,
+):
     """:func:`qac_step` for learner ``b``; returns its next action."""
     n_features = theta.shape[2]
     fourier_features(obs_next, low, inv_range, order, half, scratch, phi_next)
     a_next = _policy_sample(theta[b], phi_next, uniform(streams, b), probs[b])
-    q = _dot(w[b, a_taken * n_features:(a_taken + 1) * n_features], phi[b])
-    q_next = _dot(w[b, a_next * n_features:(a_next + 1) * n_features], phi_next)
+    q = _dot(w[b, a_taken * n_features : (a_taken + 1) * n_features], phi[b])
+    q_next = _dot(w[b, a_next * n_features : (a_next + 1) * n_features], phi_next)
     norm2 = _dot(phi[b], phi[b])
     scale = 1.0 / np.sqrt(norm2) if normalize else 1.0
     _policy(theta[b], phi[b], probs[b])
@@ -216,8 +302,26 @@ def _qac_learner(b, w, theta, phi, probs, a_taken, reward, obs_next, terminated,
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
 def qac_step(
-    w, theta, phi, probs, action, reward, obs_next, terminated, done, obs_root,
-    low, inv_range, order, half, streams, actor_lr, critic_lr, gamma, normalize, action_out,
+    w,
+    theta,
+    phi,
+    probs,
+    action,
+    reward,
+    obs_next,
+    terminated,
+    done,
+    obs_root,
+    low,
+    inv_range,
+    order,
+    half,
+    streams,
+    actor_lr,
+    critic_lr,
+    gamma,
+    normalize,
+    action_out,
 ):
     """One step of the Q-based actor-critic (the authors' released PinBall agent) for every learner.
 
@@ -233,9 +337,30 @@ def qac_step(
     """
     scratch, phi_next = _feature_scratch(order, half, obs_next.shape[1], theta.shape[2])
     for b in range(w.shape[0]):
-        action_out[b] = _qac_learner(b, w, theta, phi, probs, action[b], reward[b], obs_next[b], terminated[b],
-                                     done[b], obs_root[b], low, inv_range, order, half, streams, actor_lr, critic_lr,
-                                     gamma, normalize, scratch, phi_next)
+        action_out[b] = _qac_learner(
+            b,
+            w,
+            theta,
+            phi,
+            probs,
+            action[b],
+            reward[b],
+            obs_next[b],
+            terminated[b],
+            done[b],
+            obs_root[b],
+            low,
+            inv_range,
+            order,
+            half,
+            streams,
+            actor_lr,
+            critic_lr,
+            gamma,
+            normalize,
+            scratch,
+            phi_next,
+        )
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -244,9 +369,51 @@ def ac_learner_step(learner, b, a, reward, obs_next, terminated, done, obs_root,
     (:func:`_qac_learner` or :func:`_ac_learner`, by its critic); returns its next action."""
     L = learner
     if L.q_critic:
-        return _qac_learner(b, L.w, L.theta, L.phi, L.probs, a, reward, obs_next, terminated, done, obs_root, L.low,
-                            L.inv_range, L.order, L.half, L.streams, L.actor_lr, L.critic_lr, L.gamma, L.normalize,
-                            scratch, phi_next)
-    return _ac_learner(b, L.w, L.theta, L.phi, L.probs, a, reward, obs_next, terminated, done, obs_root, L.low,
-                       L.inv_range, L.order, L.half, L.streams, L.actor_lr, L.critic_lr, L.gamma, L.normalize,
-                       scratch, phi_next)
+        return _qac_learner(
+            b,
+            L.w,
+            L.theta,
+            L.phi,
+            L.probs,
+            a,
+            reward,
+            obs_next,
+            terminated,
+            done,
+            obs_root,
+            L.low,
+            L.inv_range,
+            L.order,
+            L.half,
+            L.streams,
+            L.actor_lr,
+            L.critic_lr,
+            L.gamma,
+            L.normalize,
+            scratch,
+            phi_next,
+        )
+    return _ac_learner(
+        b,
+        L.w,
+        L.theta,
+        L.phi,
+        L.probs,
+        a,
+        reward,
+        obs_next,
+        terminated,
+        done,
+        obs_root,
+        L.low,
+        L.inv_range,
+        L.order,
+        L.half,
+        L.streams,
+        L.actor_lr,
+        L.critic_lr,
+        L.gamma,
+        L.normalize,
+        scratch,
+        phi_next,
+    )

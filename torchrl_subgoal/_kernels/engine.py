@@ -67,24 +67,28 @@ def fused_run(env, shaping, learner, action, max_steps_run, records):
                 if kind == REGION_SHAPING:  # region_search, written out (see its doc)
                     p = pattern[b] if pattern.shape[0] > 0 else 0
                     for j in range(lo.shape[1]):
-                        if succ[p, zb, j] and _in_region(seen, lo[p, j], hi[p, j], centre[p, j], weight[p, j],
-                                                         radius2[p, j]):
+                        if succ[p, zb, j] and _in_region(
+                            seen, lo[p, j], hi[p, j], centre[p, j], weight[p, j], radius2[p, j]
+                        ):
                             znb = j + offset
                             break
                 else:
                     znb = lookup[np.int64(seen[0])]
-                shaped, rh_new, k_new = shaping_step(potential, b, zb, znb, achieved[b, 0], r_h[b, 0], k[b, 0],
-                                                     z_start[b, 0], reward, done, terminated)
+                shaped, rh_new, k_new = shaping_step(
+                    potential, b, zb, znb, achieved[b, 0], r_h[b, 0], k[b, 0], z_start[b, 0], reward, done, terminated
+                )
             o_root, z_reset = o_next, 0
             if done:  # the env and the transform reset this learner
                 o_root = env_reset(env, b, env_buffers)
                 z_reset = shaping_start(kind, regions, lookup, b, env_shaping_observation(env, o_root, env_buffers))
             if kind != NO_SHAPING or done:
                 shaping_carry(z, achieved, r_h, k, b, done, z_reset, zb, znb, rh_new, k_new)
-            action[b] = learner_step(learner, b, o, zb, action[b], shaped, o_next, znb, terminated, done, o_root,
-                                     z[b, 0], learner_buffers)
-            filed = 1 if _record_learner(b, done, terminated, reward, t, ret, episode, steps_out, returns,
-                                         success) else 0
+            action[b] = learner_step(
+                learner, b, o, zb, action[b], shaped, o_next, znb, terminated, done, o_root, z[b, 0], learner_buffers
+            )
+            filed = (
+                1 if _record_learner(b, done, terminated, reward, t, ret, episode, steps_out, returns, success) else 0
+            )
             finished = episode[b] >= steps_out.shape[1]
             filed_total += filed
             if finished:

@@ -46,8 +46,9 @@ def uniform(streams, b):
     else:
         block = draws >> np.uint64(1)
         key = row[0]
-        c0, c1, c2, c3 = philox4x32(block & _LOW32, block >> _SHIFT32, row[3], np.uint64(0), key & _LOW32,
-                                    key >> _SHIFT32)
+        c0, c1, c2, c3 = philox4x32(
+            block & _LOW32, block >> _SHIFT32, row[3], np.uint64(0), key & _LOW32, key >> _SHIFT32
+        )
         bits = (c0 << _SHIFT32) | c1
         row[2] = (c2 << _SHIFT32) | c3
     return np.float64(bits >> _SHIFT11) * (1.0 / 9007199254740992.0)
@@ -82,11 +83,15 @@ def learner_keys(seed: int | Sequence[int] | np.ndarray | np.random.Generator, n
     if isinstance(seed, (int, np.integer)):
         if seed < 0:
             raise ValueError(f"seed must be >= 0, got {seed}")
-        return np.array([np.random.SeedSequence(int(seed), spawn_key=(b,)).generate_state(1, np.uint64)[0]
-                         for b in range(n)], dtype=np.uint64)
+        return np.array(
+            [np.random.SeedSequence(int(seed), spawn_key=(b,)).generate_state(1, np.uint64)[0] for b in range(n)],
+            dtype=np.uint64,
+        )
     keys = np.asarray(seed)
     if keys.shape != (n,) or keys.dtype.kind not in "iu" or (keys < 0).any():
-        raise ValueError(f"seed: give one non-negative integer per learner ({n}), got {keys.shape[0] if keys.ndim else 1}")
+        raise ValueError(
+            f"seed: give one non-negative integer per learner ({n}), got {keys.shape[0] if keys.ndim else 1}"
+        )
     return keys.astype(np.uint64)
 
 

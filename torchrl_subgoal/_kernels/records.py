@@ -7,17 +7,14 @@ import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)
-def record_episodes(
-    done, terminated, reward, t, ret, episode, steps_out, returns_out, success_out
-):
+def record_episodes(done, terminated, reward, t, ret, episode, steps_out, returns_out, success_out):
     """Advance per-learner step and return counters; file finished episodes.
 
     Returns how many episodes were filed (those past ``steps_out.shape[1]`` are not).
     """
     filed = 0
     for b in range(done.shape[0]):
-        if _record_learner(b, done[b], terminated[b], reward[b], t, ret, episode, steps_out, returns_out,
-                           success_out):
+        if _record_learner(b, done[b], terminated[b], reward[b], t, ret, episode, steps_out, returns_out, success_out):
             filed += 1
     return filed
 

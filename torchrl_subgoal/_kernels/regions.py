@@ -80,7 +80,10 @@ def advance_with_conditions(regions, condition, hits, z, obs, z_out):
             if not succ[p, zb, j]:
                 continue
             c = condition[p, j]
-            if hits[b, c] if c >= 0 else _in_region(obs[b], lo[p, j], hi[p, j], centre[p, j], weight[p, j],
-                                                     radius2[p, j]):
+            if (
+                hits[b, c]
+                if c >= 0
+                else _in_region(obs[b], lo[p, j], hi[p, j], centre[p, j], weight[p, j], radius2[p, j])
+            ):
                 z_out[b, 0] = j + offset
                 break

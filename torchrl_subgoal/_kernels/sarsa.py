@@ -27,8 +27,9 @@ def softmax_sample(q, state, inv_temperature, streams, action_out):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _sarsa_learner(q_b, s, a, reward, s_next, terminated, done, s_root, streams, b, lr, gamma, inv_temperature,
-                   scratch):
+def _sarsa_learner(
+    q_b, s, a, reward, s_next, terminated, done, s_root, streams, b, lr, gamma, inv_temperature, scratch
+):
     """:func:`sarsa_step` for learner ``b`` (its table ``q_b``); returns its next action."""
     a2 = _softmax_choice(q_b[s_next], inv_temperature, uniform(streams, b), scratch)
     target = reward
@@ -41,9 +42,7 @@ def _sarsa_learner(q_b, s, a, reward, s_next, terminated, done, s_root, streams,
 
 
 @numba.njit(cache=True, nogil=True)
-def sarsa_step(
-    q, s, a, reward, s_next, terminated, done, s_root, streams, lr, gamma, inv_temperature, action_out
-):
+def sarsa_step(q, s, a, reward, s_next, terminated, done, s_root, streams, lr, gamma, inv_temperature, action_out):
     """One SARSA(0) step per learner: draw ``a' ~ π(·|s')``, update ``Q(s, a)``, then
     the next action — ``a'``, or a fresh draw at the reset state where the episode ended.
 
@@ -52,8 +51,22 @@ def sarsa_step(
     """
     scratch = np.empty(q.shape[2])
     for b in range(q.shape[0]):
-        action_out[b] = _sarsa_learner(q[b], s[b], a[b], reward[b], s_next[b], terminated[b], done[b], s_root[b],
-                                       streams, b, lr, gamma, inv_temperature, scratch)
+        action_out[b] = _sarsa_learner(
+            q[b],
+            s[b],
+            a[b],
+            reward[b],
+            s_next[b],
+            terminated[b],
+            done[b],
+            s_root[b],
+            streams,
+            b,
+            lr,
+            gamma,
+            inv_temperature,
+            scratch,
+        )
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -66,6 +79,19 @@ def _sarsa_row(sarsa, s, z):
 def sarsa_learner_step(sarsa, b, s, z, a, reward, s_next, z_next, terminated, done, s_root, z_root, scratch):
     """:func:`_sarsa_learner` for learner ``b`` of a :class:`~torchrl_subgoal.agents.sarsa.SarsaKernelState`,
     from states and abstract states; returns its next action."""
-    return _sarsa_learner(sarsa.q[b], _sarsa_row(sarsa, s, z), a, reward, _sarsa_row(sarsa, s_next, z_next),
-                          terminated, done, _sarsa_row(sarsa, s_root, z_root), sarsa.streams, b, sarsa.lr,
-                          sarsa.gamma, sarsa.inv_temperature, scratch)
+    return _sarsa_learner(
+        sarsa.q[b],
+        _sarsa_row(sarsa, s, z),
+        a,
+        reward,
+        _sarsa_row(sarsa, s_next, z_next),
+        terminated,
+        done,
+        _sarsa_row(sarsa, s_root, z_root),
+        sarsa.streams,
+        b,
+        sarsa.lr,
+        sarsa.gamma,
+        sarsa.inv_temperature,
+        scratch,
+    )

@@ -48,8 +48,9 @@ def _expectile_weight(expectile, delta):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _shaped_reward(table, row, zb, znb, achieved_prev, terminated, z_start, reward, eta, gamma, zero_terminal,
-                   start_mode):
+def _shaped_reward(
+    table, row, zb, znb, achieved_prev, terminated, z_start, reward, eta, gamma, zero_terminal, start_mode
+):
     """``r + γ Φ(z') − Φ(z)`` with the potential as it is now (see :func:`shape_step`)."""
     if table.shape[0] == 0:
         phi = eta if achieved_prev else 0.0
@@ -82,20 +83,51 @@ def _shape_learner(potential, row, zb, znb, achieved_prev, r_h, k, reward, done,
     """
     emit, r, discount, kb = _smdp_accumulate(zb, znb, r_h, k, reward, done, potential.value_gamma)
     table = potential.table
-    if (emit and potential.value_lr > 0.0 and table.shape[0] > 0
-            and _learns_from(potential.bootstrap_truncated, zb, znb, terminated)):
+    if (
+        emit
+        and potential.value_lr > 0.0
+        and table.shape[0] > 0
+        and _learns_from(potential.bootstrap_truncated, zb, znb, terminated)
+    ):
         delta = _td_error(table, row, zb, znb, terminated, r, discount, potential.value_gamma)
         if delta != 0.0:
             table[row, zb] += potential.value_lr * _expectile_weight(potential.expectile, delta) * delta
-    shaped = _shaped_reward(table, row, zb, znb, achieved_prev, terminated, z_start, reward, potential.eta,
-                            potential.gamma, potential.zero_terminal, potential.start_mode)
+    shaped = _shaped_reward(
+        table,
+        row,
+        zb,
+        znb,
+        achieved_prev,
+        terminated,
+        z_start,
+        reward,
+        potential.eta,
+        potential.gamma,
+        potential.zero_terminal,
+        potential.start_mode,
+    )
     return shaped, r, kb, emit
 
 
 @numba.njit(cache=True, nogil=True)
 def shape_step(
-    potential, shared, z, z_next, achieved_prev, r_h, k, reward, done, terminated, z_start,
-    rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out,
+    potential,
+    shared,
+    z,
+    z_next,
+    achieved_prev,
+    r_h,
+    k,
+    reward,
+    done,
+    terminated,
+    z_start,
+    rh_out,
+    k_out,
+    reward_out,
+    rh_acc_out,
+    k_acc_out,
+    emit_out,
 ):
     """Accumulate ``r_h, k``, update a tabular potential online, and shape the reward, for every row.
 
@@ -118,12 +150,39 @@ def shape_step(
     n = z.shape[0]
     fill = emit_out.shape[0] > 0
     if shared:
-        _shape_shared(potential, z, z_next, achieved_prev, r_h, k, reward, done, terminated, z_start, rh_out, k_out,
-                      reward_out, rh_acc_out, k_acc_out, emit_out)
+        _shape_shared(
+            potential,
+            z,
+            z_next,
+            achieved_prev,
+            r_h,
+            k,
+            reward,
+            done,
+            terminated,
+            z_start,
+            rh_out,
+            k_out,
+            reward_out,
+            rh_acc_out,
+            k_acc_out,
+            emit_out,
+        )
         return
     for b in range(n):
-        shaped, r, kb, emit = _shape_learner(potential, b, z[b, 0], z_next[b, 0], achieved_prev[b, 0], r_h[b, 0],
-                                             k[b, 0], reward[b, 0], done[b, 0], terminated[b, 0], z_start[b, 0])
+        shaped, r, kb, emit = _shape_learner(
+            potential,
+            b,
+            z[b, 0],
+            z_next[b, 0],
+            achieved_prev[b, 0],
+            r_h[b, 0],
+            k[b, 0],
+            reward[b, 0],
+            done[b, 0],
+            terminated[b, 0],
+            z_start[b, 0],
+        )
         reward_out[b, 0] = shaped
         rh_out[b, 0] = 0.0 if emit else r
         k_out[b, 0] = 0 if emit else kb
@@ -135,8 +194,22 @@ def shape_step(
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _shape_shared(
-    potential, z, z_next, achieved_prev, r_h, k, reward, done, terminated, z_start,
-    rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out,
+    potential,
+    z,
+    z_next,
+    achieved_prev,
+    r_h,
+    k,
+    reward,
+    done,
+    terminated,
+    z_start,
+    rh_out,
+    k_out,
+    reward_out,
+    rh_acc_out,
+    k_acc_out,
+    emit_out,
 ):
     """:func:`shape_step` with one table for every row: :func:`_shape_learner`'s three parts
     (accumulate and TD error; update; shape) each over the whole batch."""
@@ -145,11 +218,11 @@ def _shape_shared(
     learn = potential.value_lr > 0.0 and table.shape[0] > 0
     delta = np.zeros(n)
     for b in range(n):
-        emit, r, discount, kb = _smdp_accumulate(z[b, 0], z_next[b, 0], r_h[b, 0], k[b, 0], reward[b, 0],
-                                                 done[b, 0], potential.value_gamma)
+        emit, r, discount, kb = _smdp_accumulate(
+            z[b, 0], z_next[b, 0], r_h[b, 0], k[b, 0], reward[b, 0], done[b, 0], potential.value_gamma
+        )
         if emit and learn and _learns_from(potential.bootstrap_truncated, z[b, 0], z_next[b, 0], terminated[b, 0]):
-            delta[b] = _td_error(table, 0, z[b, 0], z_next[b, 0], terminated[b, 0], r, discount,
-                                 potential.value_gamma)
+            delta[b] = _td_error(table, 0, z[b, 0], z_next[b, 0], terminated[b, 0], r, discount, potential.value_gamma)
         rh_out[b, 0] = 0.0 if emit else r
         k_out[b, 0] = 0 if emit else kb
         if emit_out.shape[0] > 0:
@@ -161,9 +234,20 @@ def _shape_shared(
             if delta[b] != 0.0:
                 table[0, z[b, 0]] += potential.value_lr * _expectile_weight(potential.expectile, delta[b]) * delta[b]
     for b in range(n):
-        reward_out[b, 0] = _shaped_reward(table, 0, z[b, 0], z_next[b, 0], achieved_prev[b, 0], terminated[b, 0],
-                                          z_start[b, 0], reward[b, 0], potential.eta, potential.gamma,
-                                          potential.zero_terminal, potential.start_mode)
+        reward_out[b, 0] = _shaped_reward(
+            table,
+            0,
+            z[b, 0],
+            z_next[b, 0],
+            achieved_prev[b, 0],
+            terminated[b, 0],
+            z_start[b, 0],
+            reward[b, 0],
+            potential.eta,
+            potential.gamma,
+            potential.zero_terminal,
+            potential.start_mode,
+        )
 
 
 # --------------------------------------------------------------------------- shaping in a fused loop
@@ -171,7 +255,8 @@ def _shape_shared(
 # A fused loop unpacks a ShapingKernelState (torchrl_subgoal.transform) once, before its loop:
 # ``kind, regions, lookup, potential, learners = shaping``, then ``z, achieved, r_h, k, z_start = learners``
 # and ``pattern, …, offset = regions``. Per step, when ``kind != NO_SHAPING``, it advances the learner's
-# abstract state (region_search when ``kind == REGION_SHAPING``, written out in fused_run, ``lookup`` when LOOKUP_SHAPING) and
+# abstract state (region_search when ``kind == REGION_SHAPING``, written out in fused_run, ``lookup`` when
+# LOOKUP_SHAPING) and
 # calls shaping_step, then shaping_carry with shaping_start's abstract state where the env reset,
 # whatever the env and the learner. Each helper takes only the arrays or values it reads: numba counts
 # references to every array of a tuple passed to an inlined function or read from it, and that per step
@@ -221,8 +306,25 @@ def shaping_carry(z, achieved, r_h, k, b, reset, z_reset, zb, znb, rh_new, k_new
 
 @numba.njit(cache=True, nogil=True)
 def advance_and_shape(
-    regions, potential, shared, z, obs, achieved, r_h, k, reward, done, terminated, z_start,
-    z_out, rh_out, k_out, reward_out, rh_acc_out, k_acc_out, emit_out,
+    regions,
+    potential,
+    shared,
+    z,
+    obs,
+    achieved,
+    r_h,
+    k,
+    reward,
+    done,
+    terminated,
+    z_start,
+    z_out,
+    rh_out,
+    k_out,
+    reward_out,
+    rh_acc_out,
+    k_acc_out,
+    emit_out,
 ):
     """:func:`advance_regions` then :func:`shape_step`: one transform step in one call.
 
@@ -232,8 +334,25 @@ def advance_and_shape(
     if not finite_inputs(reward, obs):
         return False
     advance_regions(regions, z, obs, z_out)
-    shape_step(potential, shared, z, z_out, achieved, r_h, k, reward, done, terminated, z_start, rh_out, k_out,
-               reward_out, rh_acc_out, k_acc_out, emit_out)
+    shape_step(
+        potential,
+        shared,
+        z,
+        z_out,
+        achieved,
+        r_h,
+        k,
+        reward,
+        done,
+        terminated,
+        z_start,
+        rh_out,
+        k_out,
+        reward_out,
+        rh_acc_out,
+        k_acc_out,
+        emit_out,
+    )
     return True
 
 

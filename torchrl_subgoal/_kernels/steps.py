@@ -84,8 +84,10 @@ def missing_steps(env: Any, learner: Any) -> list[str]:
 
 
 def _no_implementation(what: str, record: Any) -> TypeError:
-    return TypeError(f"{what} runs only compiled, in fused_run, for the record types registered with "
-                     f"torchrl_subgoal.agents.fused.implements; called from Python with {type(record).__name__}")
+    return TypeError(
+        f"{what} runs only compiled, in fused_run, for the record types registered with "
+        f"torchrl_subgoal.agents.fused.implements; called from Python with {type(record).__name__}"
+    )
 
 
 def env_scratch(env: Any) -> Any:
@@ -121,8 +123,21 @@ def learner_scratch(learner: Any) -> Any:
     raise _no_implementation("learner_scratch", learner)
 
 
-def learner_step(learner: Any, b: int, o: Any, z: int, a: int, reward: float, o_next: Any, z_next: int,
-                 terminated: bool, done: bool, o_root: Any, z_root: int, scratch: Any) -> int:
+def learner_step(
+    learner: Any,
+    b: int,
+    o: Any,
+    z: int,
+    a: int,
+    reward: float,
+    o_next: Any,
+    z_next: int,
+    terminated: bool,
+    done: bool,
+    o_root: Any,
+    z_root: int,
+    scratch: Any,
+) -> int:
     """Learner ``b``'s update for the transition ``(o, z) --a, reward--> (o_next, z_next)``; returns its next
     action, drawn at ``(o_root, z_root)`` (the reset state where ``done``, else ``(o_next, z_next)``).
     ``z`` are abstract states (0 unshaped) for a learner whose table has a row per state and abstract state."""

@@ -65,10 +65,10 @@ class ActorCriticConfig:
 #: released rates (the two differ by the agent only).
 AC_PRESETS: dict[str, ActorCriticConfig] = {
     "paper": ActorCriticConfig(actor_lr=0.01, critic_lr=0.01, gamma=0.99, value_lr=0.05),
-    "released": ActorCriticConfig(actor_lr=0.001, critic_lr=0.001, gamma=0.99, value_lr=0.05, normalize_lr=True,
-                                  critic="action"),
-    "released-td": ActorCriticConfig(actor_lr=0.001, critic_lr=0.001, gamma=0.99, value_lr=0.05,
-                                     normalize_lr=True),
+    "released": ActorCriticConfig(
+        actor_lr=0.001, critic_lr=0.001, gamma=0.99, value_lr=0.05, normalize_lr=True, critic="action"
+    ),
+    "released-td": ActorCriticConfig(actor_lr=0.001, critic_lr=0.001, gamma=0.99, value_lr=0.05, normalize_lr=True),
 }
 
 
@@ -195,8 +195,9 @@ class FourierActorCritic(KernelLearner):
         # the kernels update these in place through numpy views (numpy_view)
         # the Q critic is [B, A·F]: row-major per action, one layout for both critics in the fused kernels
         f64 = torch.float64
-        self.register_buffer("w", torch.zeros(num_learners, self.num_features * (num_actions if q_critic else 1),
-                                              dtype=f64))
+        self.register_buffer(
+            "w", torch.zeros(num_learners, self.num_features * (num_actions if q_critic else 1), dtype=f64)
+        )
         self.register_buffer("theta", torch.zeros(num_learners, num_actions, self.num_features, dtype=f64))
         self.register_buffer("phi", torch.zeros(num_learners, self.num_features, dtype=f64))  # φ of the current state
         self.register_buffer("probs", torch.full((num_learners, num_actions), 1.0 / num_actions, dtype=f64))  # π(·|s)
@@ -216,9 +217,22 @@ class FourierActorCritic(KernelLearner):
         """
         cfg = self.config
         view = self.numpy_view
-        return ActorCriticKernelState(view("w"), view("theta"), view("phi"), view("probs"), view("streams"), self.low,
-                                      self.inv_range, cfg.order, self.half_dim, cfg.actor_lr, cfg.critic_lr,
-                                      cfg.gamma, cfg.normalize_lr, cfg.critic == "action")
+        return ActorCriticKernelState(
+            view("w"),
+            view("theta"),
+            view("phi"),
+            view("probs"),
+            view("streams"),
+            self.low,
+            self.inv_range,
+            cfg.order,
+            self.half_dim,
+            cfg.actor_lr,
+            cfg.critic_lr,
+            cfg.gamma,
+            cfg.normalize_lr,
+            cfg.critic == "action",
+        )
 
     def features(self, observation: torch.Tensor) -> torch.Tensor:
         """``φ(s)`` of a batch of observations ``[N, D]`` (the kernel's features, for inspection)."""
@@ -226,8 +240,18 @@ class FourierActorCritic(KernelLearner):
         n = obs.shape[0]
         out = np.empty((n, self.num_features))
         theta = np.zeros((n, 1, self.num_features))
-        ac_act(theta, out, np.empty((n, 1)), obs, self.low, self.inv_range, self.config.order, self.half_dim,
-                        np.zeros((0, 4), np.uint64), np.empty(n, np.int64))
+        ac_act(
+            theta,
+            out,
+            np.empty((n, 1)),
+            obs,
+            self.low,
+            self.inv_range,
+            self.config.order,
+            self.half_dim,
+            np.zeros((0, 4), np.uint64),
+            np.empty(n, np.int64),
+        )
         return torch.from_numpy(out)
 
     def q_values(self, observation: torch.Tensor) -> torch.Tensor:
@@ -246,8 +270,18 @@ class FourierActorCritic(KernelLearner):
         n = self.w.shape[0]
         action = np.empty(n, np.int64)
         view = self.numpy_view
-        ac_act(view("theta"), view("phi"), view("probs"), self._obs(tensordict), self.low, self.inv_range,
-                        self.config.order, self.half_dim, view("streams"), action)
+        ac_act(
+            view("theta"),
+            view("phi"),
+            view("probs"),
+            self._obs(tensordict),
+            self.low,
+            self.inv_range,
+            self.config.order,
+            self.half_dim,
+            view("streams"),
+            action,
+        )
         tensordict.set("action", torch.from_numpy(action))
         return tensordict
 
@@ -263,10 +297,26 @@ class FourierActorCritic(KernelLearner):
         n = self.w.shape[0]
         action = np.empty(n, np.int64)
         self._step_kernel(
-            view("w"), view("theta"), view("phi"), view("probs"), transition.get("action").numpy().reshape(n),
-            nxt.get("reward").numpy().reshape(n), self._obs(nxt), nxt.get("terminated").numpy().reshape(n),
-            nxt.get("done").numpy().reshape(n), self._obs(next_root), self.low, self.inv_range,
-            cfg.order, self.half_dim, view("streams"), cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.normalize_lr, action,
+            view("w"),
+            view("theta"),
+            view("phi"),
+            view("probs"),
+            transition.get("action").numpy().reshape(n),
+            nxt.get("reward").numpy().reshape(n),
+            self._obs(nxt),
+            nxt.get("terminated").numpy().reshape(n),
+            nxt.get("done").numpy().reshape(n),
+            self._obs(next_root),
+            self.low,
+            self.inv_range,
+            cfg.order,
+            self.half_dim,
+            view("streams"),
+            cfg.actor_lr,
+            cfg.critic_lr,
+            cfg.gamma,
+            cfg.normalize_lr,
+            action,
         )
         next_root.set("action", torch.from_numpy(action))
 
@@ -280,8 +330,20 @@ def _ac_scratch(learner: ActorCriticKernelState) -> tuple[tuple[np.ndarray, ...]
 
 
 @implements(learner_step, ActorCriticKernelState)
-def _ac_fused_step(learner: ActorCriticKernelState, b: int, o: np.ndarray, z: int, a: int, reward: float,
-                   o_next: np.ndarray, z_next: int, terminated: bool, done: bool, o_root: np.ndarray, z_root: int,
-                   scratch: tuple[tuple[np.ndarray, ...], np.ndarray]) -> int:
+def _ac_fused_step(
+    learner: ActorCriticKernelState,
+    b: int,
+    o: np.ndarray,
+    z: int,
+    a: int,
+    reward: float,
+    o_next: np.ndarray,
+    z_next: int,
+    terminated: bool,
+    done: bool,
+    o_root: np.ndarray,
+    z_root: int,
+    scratch: tuple[tuple[np.ndarray, ...], np.ndarray],
+) -> int:
     features, phi_next = scratch
     return ac_learner_step(learner, b, a, reward, o_next, terminated, done, o_root, features, phi_next)

@@ -110,8 +110,7 @@ def mlp(in_features: int, out_features: int, hidden: Sequence[int]) -> MLP:
         >>> net(torch.zeros(5, 3)).shape
         torch.Size([5, 2])
     """
-    return MLP(in_features=in_features, out_features=out_features, num_cells=list(hidden),
-               activation_class=nn.ReLU)
+    return MLP(in_features=in_features, out_features=out_features, num_cells=list(hidden), activation_class=nn.ReLU)
 
 
 class RunningNorm(nn.Module):
@@ -312,41 +311,67 @@ class DDPGAgent(nn.Module):
         self.observation_key = observation_key
         action_size = int(action_spec.shape[-1])
         z = [SUBGOAL_INDEX] if subgoal_states else []
-        self.keys: tuple[NestedKey, ...] = tuple(dict.fromkeys([
-            observation_key, "action", ("next", observation_key), ("next", "reward"), ("next", "done"),
-            ("next", "terminated"), *z, *(("next", k) for k in z), *keys]))
+        self.keys: tuple[NestedKey, ...] = tuple(
+            dict.fromkeys(
+                [
+                    observation_key,
+                    "action",
+                    ("next", observation_key),
+                    ("next", "reward"),
+                    ("next", "done"),
+                    ("next", "terminated"),
+                    *z,
+                    *(("next", k) for k in z),
+                    *keys,
+                ]
+            )
+        )
         self.norm = RunningNorm(observation_size, config.norm_eps, config.norm_clip)
         normalize = TensorDictModule(self.norm, in_keys=[observation_key], out_keys=[NORMALIZED])
-        actor_net: nn.Module = nn.Sequential(mlp(observation_size + subgoal_states, action_size, config.hidden),
-                                             nn.Tanh())
+        actor_net: nn.Module = nn.Sequential(
+            mlp(observation_size + subgoal_states, action_size, config.hidden), nn.Tanh()
+        )
         if subgoal_states:
             actor_net = SubgoalInput(subgoal_states, body=actor_net)
         self.actor = Actor(actor_net, in_keys=[NORMALIZED, *z], spec=action_spec)
-        self.critic = ValueOperator(_QNet(mlp(observation_size + action_size + subgoal_states, 1, config.hidden),
-                                          subgoal_states), in_keys=[NORMALIZED, "action", *z])
+        self.critic = ValueOperator(
+            _QNet(mlp(observation_size + action_size + subgoal_states, 1, config.hidden), subgoal_states),
+            in_keys=[NORMALIZED, "action", *z],
+        )
         self.greedy = TensorDictSequential(normalize, self.actor)
         # one module call per step: normaliser, actor network and exploration on the observation
-        explore = GaussianOrRandom(action_spec.space.low, action_spec.space.high, config.noise_eps,
-                                   config.random_eps)
-        acting: nn.Module = (_Explore(self.norm, self.actor.module, explore) if subgoal_states
-                             else nn.Sequential(self.norm, self.actor.module, explore))
+        explore = GaussianOrRandom(action_spec.space.low, action_spec.space.high, config.noise_eps, config.random_eps)
+        acting: nn.Module = (
+            _Explore(self.norm, self.actor.module, explore)
+            if subgoal_states
+            else nn.Sequential(self.norm, self.actor.module, explore)
+        )
         self.policy = TensorDictModule(acting, in_keys=[observation_key, *z], out_keys=["action"])
         high = 0.0 if config.clip_positive else None
         low = -config.clip_return if config.clip_return is not None else None
         self.loss: DDPGLoss | TD3Loss
         if td3 is None:
             self.loss = DDPGLoss(self.actor, self.critic, delay_actor=True, delay_value=True)
-            estimator = ClippedTD0Estimator(low=low, high=high, gamma=config.gamma,
-                                            value_network=self.loss.actor_critic)
+            estimator = ClippedTD0Estimator(
+                low=low, high=high, gamma=config.gamma, value_network=self.loss.actor_critic
+            )
             # through the property's setter: nn.Module.__setattr__ would register a module assigned
             # to `loss.value_estimator` under that name, and the property would still build its default
             type(self.loss).value_estimator.fset(self.loss, estimator)
             self.loss._forward_value_estimator_keys()
             critic_params = self.loss.value_network_params
         else:
-            self.loss = TD3Loss(self.actor, self.critic, action_spec=action_spec, num_qvalue_nets=2,
-                                policy_noise=td3.target_noise, noise_clip=td3.noise_clip, loss_function="l2",
-                                delay_actor=True, delay_qvalue=True)
+            self.loss = TD3Loss(
+                self.actor,
+                self.critic,
+                action_spec=action_spec,
+                num_qvalue_nets=2,
+                policy_noise=td3.target_noise,
+                noise_clip=td3.noise_clip,
+                loss_function="l2",
+                delay_actor=True,
+                delay_qvalue=True,
+            )
             estimator = ClippedTD0Estimator(low=low, high=high, gamma=config.gamma, value_network=None)
             estimator.set_keys(value=self.loss.tensor_keys.state_action_value)
             self.loss.make_value_estimator(estimator)
@@ -355,8 +380,9 @@ class DDPGAgent(nn.Module):
         self._updates, self._actor_stepped = 0, False
         # fused Adam (one kernel for all of a network's parameters): a third of the default's time on CPU
         fused = self.device.type in ("cpu", "cuda")
-        self.actor_optimizer = torch.optim.Adam(self.loss.actor_network_params.values(True, True),
-                                                lr=config.actor_lr, fused=fused)
+        self.actor_optimizer = torch.optim.Adam(
+            self.loss.actor_network_params.values(True, True), lr=config.actor_lr, fused=fused
+        )
         self.critic_optimizer = torch.optim.Adam(critic_params.values(True, True), lr=config.critic_lr, fused=fused)
         # DDPGLoss trains the modules' own parameters (``loss.value_network_params`` are these tensors)
         self._critic_parameters = list(self.critic.module.named_parameters())
@@ -445,8 +471,9 @@ class DDPGAgent(nn.Module):
     def load_training_state(self, state: dict[str, Any]) -> None:
         """Inverse of :meth:`training_state`."""
         try:
-            missing, unexpected = self.load_state_dict({k: v for k, v in state["modules"].items() if not _alias(k)},
-                                                       strict=False)
+            missing, unexpected = self.load_state_dict(
+                {k: v for k, v in state["modules"].items() if not _alias(k)}, strict=False
+            )
         except (RuntimeError, ValueError) as exc:
             raise ValueError(f"training state does not fit this agent: {exc}") from None
         if unexpected or any(not _alias(k) for k in missing):
@@ -469,8 +496,9 @@ class _QNet(nn.Module):
         self.net = net
         self.subgoal_states = subgoal_states
 
-    def forward(self, observation: torch.Tensor, action: torch.Tensor,
-                subgoal_index: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(
+        self, observation: torch.Tensor, action: torch.Tensor, subgoal_index: torch.Tensor | None = None
+    ) -> torch.Tensor:
         if subgoal_index is None:
             return self.net(torch.cat([observation, action], -1))
         z = nn.functional.one_hot(subgoal_index.reshape(action.shape[:-1]).long(), self.subgoal_states)

@@ -66,8 +66,18 @@ from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.transform import ShapingKernelState, SubgoalPotentialTransform
 
 __all__ = [
-    "FusedEnv", "FusedLearner", "env_observe", "env_reset", "env_scratch", "env_shaping_observation", "env_step",
-    "implements", "learner_scratch", "learner_step", "missing_steps", "run_episodes_fused",
+    "FusedEnv",
+    "FusedLearner",
+    "env_observe",
+    "env_reset",
+    "env_scratch",
+    "env_shaping_observation",
+    "env_step",
+    "implements",
+    "learner_scratch",
+    "learner_step",
+    "missing_steps",
+    "run_episodes_fused",
 ]
 
 
@@ -77,8 +87,10 @@ def _unwrap(env: EnvBase) -> tuple[EnvBase, SubgoalPotentialTransform | None]:
         return env, None
     if isinstance(env.transform, SubgoalPotentialTransform):
         return env.base_env, env.transform
-    raise TypeError(f"the fused engine runs an env alone or with one SubgoalPotentialTransform; got {env}. "
-                    "Use engine='torchrl' for other transforms.")
+    raise TypeError(
+        f"the fused engine runs an env alone or with one SubgoalPotentialTransform; got {env}. "
+        "Use engine='torchrl' for other transforms."
+    )
 
 
 def _run_blocks(
@@ -89,8 +101,9 @@ def _run_blocks(
 ) -> EpisodeRecords:
     """Call ``run_block(records)`` (one compiled block of steps) until every learner has
     ``episodes`` episodes; ``records`` are the arrays the kernels file episodes into."""
-    out = EpisodeRecords(torch.zeros(n, episodes, dtype=torch.long), torch.zeros(n, episodes),
-                         torch.zeros(n, episodes, dtype=torch.bool))
+    out = EpisodeRecords(
+        torch.zeros(n, episodes, dtype=torch.long), torch.zeros(n, episodes), torch.zeros(n, episodes, dtype=torch.bool)
+    )
     records = EpisodeArrays.zeros(out)
     while records.episode.min() < episodes:
         taken, filed = run_block(records)
@@ -106,8 +119,10 @@ def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase
         return ShapingKernelState.unshaped(n)
     pot = shaping.potential
     if isinstance(pot, TabularPotential) and not pot.batch_shape:
-        raise TypeError("the fused engine stops learners that have their episodes, so each needs its own "
-                        "potential table (a TabularPotential with the env's batch shape); use engine='torchrl'")
+        raise TypeError(
+            "the fused engine stops learners that have their episodes, so each needs its own "
+            "potential table (a TabularPotential with the env's batch shape); use engine='torchrl'"
+        )
     return shaping.kernel_state(td)
 
 
@@ -178,9 +193,11 @@ def run_episodes_fused(
     if base.device is not None and base.device.type != "cpu":
         raise TypeError("the fused engine runs on the CPU")
     if not hasattr(base, "kernel_state") or not hasattr(agent, "kernel_state"):
-        raise TypeError(f"the fused engine runs an env and a learner whose kernel_state() records implement its "
-                        f"steps (docs/adding_a_domain.md); {type(base).__name__} with {type(agent).__name__} "
-                        "do not: use engine='torchrl'")
+        raise TypeError(
+            f"the fused engine runs an env and a learner whose kernel_state() records implement its "
+            f"steps (docs/adding_a_domain.md); {type(base).__name__} with {type(agent).__name__} "
+            "do not: use engine='torchrl'"
+        )
     td = agent.act(env.reset())  # the same start as the TorchRL loop, tables compiled
     n = max(1, env.batch_size.numel())
     action = td.get("action").reshape(-1).numpy().copy()
@@ -189,9 +206,11 @@ def run_episodes_fused(
     learner = agent.kernel_state()
     missing = missing_steps(record, learner)
     if missing:
-        raise TypeError(f"{type(record).__name__} and {type(learner).__name__} do not implement the fused engine's "
-                        f"{', '.join(missing)} (register them with torchrl_subgoal.agents.fused.implements; "
-                        "docs/adding_a_domain.md)")
+        raise TypeError(
+            f"{type(record).__name__} and {type(learner).__name__} do not implement the fused engine's "
+            f"{', '.join(missing)} (register them with torchrl_subgoal.agents.fused.implements; "
+            "docs/adding_a_domain.md)"
+        )
     packaged = all(type(r).__module__.startswith("torchrl_subgoal.") for r in (record, learner))
     loop = fused_run if packaged else fused_run_uncached  # see fused_run_uncached
     block = getattr(base, "fused_block", 1024)
@@ -202,8 +221,10 @@ def run_episodes_fused(
         except numba.core.errors.TypingError as error:
             plain = re.sub(r"\x1b\[[0-9;]*m", "", str(error))  # numba highlights its message
             said = [line for line in plain.splitlines() if line.strip() and "Failed in" not in line]
-            raise TypeError(f"the fused loop does not compile for {type(record).__name__} with "
-                            f"{type(learner).__name__} (does what env_step returns fit what learner_step reads?): "
-                            f"{said[0] if said else error}") from None
+            raise TypeError(
+                f"the fused loop does not compile for {type(record).__name__} with "
+                f"{type(learner).__name__} (does what env_step returns fit what learner_step reads?): "
+                f"{said[0] if said else error}"
+            ) from None
 
     return _run_blocks(n, episodes, run_block, progress)

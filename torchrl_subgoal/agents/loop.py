@@ -110,8 +110,13 @@ def run_episodes(
         nxt = td.get("next")
         env_steps += 1
         filed = record_episodes(
-            _flat(nxt.get("done")), _flat(nxt.get("terminated")), _flat(nxt.get(return_key)),
-            t, ret, done_episodes, *outputs,
+            _flat(nxt.get("done")),
+            _flat(nxt.get("terminated")),
+            _flat(nxt.get(return_key)),
+            t,
+            ret,
+            done_episodes,
+            *outputs,
         )
         if filed:
             if progress is not None:

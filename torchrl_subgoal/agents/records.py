@@ -53,5 +53,11 @@ class EpisodeArrays(NamedTuple):
     def zeros(cls, records: EpisodeRecords) -> EpisodeArrays:
         """Zero counters and views of ``records``' tensors (CPU)."""
         n = records.steps.shape[0]
-        return cls(np.zeros(n, np.int64), np.zeros(n), np.zeros(n, np.int64), records.steps.numpy(),
-                   records.returns.numpy(), records.success.numpy())
+        return cls(
+            np.zeros(n, np.int64),
+            np.zeros(n),
+            np.zeros(n, np.int64),
+            records.steps.numpy(),
+            records.returns.numpy(),
+            records.success.numpy(),
+        )

@@ -160,15 +160,26 @@ class SoftmaxSarsa(KernelLearner):
             1.0
         """
         cfg = self.config
-        return SarsaKernelState(self.numpy_view("q"), self.numpy_view("streams"), self.abstract_states, cfg.lr,
-                                cfg.gamma, 1.0 / cfg.temperature)
+        return SarsaKernelState(
+            self.numpy_view("q"),
+            self.numpy_view("streams"),
+            self.abstract_states,
+            cfg.lr,
+            cfg.gamma,
+            1.0 / cfg.temperature,
+        )
 
     def sample(self, state: torch.Tensor) -> torch.Tensor:
         """Softmax actions for each learner's table row ``[N]`` (see :meth:`state`)."""
         s = state.numpy().reshape(-1)
         action = torch.empty_like(state)
-        softmax_sample(self.numpy_view("q"), s, 1.0 / self.config.temperature, self.numpy_view("streams"),
-                                action.numpy().reshape(-1))
+        softmax_sample(
+            self.numpy_view("q"),
+            s,
+            1.0 / self.config.temperature,
+            self.numpy_view("streams"),
+            action.numpy().reshape(-1),
+        )
         return action
 
     def greedy(self, state: torch.Tensor) -> torch.Tensor:
@@ -199,10 +210,19 @@ class SoftmaxSarsa(KernelLearner):
         n = self.q.shape[0]
         action = torch.empty(n, dtype=torch.long)
         sarsa_step(
-            self.numpy_view("q"), _flat(self.state(transition)), _flat(transition.get("action")),
-            _flat(nxt.get("reward")), _flat(self.state(nxt)), _flat(nxt.get("terminated")),
-            _flat(nxt.get("done")), _flat(self.state(next_root)), self.numpy_view("streams"), cfg.lr, cfg.gamma,
-            1.0 / cfg.temperature, action.numpy(),
+            self.numpy_view("q"),
+            _flat(self.state(transition)),
+            _flat(transition.get("action")),
+            _flat(nxt.get("reward")),
+            _flat(self.state(nxt)),
+            _flat(nxt.get("terminated")),
+            _flat(nxt.get("done")),
+            _flat(self.state(next_root)),
+            self.numpy_view("streams"),
+            cfg.lr,
+            cfg.gamma,
+            1.0 / cfg.temperature,
+            action.numpy(),
         )
         next_root.set("action", action.view(transition.get("action").shape))
 
@@ -221,7 +241,19 @@ def _sarsa_scratch(learner: SarsaKernelState) -> np.ndarray:
 
 
 @implements(learner_step, SarsaKernelState)
-def _sarsa_fused_step(learner: SarsaKernelState, b: int, o: int, z: int, a: int, reward: float, o_next: int,
-                      z_next: int, terminated: bool, done: bool, o_root: int, z_root: int, scratch: np.ndarray) -> int:
-    return sarsa_learner_step(learner, b, o, z, a, reward, o_next, z_next, terminated, done, o_root, z_root,
-                                       scratch)
+def _sarsa_fused_step(
+    learner: SarsaKernelState,
+    b: int,
+    o: int,
+    z: int,
+    a: int,
+    reward: float,
+    o_next: int,
+    z_next: int,
+    terminated: bool,
+    done: bool,
+    o_root: int,
+    z_root: int,
+    scratch: np.ndarray,
+) -> int:
+    return sarsa_learner_step(learner, b, o, z, a, reward, o_next, z_next, terminated, done, o_root, z_root, scratch)

@@ -44,8 +44,14 @@ class SubgoalInput(nn.Module):
         (5, 6)
     """
 
-    def __init__(self, num_states: int, features: nn.Module | None = None, body: nn.Module | None = None, *,
-                 product: bool = False) -> None:
+    def __init__(
+        self,
+        num_states: int,
+        features: nn.Module | None = None,
+        body: nn.Module | None = None,
+        *,
+        product: bool = False,
+    ) -> None:
         super().__init__()
         if num_states < 1:
             raise ValueError(f"num_states must be >= 1, got {num_states}")

@@ -54,8 +54,12 @@ def _draw_map(ax: Any, patterns: Mapping[str, Any], options: Mapping[str, Any]) 
 
 def _geometry(config: str) -> dict[str, Any]:
     return {
-        "kind": "grid", "rows": four_rooms.LAYOUT.splitlines(), "wall": "w", "start": list(four_rooms.START),
-        "goal": list(four_rooms.GOAL), "hallways": [list(h) for h in four_rooms.HALLWAYS],
+        "kind": "grid",
+        "rows": four_rooms.LAYOUT.splitlines(),
+        "wall": "w",
+        "start": list(four_rooms.START),
+        "goal": list(four_rooms.GOAL),
+        "hallways": [list(h) for h in four_rooms.HALLWAYS],
     }
 
 
@@ -65,8 +69,9 @@ def _cell_of_state(predicate: Predicate) -> dict[str, Any]:
     return predicate.to_dict()
 
 
-def _sarsa(learners: int, seed: int, max_steps: int | None,
-           map_: str | None) -> tuple[EnvBase, OnlineAgent, Mapping[str, Any]]:
+def _sarsa(
+    learners: int, seed: int, max_steps: int | None, map_: str | None
+) -> tuple[EnvBase, OnlineAgent, Mapping[str, Any]]:
     """The paper's learner: SARSA with the released settings, over the env's state number."""
     sarsa = SARSA_PRESETS["released"]
     env = four_rooms.FourRoomsEnv(num_envs=learners, max_steps=max_steps or 1000)
@@ -79,10 +84,17 @@ def _candidates(seed: int) -> list[Predicate]:
 
 
 A2C = A2CDomain(
-    "four_rooms", four_rooms_env, "observation", "cell", "observation",
-    str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml"), eta=1.0, thresholds=(100.0, 50.0),
+    "four_rooms",
+    four_rooms_env,
+    "observation",
+    "cell",
+    "observation",
+    str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml"),
+    eta=1.0,
+    thresholds=(100.0, 50.0),
     a2c=A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=100_000),
-    aggregation=four_rooms.room_aggregation, candidates=_candidates,
+    aggregation=four_rooms.room_aggregation,
+    candidates=_candidates,
 )
 
 
@@ -107,12 +119,20 @@ PAPER = PaperResults(
 )
 
 STUDIO = StudioDomain(
-    _geometry, limits={"episodes": Limit(300, 1, 2000), "learners": Limit(20, 1, 200),
-                       "max_steps": Limit(1000, 50, 1000)},
-    recipe="recipes/four_rooms.py", to_page=_cell_of_state, learner=_sarsa, position=0,
+    _geometry,
+    limits={"episodes": Limit(300, 1, 2000), "learners": Limit(20, 1, 200), "max_steps": Limit(1000, 50, 1000)},
+    recipe="recipes/four_rooms.py",
+    to_page=_cell_of_state,
+    learner=_sarsa,
+    position=0,
 )
 
-DOMAIN = domains.register(domains.Domain(
-    "four_rooms", "Four rooms", make_env=four_rooms_env, check_subgoal=four_rooms.check_subgoal,
-    parts=(A2C, PAPER, ReportMap(_draw_map), STUDIO),
-))
+DOMAIN = domains.register(
+    domains.Domain(
+        "four_rooms",
+        "Four rooms",
+        make_env=four_rooms_env,
+        check_subgoal=four_rooms.check_subgoal,
+        parts=(A2C, PAPER, ReportMap(_draw_map), STUDIO),
+    )
+)

@@ -40,7 +40,9 @@ def fetch_env(num_envs: int) -> EnvBase:
 
 def _geometry(config: str) -> dict[str, Any]:
     return {
-        "kind": "form", "observation_size": fetch.OBSERVATION_SIZE, "default_margin": fetch.SUBGOAL_MARGIN,
+        "kind": "form",
+        "observation_size": fetch.OBSERVATION_SIZE,
+        "default_margin": fetch.SUBGOAL_MARGIN,
         "components": [{"name": n, "start": s.start, "size": s.stop - s.start} for n, s in fetch.COMPONENTS.items()],
     }
 
@@ -52,8 +54,10 @@ def _box_to_page(predicate: Predicate) -> dict[str, Any]:
         return body
     names = fetch.components_of(predicate.box_dims)
     if names is None:
-        raise FormError(f"box entries {list(predicate.box_dims)} are not whole observation components "
-                        f"({', '.join(fetch.COMPONENTS)}); the form edits whole components, edit this file by hand")
+        raise FormError(
+            f"box entries {list(predicate.box_dims)} are not whole observation components "
+            f"({', '.join(fetch.COMPONENTS)}); the form edits whole components, edit this file by hand"
+        )
     box = body["box"]
     return {"box": {"components": list(names), "centre": box["centre"], "margin": box["margin"]}}
 
@@ -65,7 +69,7 @@ def _box_from_page(subgoal: dict[str, Any], where: str) -> dict[str, Any]:
         >>> _box_from_page({"box": {"components": []}}, "patterns.p.subgoals[0]")
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.studio.domains.FormError: patterns.p.subgoals[0].box.components: expected a non-empty list of component names, got []
+        torchrl_subgoal.studio.domains.FormError: patterns.p.subgoals[0].box.components: expected a non-empty list ...
     """
     box = subgoal.get("box")
     if not isinstance(box, Mapping) or "components" not in box:
@@ -81,8 +85,10 @@ def _box_from_page(subgoal: dict[str, Any], where: str) -> dict[str, Any]:
         raise FormError(f"{where}.box.components: {exc.args[0]}") from None
     centre = box.get("centre")
     if isinstance(centre, list) and len(centre) != len(dims):
-        raise FormError(f"{where}.box.centre: {len(centre)} values, but {', '.join(names)} "
-                        f"{'has' if len(names) == 1 else 'have'} {len(dims)} coordinates; give one per coordinate")
+        raise FormError(
+            f"{where}.box.centre: {len(centre)} values, but {', '.join(names)} "
+            f"{'has' if len(names) == 1 else 'have'} {len(dims)} coordinates; give one per coordinate"
+        )
     rest = {k: v for k, v in box.items() if k != "components"}
     return {**subgoal, "box": {**rest, "dims": list(dims)}}
 
@@ -104,10 +110,22 @@ PAPER = PaperResults(
     notes=("Success rate 0.6 reached 30 epochs earlier with HRS than with DDPG.",),
 )
 
-STUDIO = StudioDomain(_geometry, recipe="recipes/pick_and_place.py", to_page=_box_to_page, from_page=_box_from_page,
-                      try_note=TRY_NOTE, position=2)
+STUDIO = StudioDomain(
+    _geometry,
+    recipe="recipes/pick_and_place.py",
+    to_page=_box_to_page,
+    from_page=_box_from_page,
+    try_note=TRY_NOTE,
+    position=2,
+)
 
-DOMAIN = domains.register(domains.Domain(
-    "pick_and_place", "Pick and place", aliases=("fetch",), make_env=fetch_env, check_subgoal=fetch.check_subgoal,
-    parts=(PAPER, STUDIO),
-))
+DOMAIN = domains.register(
+    domains.Domain(
+        "pick_and_place",
+        "Pick and place",
+        aliases=("fetch",),
+        make_env=fetch_env,
+        check_subgoal=fetch.check_subgoal,
+        parts=(PAPER, STUDIO),
+    )
+)

@@ -59,7 +59,10 @@ def _load_map(config: str) -> pinball.PinBallConfig:
 def _geometry(config: str) -> dict[str, Any]:
     cfg = _load_map(config)
     return {
-        "kind": "table", "ball_radius": cfg.ball_radius, "target": list(cfg.target), "start": list(cfg.start),
+        "kind": "table",
+        "ball_radius": cfg.ball_radius,
+        "target": list(cfg.target),
+        "start": list(cfg.start),
         "polygons": [[list(v) for v in poly] for poly in cfg.polygons],
         "default_radius": cfg.target[2],  # the target's radius, as the paper's participants' circles
     }
@@ -71,13 +74,16 @@ def _map_check(predicate: Predicate, map_name: str, config: str) -> str | None:
     x, y = predicate.centre[:2]
     for i, polygon in enumerate(_load_map(config).polygons):
         if pinball.point_in_polygon((x, y), polygon):
-            return (f"centre ({x:g}, {y:g}) lies inside obstacle {i + 1} of the {map_name!r} map; "
-                    "move it to where the ball can go")
+            return (
+                f"centre ({x:g}, {y:g}) lies inside obstacle {i + 1} of the {map_name!r} map; "
+                "move it to where the ball can go"
+            )
     return None
 
 
-def _actor_critic(learners: int, seed: int, max_steps: int | None,
-                  map_: str | None) -> tuple[EnvBase, OnlineAgent, Mapping[str, Any]]:
+def _actor_critic(
+    learners: int, seed: int, max_steps: int | None, map_: str | None
+) -> tuple[EnvBase, OnlineAgent, Mapping[str, Any]]:
     """The paper's learner: the Fourier actor-critic with the released settings."""
     ac = AC_PRESETS["released"]
     env = pinball.PinBallEnv(learners, map_ or "simple", max_steps=max_steps or 10_000, seed=seed)
@@ -96,14 +102,19 @@ def _aggregation() -> StateAggregation:
 
 
 A2C = A2CDomain(
-    "pinball", pinball_env, "observation", "observation", "observation",
-    str(files("torchrl_subgoal") / "data" / "pinball_participants.yaml"), eta=1.0,
+    "pinball",
+    pinball_env,
+    "observation",
+    "observation",
+    "observation",
+    str(files("torchrl_subgoal") / "data" / "pinball_participants.yaml"),
+    eta=1.0,
     thresholds=(3000.0, 2000.0, 1000.0, 500.0),
     # lr: the paper's 0.01 divided by the Fourier features' norm (‖φ‖ ≈ 11.3 for order 3 on PinBall's
     # states), as its actor-critic divides its steps; with 0.01 A2C learns, then collapses (docs/torchrl.md).
-    a2c=A2CConfig(features="fourier", hidden=(), fourier_order=3, lr=1e-3, reward_scale=1e-4,
-                  total_frames=2_000_000),
-    aggregation=_aggregation, candidates=_candidates,
+    a2c=A2CConfig(features="fourier", hidden=(), fourier_order=3, lr=1e-3, reward_scale=1e-4, total_frames=2_000_000),
+    aggregation=_aggregation,
+    candidates=_candidates,
 )
 
 
@@ -124,12 +135,21 @@ PAPER = PaperResults(
 )
 
 STUDIO = StudioDomain(
-    _geometry, maps={"simple": "simple", "hard": "hard"}, map_check=_map_check,
+    _geometry,
+    maps={"simple": "simple", "hard": "hard"},
+    map_check=_map_check,
     limits={"episodes": Limit(30, 1, 100), "learners": Limit(5, 1, 10), "max_steps": Limit(10_000, 100, 10_000)},
-    recipe="recipes/pinball.py", learner=_actor_critic, position=1,
+    recipe="recipes/pinball.py",
+    learner=_actor_critic,
+    position=1,
 )
 
-DOMAIN = domains.register(domains.Domain(
-    "pinball", "PinBall", make_env=pinball_env, check_subgoal=pinball.check_subgoal,
-    parts=(A2C, PAPER, ReportMap(_draw_map), STUDIO),
-))
+DOMAIN = domains.register(
+    domains.Domain(
+        "pinball",
+        "PinBall",
+        make_env=pinball_env,
+        check_subgoal=pinball.check_subgoal,
+        parts=(A2C, PAPER, ReportMap(_draw_map), STUDIO),
+    )
+)

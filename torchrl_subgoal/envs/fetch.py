@@ -115,8 +115,15 @@ def components_of(dims: tuple[int, ...] | list[int]) -> tuple[str, ...] | None:
     names: list[str] = []
     i = 0
     while i < len(dims):
-        match = next((n for n, part in COMPONENTS.items() if part.start == dims[i]
-                      and tuple(dims[i:i + part.stop - part.start]) == tuple(range(part.start, part.stop))), None)
+        match = next(
+            (
+                n
+                for n, part in COMPONENTS.items()
+                if part.start == dims[i]
+                and tuple(dims[i : i + part.stop - part.start]) == tuple(range(part.start, part.stop))
+            ),
+            None,
+        )
         if match is None:
             return None
         names.append(match)
@@ -138,8 +145,10 @@ def check_subgoal(predicate: Predicate) -> str | None:
         return f"pick-and-place subgoals are boxes over observation entries, not {predicate.kind}"
     outside = [d for d in predicate.box_dims if d >= OBSERVATION_SIZE]
     if outside:
-        return (f"box entries {outside} lie outside the {OBSERVATION_SIZE}-d observation "
-                f"(entries 0 to {OBSERVATION_SIZE - 1})")
+        return (
+            f"box entries {outside} lie outside the {OBSERVATION_SIZE}-d observation "
+            f"(entries 0 to {OBSERVATION_SIZE - 1})"
+        )
     return None
 
 
@@ -173,13 +182,11 @@ def require_fetch() -> ModuleType:
     version = metadata.version("mujoco")
     if not low <= _version_tuple(version) < high:
         raise FetchUnavailableError(
-            f"mujoco {version} is installed; Fetch needs mujoco>=3.3,<3.12 (3.12 breaks its reset): "
-            f"{INSTALL_HINT}"
+            f"mujoco {version} is installed; Fetch needs mujoco>=3.3,<3.12 (3.12 breaks its reset): {INSTALL_HINT}"
         )
     gymnasium.register_envs(gymnasium_robotics)
     if ENV_ID not in gymnasium.registry:
-        gymnasium.register(ENV_ID, entry_point=f"{__name__}:_make_single_goal",
-                           max_episode_steps=MAX_EPISODE_STEPS)
+        gymnasium.register(ENV_ID, entry_point=f"{__name__}:_make_single_goal", max_episode_steps=MAX_EPISODE_STEPS)
     return gymnasium
 
 
@@ -236,8 +243,7 @@ def make_fetch_env(goal_seed: int, *, device: str | torch.device = "cpu", **kwar
     return env
 
 
-def make_fetch_envs(goal_seed: int, num_envs: int, *, device: str | torch.device = "cpu",
-                    lean: bool = True) -> Any:
+def make_fetch_envs(goal_seed: int, num_envs: int, *, device: str | torch.device = "cpu", lean: bool = True) -> Any:
     """``num_envs`` single-goal FetchPickAndPlace envs stepped together in this process, one TorchRL env.
 
     The same task as ``num_envs`` copies of :func:`make_fetch_env` in a ``SerialEnv``
@@ -286,23 +292,40 @@ class FetchEnvs(EnvBase):
         n = (num_envs,)
         self.observation_spec = Composite(
             observation=Unbounded((*n, OBSERVATION_SIZE), dtype=torch.float32, device=self.device),
-            is_success=Binary(n=1, shape=(*n, 1), dtype=torch.bool, device=self.device), shape=n)
+            is_success=Binary(n=1, shape=(*n, 1), dtype=torch.bool, device=self.device),
+            shape=n,
+        )
         space = self.envs[0].action_space
-        self.action_spec = Bounded(torch.as_tensor(space.low).expand(*n, -1).clone(),
-                                   torch.as_tensor(space.high).expand(*n, -1).clone(),
-                                   shape=(*n, space.shape[0]), dtype=torch.float32, device=self.device)
+        self.action_spec = Bounded(
+            torch.as_tensor(space.low).expand(*n, -1).clone(),
+            torch.as_tensor(space.high).expand(*n, -1).clone(),
+            shape=(*n, space.shape[0]),
+            dtype=torch.float32,
+            device=self.device,
+        )
         self.reward_spec = Unbounded((*n, 1), dtype=torch.float32, device=self.device)
-        self.done_spec = Composite({key: Categorical(2, (*n, 1), dtype=torch.bool, device=self.device)
-                                    for key in ("done", "terminated", "truncated")}, shape=n)
+        self.done_spec = Composite(
+            {
+                key: Categorical(2, (*n, 1), dtype=torch.bool, device=self.device)
+                for key in ("done", "terminated", "truncated")
+            },
+            shape=n,
+        )
         self._observation = np.zeros((num_envs, OBSERVATION_SIZE), dtype=np.float32)
         self._success = np.zeros((num_envs, 1), dtype=bool)
         self.lean_steps: list[LeanStep] | None = [LeanStep(env) for env in self.envs] if lean else None
         self._observation64 = np.zeros((num_envs, OBSERVATION_SIZE), dtype=np.float64)
 
     def _out(self, **extra: torch.Tensor) -> TensorDictBase:
-        return TensorDict({"observation": torch.from_numpy(self._observation.copy()),
-                           "is_success": torch.from_numpy(self._success.copy()), **extra},
-                          batch_size=self.batch_size, device=self.device)
+        return TensorDict(
+            {
+                "observation": torch.from_numpy(self._observation.copy()),
+                "is_success": torch.from_numpy(self._success.copy()),
+                **extra,
+            },
+            batch_size=self.batch_size,
+            device=self.device,
+        )
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
         mask = None if tensordict is None else tensordict.get("_reset", None)
@@ -384,12 +407,18 @@ class LeanStep:
 
         fetch_env = env.unwrapped
         model, data = fetch_env.model, fetch_env.data
-        unsupported = {"block_gripper": fetch_env.block_gripper, "has_object": not fetch_env.has_object,
-                       "reward_type": fetch_env.reward_type != "sparse", "render_mode": fetch_env.render_mode,
-                       "nmocap != 1": model.nmocap != 1}
+        unsupported = {
+            "block_gripper": fetch_env.block_gripper,
+            "has_object": not fetch_env.has_object,
+            "reward_type": fetch_env.reward_type != "sparse",
+            "render_mode": fetch_env.render_mode,
+            "nmocap != 1": model.nmocap != 1,
+        }
         if any(unsupported.values()):
-            raise ValueError(f"LeanStep replicates FetchPickAndPlace only; this env differs in "
-                             f"{[k for k, v in unsupported.items() if v]}")
+            raise ValueError(
+                f"LeanStep replicates FetchPickAndPlace only; this env differs in "
+                f"{[k for k, v in unsupported.items() if v]}"
+            )
         self.env, self.fetch_env, self.model, self.data = env, fetch_env, model, data
         self._mj_step, self._jac_site = mujoco.mj_step, mujoco.mj_jacSite
         self._mat2euler, self._distance = rotations.mat2euler, goal_distance
@@ -403,8 +432,10 @@ class LeanStep:
         self.finger_qpos = np.array([model.jnt_qposadr[j] for j in fingers])
         self.finger_dof = np.array([model.jnt_dofadr[j] for j in fingers])
         # ctrl_set_action: a position actuator (bias) targets its joint's position plus the action
-        self.actuators = [(i, None if model.actuator_biastype[i] == 0
-                           else int(model.jnt_qposadr[model.actuator_trnid[i, 0]])) for i in range(model.nu)]
+        self.actuators = [
+            (i, None if model.actuator_biastype[i] == 0 else int(model.jnt_qposadr[model.actuator_trnid[i, 0]]))
+            for i in range(model.nu)
+        ]
         # reset_mocap2body_xpos: every weld puts its mocap at the body welded to it
         self.welds = []
         for eq_type, a, b in zip(model.eq_type, model.eq_obj1id, model.eq_obj2id, strict=True):
@@ -449,8 +480,20 @@ class LeanStep:
         object_velp -= grip_velp
         object_velr = (self.jacr_object @ data.qvel) * dt
         object_rot = self._mat2euler(data.site_xmat[self.object].reshape(3, 3))
-        np.concatenate([grip_pos, object_pos, object_pos - grip_pos, data.qpos[self.finger_qpos], object_rot,
-                        object_velp, object_velr, grip_velp, data.qvel[self.finger_dof] * dt], out=out)
+        np.concatenate(
+            [
+                grip_pos,
+                object_pos,
+                object_pos - grip_pos,
+                data.qpos[self.finger_qpos],
+                object_rot,
+                object_velp,
+                object_velr,
+                grip_velp,
+                data.qvel[self.finger_dof] * dt,
+            ],
+            out=out,
+        )
         distance = self._distance(object_pos, self.fetch_env.goal)
         self.steps += 1
         return -float(distance > self.threshold) + 0.0, bool(distance < self.threshold), self.steps >= self.max_steps
@@ -511,8 +554,10 @@ def _component_of(dim: int) -> str:
     for name, part in COMPONENTS.items():
         if part.start <= dim < part.stop:
             if name not in RANDOM_CENTRE_RANGE:
-                raise ValueError(f"RRS has no range to draw random centres from for observation component {name!r} "
-                                 f"(entry {dim}); it draws over {', '.join(RANDOM_CENTRE_RANGE)}")
+                raise ValueError(
+                    f"RRS has no range to draw random centres from for observation component {name!r} "
+                    f"(entry {dim}); it draws over {', '.join(RANDOM_CENTRE_RANGE)}"
+                )
             return name
     raise ValueError(f"entry {dim} is outside the {OBSERVATION_SIZE}-d observation")
 
@@ -537,4 +582,3 @@ def three_state_aggregation(near: float = 0.05) -> StateAggregation:
     close = Box((0.0, 0.0, 0.0), (near,) * 3, rel)
     anywhere = Box((0.0,), (float("inf"),), (0,))
     return StateAggregation.from_regions([grasped, close, anywhere], OBSERVATION_SIZE)
-

@@ -126,7 +126,9 @@ class GridKernelState(NamedTuple):
     t: np.ndarray  #: ``[N]`` steps into the episode
     transitions: np.ndarray  #: ``[S, 4]`` next state of every state and action
     cells: np.ndarray  #: ``[S, 2]`` (row, column) of every state
-    observed: np.ndarray  #: ``[S, D]`` what the shaping of a compiled loop reads in every state (see :meth:`FourRoomsEnv.kernel_state`)
+    observed: (
+        np.ndarray
+    )  #: ``[S, D]`` what the shaping of a compiled loop reads in every state (see :meth:`FourRoomsEnv.kernel_state`)
     start: int  #: the start state
     goal: int  #: the goal state
     max_steps: int  #: steps before truncation
@@ -190,9 +192,7 @@ class FourRoomsEnv(EnvBase):
         self.goal_reward = float(goal_reward)
         self.step_reward = float(step_reward)
         n = len(_CELLS)
-        moves = [
-            [_STATE.get((r + dr, c + dc), _STATE[(r, c)]) for dr, dc in ACTIONS] for r, c in _CELLS
-        ]
+        moves = [[_STATE.get((r + dr, c + dc), _STATE[(r, c)]) for dr, dc in ACTIONS] for r, c in _CELLS]
         self.transitions = torch.tensor(moves, device=self.device)  # [S, A] next state
         self.cells = torch.tensor(_CELLS, device=self.device)  # [S, 2]
         self.start_state = _STATE[START]
@@ -251,8 +251,14 @@ class FourRoomsEnv(EnvBase):
         truncated = torch.empty((*shape, 1), dtype=torch.bool, device=self.device)
         cell = torch.empty((*shape, 2), dtype=torch.long, device=self.device)
         if self.device.type == "cpu":
-            grid_step(self.kernel_state(), action.numpy(), reward.numpy().reshape(n),
-                               terminated.numpy().reshape(n), truncated.numpy().reshape(n), cell.numpy().reshape(n, 2))
+            grid_step(
+                self.kernel_state(),
+                action.numpy(),
+                reward.numpy().reshape(n),
+                terminated.numpy().reshape(n),
+                truncated.numpy().reshape(n),
+                cell.numpy().reshape(n, 2),
+            )
         else:
             self._state = self.transitions[self._state, action]
             self._t += 1
@@ -294,8 +300,18 @@ class FourRoomsEnv(EnvBase):
         if observation_key not in ("observation", "cell"):
             raise TypeError(f"a compiled loop reads 'cell' or 'observation', not {observation_key!r}")
         observed = self._cells_np if observation_key == "cell" else self._numbers_np
-        return GridKernelState(self._state.numpy(), self._t.numpy(), self._transitions_np, self._cells_np, observed,
-                               self.start_state, self.goal_state, self.max_steps, self.goal_reward, self.step_reward)
+        return GridKernelState(
+            self._state.numpy(),
+            self._t.numpy(),
+            self._transitions_np,
+            self._cells_np,
+            observed,
+            self.start_state,
+            self.goal_state,
+            self.max_steps,
+            self.goal_reward,
+            self.step_reward,
+        )
 
     def shortest_path_length(self) -> int:
         """Steps of the shortest start-to-goal path (breadth-first search; 20)."""

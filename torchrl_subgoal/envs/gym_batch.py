@@ -38,15 +38,18 @@ def require_gymnasium(what: str, *, robotics: bool = False) -> Any:
     try:
         import gymnasium
     except ImportError:
-        raise ImportError(f"{what} needs gymnasium: pip install gymnasium "
-                          "(or the fetch extra: pip install 'torchrl_subgoal[fetch]')") from None
+        raise ImportError(
+            f"{what} needs gymnasium: pip install gymnasium (or the fetch extra: pip install 'torchrl_subgoal[fetch]')"
+        ) from None
     if robotics:
         try:
             import gymnasium_robotics
             import mujoco  # noqa: F401
         except ImportError as exc:
-            raise ImportError(f"{what} needs MuJoCo and gymnasium-robotics ({exc.name} is missing): "
-                              "pip install 'torchrl_subgoal[fetch]'  (or `make install` in a checkout)") from None
+            raise ImportError(
+                f"{what} needs MuJoCo and gymnasium-robotics ({exc.name} is missing): "
+                "pip install 'torchrl_subgoal[fetch]'  (or `make install` in a checkout)"
+            ) from None
         gymnasium.register_envs(gymnasium_robotics)
     return gymnasium
 

@@ -149,9 +149,7 @@ class PinBallEnv(EnvBase):
             raise ValueError(f"max_steps must be at least 1, got {max_steps}")
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         device = self.device
-        self.physics = PinBallPhysics(
-            config, velocity_limit=velocity_limit, backend=backend, device=device
-        )
+        self.physics = PinBallPhysics(config, velocity_limit=velocity_limit, backend=backend, device=device)
         cfg = self.physics.config
         self.config = cfg
         self.ball_radius: float = cfg.ball_radius
@@ -189,9 +187,7 @@ class PinBallEnv(EnvBase):
             shape=(n,),
             device=device,
         )
-        self.action_spec = Categorical(
-            len(ACTION_NAMES), shape=(n,), dtype=torch.int64, device=device
-        )
+        self.action_spec = Categorical(len(ACTION_NAMES), shape=(n,), dtype=torch.int64, device=device)
         self.reward_spec = Unbounded(shape=(n, 1), dtype=torch.float32, device=device)
         self.full_done_spec = Composite(
             done=Categorical(2, shape=(n, 1), dtype=torch.bool, device=device),
@@ -233,8 +229,13 @@ class PinBallEnv(EnvBase):
         action = tensordict.get("action")
         if self.random_action_prob > 0.0:
             executed = np.empty(action.shape[0], np.int64)
-            random_actions(action.cpu().numpy().astype(np.int64), self.streams, self.random_action_prob,
-                                    len(ACTION_NAMES), executed)
+            random_actions(
+                action.cpu().numpy().astype(np.int64),
+                self.streams,
+                self.random_action_prob,
+                len(ACTION_NAMES),
+                executed,
+            )
             action = torch.from_numpy(executed).to(self.device)
         terminated = self.physics.step(self._position, self._velocity, action).unsqueeze(1)
         self._steps += 1
@@ -280,13 +281,28 @@ class PinBallEnv(EnvBase):
         g = self.physics.geometry
         tx, ty, tr = g.target
         return BallKernelState(
-            self._position.numpy(), self._velocity.numpy(), self._steps.numpy(), self.streams, self.start[0],
-            self.start[1], g.edges, g.boxes, g.first_edge, g.ball_radius, tx, ty, tr, self.physics.velocity_limit,
-            self.max_steps, self.random_action_prob, self.goal_reward, self.step_penalty, self.thrust_penalty)
+            self._position.numpy(),
+            self._velocity.numpy(),
+            self._steps.numpy(),
+            self.streams,
+            self.start[0],
+            self.start[1],
+            g.edges,
+            g.boxes,
+            g.first_edge,
+            g.ball_radius,
+            tx,
+            ty,
+            tr,
+            self.physics.velocity_limit,
+            self.max_steps,
+            self.random_action_prob,
+            self.goal_reward,
+            self.step_penalty,
+            self.thrust_penalty,
+        )
 
-    def sample_free_positions(
-        self, n: int, generator: torch.Generator | None = None
-    ) -> torch.Tensor:
+    def sample_free_positions(self, n: int, generator: torch.Generator | None = None) -> torch.Tensor:
         """Draw ``n`` uniform points of the unit square whose target-sized circle is obstacle-free.
 
         Used to draw random subgoals: a point is kept when its circle of the
@@ -305,16 +321,12 @@ class PinBallEnv(EnvBase):
         for _ in range(10_000):
             if count >= n:
                 break
-            points = torch.rand(
-                max(2 * (n - count), 64), 2, generator=generator, dtype=torch.float64
-            )
+            points = torch.rand(max(2 * (n - count), 64), 2, generator=generator, dtype=torch.float64)
             points = points[_circles_free(points, radius, self.config)]
             kept.append(points)
             count += points.shape[0]
         else:
-            raise RuntimeError(
-                f"{self.config.source}: found no obstacle-free circle of radius {radius}"
-            )
+            raise RuntimeError(f"{self.config.source}: found no obstacle-free circle of radius {radius}")
         return torch.cat(kept)[:n].to(device=self.device, dtype=torch.float32)
 
 

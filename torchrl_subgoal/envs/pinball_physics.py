@@ -75,10 +75,7 @@ class PinBallConfig:
             return config
         path = _DATA_DIR / f"{config}.cfg" if config in _NAMED_CONFIGS else Path(config)
         if not path.is_file():
-            raise ValueError(
-                f"PinBall config {str(config)!r} is neither one of {_NAMED_CONFIGS} "
-                f"nor an existing file"
-            )
+            raise ValueError(f"PinBall config {str(config)!r} is neither one of {_NAMED_CONFIGS} nor an existing file")
         return cls.parse(path.read_text(), source=str(path))
 
     @classmethod
@@ -109,9 +106,7 @@ class PinBallConfig:
                 if keyword in values:
                     raise fail(f"second {keyword!r} line (first on line {lines[keyword]})")
                 if len(numbers) != arity[keyword]:
-                    raise fail(
-                        f"{keyword!r} expects {arity[keyword]} number(s), got {len(numbers)}"
-                    )
+                    raise fail(f"{keyword!r} expects {arity[keyword]} number(s), got {len(numbers)}")
                 values[keyword], lines[keyword] = numbers, number
             elif keyword == "polygon":
                 if len(numbers) % 2:
@@ -171,9 +166,7 @@ def point_in_polygon(point: tuple[float, float], vertices: Sequence[tuple[float,
     return inside
 
 
-def _circle_hits_polygon(
-    centre: tuple[float, float], radius: float, vertices: Sequence[tuple[float, float]]
-) -> bool:
+def _circle_hits_polygon(centre: tuple[float, float], radius: float, vertices: Sequence[tuple[float, float]]) -> bool:
     """Whether a circle overlaps a polygon (centre inside, or an edge closer than ``radius``)."""
     if point_in_polygon(centre, vertices):
         return True
@@ -207,9 +200,7 @@ class _Geometry:
         length = np.hypot(d[:, 0], d[:, 1])  # > 0: the parser rejects repeated vertices
         normal = np.stack([-d[:, 1], d[:, 0]], axis=1) / length[:, None]
         # Per edge: start x, y; direction x, y; 1 / |direction|²; unit normal x, y.
-        self.edges = np.ascontiguousarray(
-            np.concatenate([a, d, (1.0 / length**2)[:, None], normal], 1)
-        )
+        self.edges = np.ascontiguousarray(np.concatenate([a, d, (1.0 / length**2)[:, None], normal], 1))
         sizes = [len(vertices) for vertices in config.polygons]
         self.first_edge = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.boxes = np.array(
@@ -227,9 +218,21 @@ class _Geometry:
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def step_ball(
-    px: float, py: float, vx: float, vy: float, a: int, edges: np.ndarray, boxes: np.ndarray, first_edge: np.ndarray,
-    ball_radius: float, target_x: float, target_y: float, target_radius: float, velocity_limit: float,
-    candidates: np.ndarray, owners: np.ndarray,
+    px: float,
+    py: float,
+    vx: float,
+    vy: float,
+    a: int,
+    edges: np.ndarray,
+    boxes: np.ndarray,
+    first_edge: np.ndarray,
+    ball_radius: float,
+    target_x: float,
+    target_y: float,
+    target_radius: float,
+    velocity_limit: float,
+    candidates: np.ndarray,
+    owners: np.ndarray,
 ) -> tuple[float, float, float, float, bool]:
     """One environment step of one ball: ``(x, y, vx, vy, reached the target)`` (compiled by numba).
 
@@ -271,12 +274,7 @@ def step_ball(
     reach = ball_radius + (SUBSTEPS + 1) * move * math.sqrt(vx * vx + vy * vy) + 1e-9
     count = 0
     for p in range(boxes.shape[0]):
-        if (
-            px + reach < boxes[p, 0]
-            or py + reach < boxes[p, 1]
-            or px - reach > boxes[p, 2]
-            or py - reach > boxes[p, 3]
-        ):
+        if px + reach < boxes[p, 0] or py + reach < boxes[p, 1] or px - reach > boxes[p, 2] or py - reach > boxes[p, 3]:
             continue
         for e in range(first_edge[p], first_edge[p + 1]):
             ax, ay = edges[e, 0], edges[e, 1]
@@ -376,8 +374,13 @@ _NUM_ACTIONS, _NO_THRUST = len(ACTION_NAMES), ACTION_NAMES.index("none")  # ints
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def ball_step(balls: BallKernelState, b: int, a: int, candidates: np.ndarray, owners: np.ndarray,
-              ) -> tuple[float, float, float, float, np.float32, bool, bool]:
+def ball_step(
+    balls: BallKernelState,
+    b: int,
+    a: int,
+    candidates: np.ndarray,
+    owners: np.ndarray,
+) -> tuple[float, float, float, float, np.float32, bool, bool]:
     """Ball ``b``'s env step with action ``a`` (``balls`` updated in place), as :meth:`PinBallEnv.step` does it:
     ``(x, y, vx, vy, reward as float32, terminated, done)``. ``candidates``, ``owners``: :func:`step_ball`'s scratch.
 
@@ -392,9 +395,22 @@ def ball_step(balls: BallKernelState, b: int, a: int, candidates: np.ndarray, ow
     """
     executed = _random_action(a, balls.streams, b, balls.random_prob, _NUM_ACTIONS)
     px, py, vx, vy, terminated = step_ball(
-        balls.position[b, 0], balls.position[b, 1], balls.velocity[b, 0], balls.velocity[b, 1], executed,
-        balls.edges, balls.boxes, balls.first_edge, balls.ball_radius, balls.target_x, balls.target_y,
-        balls.target_radius, balls.velocity_limit, candidates, owners)
+        balls.position[b, 0],
+        balls.position[b, 1],
+        balls.velocity[b, 0],
+        balls.velocity[b, 1],
+        executed,
+        balls.edges,
+        balls.boxes,
+        balls.first_edge,
+        balls.ball_radius,
+        balls.target_x,
+        balls.target_y,
+        balls.target_radius,
+        balls.velocity_limit,
+        candidates,
+        owners,
+    )
     balls.position[b, 0], balls.position[b, 1] = px, py
     balls.velocity[b, 0], balls.velocity[b, 1] = vx, vy
     balls.steps[b] += 1
@@ -444,8 +460,12 @@ def _ball_observe(env: BallKernelState, b: int, scratch: tuple[np.ndarray, ...])
 
 
 @steps.implements(steps.env_step, BallKernelState)
-def _ball_env_step(env: BallKernelState, b: int, a: int, scratch: tuple[np.ndarray, ...],
-                   ) -> tuple[np.ndarray, np.float32, bool, bool]:
+def _ball_env_step(
+    env: BallKernelState,
+    b: int,
+    a: int,
+    scratch: tuple[np.ndarray, ...],
+) -> tuple[np.ndarray, np.float32, bool, bool]:
     px, py, vx, vy, reward, terminated, done = ball_step(env, b, a, scratch[3], scratch[4])
     return _observation(scratch[1], px, py, vx, vy), reward, terminated, done
 
@@ -480,8 +500,21 @@ def _step_balls(
     owners = np.empty(edges.shape[0], dtype=np.int64)
     for i in range(position.shape[0]):
         px, py, vx, vy, done = step_ball(
-            position[i, 0], position[i, 1], velocity[i, 0], velocity[i, 1], action[i], edges, boxes, first_edge,
-            ball_radius, target_x, target_y, target_radius, velocity_limit, candidates, owners,
+            position[i, 0],
+            position[i, 1],
+            velocity[i, 0],
+            velocity[i, 1],
+            action[i],
+            edges,
+            boxes,
+            first_edge,
+            ball_radius,
+            target_x,
+            target_y,
+            target_radius,
+            velocity_limit,
+            candidates,
+            owners,
         )
         position[i, 0], position[i, 1] = px, py
         velocity[i, 0], velocity[i, 1] = vx, vy
@@ -628,9 +661,7 @@ class PinBallPhysics:
         self.velocity_limit = float(velocity_limit)
         self.geometry = _Geometry(self.config, self.device)
 
-    def step(
-        self, position: torch.Tensor, velocity: torch.Tensor, action: torch.Tensor
-    ) -> torch.Tensor:
+    def step(self, position: torch.Tensor, velocity: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """Advance every ball by one environment step.
 
         Args:

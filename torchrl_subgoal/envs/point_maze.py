@@ -237,8 +237,7 @@ def _make_single(task: PointMazeTask) -> Any:
             obs, reward, terminated, truncated, info = self.env.step(action)
             return obs["observation"].astype(np.float32), float(reward), terminated, truncated, info
 
-    env = gymnasium.make(_ENV_IDS[task.maze], maze_map=task.maze_map(), continuing_task=False,
-                         reward_type="sparse")
+    env = gymnasium.make(_ENV_IDS[task.maze], maze_map=task.maze_map(), continuing_task=False, reward_type="sparse")
     return FixedTask(env, task.seed)
 
 

@@ -26,8 +26,7 @@ from torchrl.envs import EnvBase
 from torchrl_subgoal.envs.gym_batch import gym_batch, require_gymnasium
 from torchrl_subgoal.subgoals import SubgoalSeries
 
-__all__ = ["ENV_ID", "MAX_EPISODE_STEPS", "at_destination", "decode", "make_taxi", "passenger_in_taxi",
-           "taxi_subgoals"]
+__all__ = ["ENV_ID", "MAX_EPISODE_STEPS", "at_destination", "decode", "make_taxi", "passenger_in_taxi", "taxi_subgoals"]
 
 ENV_ID = "Taxi-v4"
 #: gymnasium's time limit.

@@ -97,8 +97,11 @@ def _one_line(event: tyro_errors.ParseErrorEvent) -> None:
     if isinstance(event, tyro_errors.InstantiationFailure) and event.argument is not None:
         raise _UsageError(f"{_argument(event)}: {event.message}")
     if isinstance(event, tyro_errors.BadValue):
-        problem = "expected one argument" if event.reason == "too_few_values" else \
-            f"ignored explicit argument {event.offending_value!r}"
+        problem = (
+            "expected one argument"
+            if event.reason == "too_few_values"
+            else f"ignored explicit argument {event.offending_value!r}"
+        )
         raise _UsageError(f"{_argument(event)}: {problem}")
     if isinstance(event, tyro_errors.UnrecognizedArgs):
         raise _UsageError(f"unrecognized arguments: {' '.join(event.tokens)}")
@@ -118,7 +121,9 @@ def _parsed_as(kind: type) -> Callable[[list[str]], Any]:
 def _number(kind: type, metavar: str) -> Any:
     """A ``tyro`` spec for an int or float flag whose bad value reads as argparse's ``invalid int value: 'x'``."""
     return tyro.constructors.PrimitiveConstructorSpec(
-        nargs=1, metavar=metavar, instance_from_str=_parsed_as(kind),
+        nargs=1,
+        metavar=metavar,
+        instance_from_str=_parsed_as(kind),
         is_instance=lambda value: isinstance(value, kind) and not isinstance(value, bool),
         str_from_instance=lambda value: [str(value)],
     )
@@ -166,8 +171,12 @@ def parse_config(cls: type[T], argv: Sequence[str] | None = None, description: s
     prog = os.path.basename(sys.argv[0])
     try:
         with tyro_errors.on_parse_error(_one_line):
-            parsed: Any = tyro.cli(flags, args=list(argv) if argv is not None else None, prog=prog,
-                                   description=description or (cls.__doc__ or "").strip().splitlines()[0])
+            parsed: Any = tyro.cli(
+                flags,
+                args=list(argv) if argv is not None else None,
+                prog=prog,
+                description=description or (cls.__doc__ or "").strip().splitlines()[0],
+            )
     except _UsageError as exc:
         print(f"error: {exc} (see {prog} --help)", file=sys.stderr)
         raise SystemExit(2) from None

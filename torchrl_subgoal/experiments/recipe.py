@@ -77,8 +77,12 @@ def fail(exc: BaseException) -> int:
 
 
 def pattern_sets(
-    human: Mapping[str, SubgoalSeries], candidates: Sequence[Predicate], num_random: int, seed: int,
-    *, random_needed: bool = True,
+    human: Mapping[str, SubgoalSeries],
+    candidates: Sequence[Predicate],
+    num_random: int,
+    seed: int,
+    *,
+    random_needed: bool = True,
 ) -> PatternSets:
     """The patterns by kind: ``human`` (as given), ``random`` (RRS, seeded, as long as the longest human one).
 
@@ -115,8 +119,10 @@ def pattern_sets(
             f"than the {len(candidates)} candidate subgoals random patterns (RRS) of that length are drawn from"
         )
     source = f"random patterns (seed {seed})"
-    rand = [SubgoalSeries(p.predicates, name=p.name, source=source)
-            for p in random_patterns(candidates, num_random, num_subgoals, seed=seed)]
+    rand = [
+        SubgoalSeries(p.predicates, name=p.name, source=source)
+        for p in random_patterns(candidates, num_random, num_subgoals, seed=seed)
+    ]
     return {"human": dict(human), "random": {p.name: p for p in rand}, "none": {}}
 
 
@@ -147,8 +153,9 @@ def check_methods(methods: Mapping[str, Method] | Sequence[str], names: Sequence
     repeated = sorted({n for n in names if names.count(n) > 1}, key=list(names).index)
     if repeated:
         twice = " and ".join(repeated)
-        raise ConfigError(f"--methods: {twice} {'is' if len(repeated) == 1 else 'are'} named twice; "
-                          "name each method once")
+        raise ConfigError(
+            f"--methods: {twice} {'is' if len(repeated) == 1 else 'are'} named twice; name each method once"
+        )
     return list(names)
 
 
@@ -289,8 +296,9 @@ def chunk_patterns(chunk: Chunk, config: Mapping[str, Any]) -> tuple[list[Subgoa
     """
     names = sorted({pattern for pattern, _ in chunk.learners})
     sources = config.get("pattern_sources") or {}
-    series = [SubgoalSeries.from_dict(config["patterns"][n], name=n, source=sources.get(n))
-              for n in names if n != "none"]
+    series = [
+        SubgoalSeries.from_dict(config["patterns"][n], name=n, source=sources.get(n)) for n in names if n != "none"
+    ]
     return series, torch.tensor([names.index(p) for p, _ in chunk.learners])
 
 
@@ -325,19 +333,34 @@ def sweep_and_report(
     """
     from torchrl_subgoal.experiments.report import write_report
 
-    for flag, value, low in (("seed", seed, 0), ("chunk_size", chunk_size, 1), ("episodes", episodes, 1),
-                             ("workers", workers, 0)):
+    for flag, value, low in (
+        ("seed", seed, 0),
+        ("chunk_size", chunk_size, 1),
+        ("episodes", episodes, 1),
+        ("workers", workers, 0),
+    ):
         if value < low:
             raise ConfigError(f"--{flag.replace('_', '-')}: must be >= {low}, got {value}")
     if not results.strip():
         raise ConfigError("--results: give a directory")
-    sweep = Sweep(domain, results, specs, run_chunk, config, seed=seed, chunk_size=chunk_size,
-                  n_episodes=episodes, overwrite=overwrite)
+    sweep = Sweep(
+        domain,
+        results,
+        specs,
+        run_chunk,
+        config,
+        seed=seed,
+        chunk_size=chunk_size,
+        n_episodes=episodes,
+        overwrite=overwrite,
+    )
     try:
         sweep.run(backend=backend, workers=workers)
     except KeyboardInterrupt:
-        print(f"interrupted: finished chunks are saved in {results}; run the same command again to resume",
-              file=sys.stderr)
+        print(
+            f"interrupted: finished chunks are saved in {results}; run the same command again to resume",
+            file=sys.stderr,
+        )
         return 130
     report = write_report(results)
     print(report.markdown)
@@ -406,19 +429,31 @@ class ReproductionConfig(RecipeConfig):
     subgoals: str = setting("", "subgoal file of the human patterns (HRS, NRS)")
     random_patterns: int = setting(10, "random subgoal patterns for RRS (paper: 10)")
     eta: float = setting(1.0, "NRS potential η")
-    zero_terminal_potential: bool = setting(False, "Φ = 0 at the goal (exact policy invariance); the authors "
-                                            "shape the goal step with γΦ(z_T)")
-    start_potential: str = setting("value", "level of Φ: value (Φ = V, the authors), zero (Φ(z_0) = 0) or "
-                                   "nonpositive (Φ(z_0) = min(V(z_0), 0), the library default)",
-                                   choices=["value", "zero", "nonpositive"])
-    expectile: float = setting(0.5, "τ of the learned potential's TD target: 0.5 the mean (the authors), 0.9 the "
-                               "library default")
-    bootstrap_truncated: bool = setting(True, "train V(z) on a time-out inside z (this engine's reproductions; the "
-                                        "library default skips it)")
-    engine: str = setting("fused", "fused: one compiled loop; torchrl: step_and_maybe_reset (identical results)",
-                          choices=["fused", "torchrl"])
-    chunk_size: int = setting(100, "learners per batch (results do not depend on it; small chunks keep both "
-                              "workers busy to the end and resume finer)")
+    zero_terminal_potential: bool = setting(
+        False, "Φ = 0 at the goal (exact policy invariance); the authors shape the goal step with γΦ(z_T)"
+    )
+    start_potential: str = setting(
+        "value",
+        "level of Φ: value (Φ = V, the authors), zero (Φ(z_0) = 0) or "
+        "nonpositive (Φ(z_0) = min(V(z_0), 0), the library default)",
+        choices=["value", "zero", "nonpositive"],
+    )
+    expectile: float = setting(
+        0.5, "τ of the learned potential's TD target: 0.5 the mean (the authors), 0.9 the library default"
+    )
+    bootstrap_truncated: bool = setting(
+        True, "train V(z) on a time-out inside z (this engine's reproductions; the library default skips it)"
+    )
+    engine: str = setting(
+        "fused",
+        "fused: one compiled loop; torchrl: step_and_maybe_reset (identical results)",
+        choices=["fused", "torchrl"],
+    )
+    chunk_size: int = setting(
+        100,
+        "learners per batch (results do not depend on it; small chunks keep both "
+        "workers busy to the end and resume finer)",
+    )
 
     AT_LEAST_ONE: ClassVar[tuple[str, ...]] = ("episodes", "learnings", "random_patterns", "chunk_size")
 
@@ -438,8 +473,12 @@ def sweep_entries(cfg: RecipeConfig, subgoal_file: str, patterns: PatternSets) -
         >>> sorted(sweep_entries(RecipeConfig(), "alice.yaml", sets))
         ['pattern_sources', 'patterns', 'seed', 'subgoal_file']
     """
-    return {"seed": cfg.seed, "subgoal_file": subgoal_file, "patterns": pattern_config(patterns),
-            "pattern_sources": pattern_sources(patterns)}
+    return {
+        "seed": cfg.seed,
+        "subgoal_file": subgoal_file,
+        "patterns": pattern_config(patterns),
+        "pattern_sources": pattern_sources(patterns),
+    }
 
 
 @dataclass
@@ -479,8 +518,9 @@ def config_main(
     errors: tuple[type[BaseException], ...] = RECIPE_ERRORS,
 ) -> int:
     """A script's ``main``: parse the flags into ``config_cls`` and ``run`` it; its exit code, or a
-    one-line error on stderr (see :func:`fail`; a bad flag exits with code 2, as argparse does). :func:`recipe_main` is this with a sweep and its report as ``run``;
-    a script that prints something else (``recipes/four_rooms_greedy.py``) uses this directly.
+    one-line error on stderr (see :func:`fail`; a bad flag exits with code 2, as argparse does).
+    :func:`recipe_main` is this with a sweep and its report as ``run``; a script that prints something else
+    (``recipes/four_rooms_greedy.py``) uses this directly.
 
     Args:
         config_cls: the settings, a dataclass of :func:`~torchrl_subgoal.experiments.cli.setting` fields.
@@ -535,8 +575,18 @@ def recipe_main(
 
     def run(cfg: C) -> int:
         sweep = plan(cfg)
-        return sweep_and_report(sweep.domain, sweep.results or cfg.results, sweep.specs, sweep.run_chunk,
-                                sweep.config, seed=cfg.seed, chunk_size=sweep.chunk_size, episodes=sweep.episodes,
-                                overwrite=cfg.overwrite, backend=cfg.backend, workers=cfg.workers)
+        return sweep_and_report(
+            sweep.domain,
+            sweep.results or cfg.results,
+            sweep.specs,
+            sweep.run_chunk,
+            sweep.config,
+            seed=cfg.seed,
+            chunk_size=sweep.chunk_size,
+            episodes=sweep.episodes,
+            overwrite=cfg.overwrite,
+            backend=cfg.backend,
+            workers=cfg.workers,
+        )
 
     return config_main(config_cls, run, argv, description=description, threads=threads, errors=errors)

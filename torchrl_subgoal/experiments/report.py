@@ -162,9 +162,7 @@ def _measure(
     methods: dict[str, Any] = {}
     for i, (name, x) in enumerate(scores.items()):
         boot_seed = int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
-        low, high = stats.stratified_bootstrap_ci(
-            x, strata[name], n_boot=n_boot, confidence=confidence, seed=boot_seed
-        )
+        low, high = stats.stratified_bootstrap_ci(x, strata[name], n_boot=n_boot, confidence=confidence, seed=boot_seed)
         methods[name] = {
             "n": int(x.size),
             "mean": _clean(float(x.mean())),
@@ -234,15 +232,11 @@ def summarize(
     thresholds = []
     for k, threshold in enumerate(spec.thresholds):
         times = {
-            name: stats.time_to_threshold(
-                c, threshold, window=spec.window, lower_is_better=spec.lower_is_better
-            )
+            name: stats.time_to_threshold(c, threshold, window=spec.window, lower_is_better=spec.lower_is_better)
             for name, c in curves.items()
         }
         scores = {name: t.episodes.astype(np.float64) for name, t in times.items()}
-        entry = _measure(
-            scores, strata, lower_is_better=True, n_boot=n_boot, confidence=confidence, seed=seed + 1 + k
-        )
+        entry = _measure(scores, strata, lower_is_better=True, n_boot=n_boot, confidence=confidence, seed=seed + 1 + k)
         for name, t in times.items():
             entry["methods"][name]["not_reached"] = t.n_not_reached
         thresholds.append({"threshold": threshold, **entry})
@@ -290,7 +284,7 @@ def summarize(
 def _num(value: float | None, digits: int = 3) -> str:
     if value is None:
         return "—"
-    return f"{value:.{digits}g}" if abs(value) < 10 ** digits else f"{value:.0f}"
+    return f"{value:.{digits}g}" if abs(value) < 10**digits else f"{value:.0f}"
 
 
 def _pvalue(value: float | None) -> str:
@@ -431,7 +425,8 @@ def render_markdown(
     out += ["", "## Notes", ""]
     out += [
         f"- IQM: mean of the middle 50% of learners; CI: {boot['confidence']:.0%} percentile interval "
-        f"of a bootstrap stratified by subgoal pattern, patterns of one learner pooled ({boot['n_boot']} samples, seed {boot['seed']}), "
+        f"of a bootstrap stratified by subgoal pattern, patterns of one learner pooled "
+        f"({boot['n_boot']} samples, seed {boot['seed']}), "
         "after Agarwal et al. (2021), *Deep RL at the Edge of the Statistical Precipice*.",
         "- Probability of improvement: P(X better than Y) over random learner pairs, ties ½ "
         f"(Agarwal et al. 2021). For times to threshold, fewer {unit}s is better.",
@@ -494,8 +489,10 @@ def write_report(
         unit=spec.unit,
     )
     maps = plot_pattern_maps(  # a sweep named after its recipe (a2c_four_rooms) names its map's domain
-        str(results.config.get("domain", results.domain)), results.config.get("patterns") or {},
-        out / PATTERNS_FILE, options=spec.map,
+        str(results.config.get("domain", results.domain)),
+        results.config.get("patterns") or {},
+        out / PATTERNS_FILE,
+        options=spec.map,
     )
     for caption, figure in (("learning curves", curves), ("subgoal patterns", maps)):
         if figure.path is not None:
@@ -556,9 +553,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="output directory (default: RESULTS_DIR)")
     parser.add_argument("--n-boot", type=int, default=2000, help=f"bootstrap samples, 1 to {MAX_BOOT} (default 2000)")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
-    parser.add_argument(
-        "--allow-incomplete", action="store_true", help="report on an unfinished sweep's chunks"
-    )
+    parser.add_argument("--allow-incomplete", action="store_true", help="report on an unfinished sweep's chunks")
     args = parser.parse_args(argv)
     if not 1 <= args.n_boot <= MAX_BOOT:
         parser.error(f"--n-boot: must lie in [1, {MAX_BOOT}], got {args.n_boot}")
@@ -566,8 +561,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"--seed: must be >= 0, got {args.seed}")
     start = time.perf_counter()
     if args.allow_incomplete and ResultsStore(args.results_dir).sweep_running():
-        print(f"warning: a sweep is running into {args.results_dir}; this report covers the chunks it has "
-              "finished so far", file=sys.stderr)
+        print(
+            f"warning: a sweep is running into {args.results_dir}; this report covers the chunks it has "
+            "finished so far",
+            file=sys.stderr,
+        )
     try:
         output = write_report(
             args.results_dir,

@@ -299,9 +299,7 @@ class Results:
         results = list(self.methods.values())
         sizes = [res.table.steps.size for res in results]
         episodes = [res.table.n_episodes for res in results]
-        patterns, pattern_codes = np.unique(
-            np.concatenate([res.patterns for res in results]), return_inverse=True
-        )
+        patterns, pattern_codes = np.unique(np.concatenate([res.patterns for res in results]), return_inverse=True)
         method_codes = np.repeat(np.arange(len(results)), sizes)
         frame = pd.DataFrame(
             {
@@ -310,9 +308,7 @@ class Results:
                     np.repeat(pattern_codes, np.repeat(episodes, [r.table.n_learners for r in results])),
                     categories=pd.Index(patterns.tolist()),
                 ),
-                "learning": np.concatenate(
-                    [np.repeat(r.learnings, r.table.n_episodes) for r in results]
-                ),
+                "learning": np.concatenate([np.repeat(r.learnings, r.table.n_episodes) for r in results]),
                 "episode": np.concatenate(
                     [np.tile(np.arange(1, e + 1), r.table.n_learners) for r, e in zip(results, episodes, strict=True)]
                 ),

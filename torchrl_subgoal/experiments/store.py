@@ -60,8 +60,17 @@ _CHUNK_FILE = re.compile(r"^[0-9]{5,}\.parquet(\.corrupt)?$")
 #: Fields of config.json that define an experiment; a mismatch on any is an error.
 IDENTITY_FIELDS = ("domain", "methods", "config", "seed", "chunk_size", "n_episodes", "chunks")
 
-__all__ = ["ResultsStore", "check_method_name", "collect_versions", "diff_fields", "load_frame", "load_results",
-           "open_manifest", "planned_chunks", "to_json_data"]
+__all__ = [
+    "ResultsStore",
+    "check_method_name",
+    "collect_versions",
+    "diff_fields",
+    "load_frame",
+    "load_results",
+    "open_manifest",
+    "planned_chunks",
+    "to_json_data",
+]
 
 
 def check_method_name(name: str) -> str:
@@ -77,8 +86,7 @@ def check_method_name(name: str) -> str:
     """
     if not _METHOD_NAME.match(name):
         raise ValueError(
-            f"method name {name!r} must start with a letter or digit and use only "
-            "letters, digits and _ . + -"
+            f"method name {name!r} must start with a letter or digit and use only letters, digits and _ . + -"
         )
     return name
 
@@ -120,7 +128,9 @@ def diff_fields(stored: Any, requested: Any, prefix: str = "") -> list[str]:
     """Dotted paths where two JSON values differ, e.g. ``['config.lr', 'seed']``.
 
     Examples:
-        >>> diff_fields({"config": {"lr": 0.1, "gamma": 0.99}, "seed": 0}, {"config": {"lr": 0.2, "gamma": 0.99}, "seed": 1})
+        >>> old = {"config": {"lr": 0.1, "gamma": 0.99}, "seed": 0}
+        >>> new = {"config": {"lr": 0.2, "gamma": 0.99}, "seed": 1}
+        >>> diff_fields(old, new)
         ['config.lr', 'seed']
     """
     if isinstance(stored, dict) and isinstance(requested, dict):
@@ -246,9 +256,7 @@ class ResultsStore:
     def write_chunk(self, chunk: Chunk, table: EpisodeTable) -> Path:
         """Write one finished chunk atomically; returns its path."""
         if table.n_learners != chunk.n_learners:
-            raise ValueError(
-                f"chunk {chunk.name} has {chunk.n_learners} learners, its table {table.n_learners} rows"
-            )
+            raise ValueError(f"chunk {chunk.name} has {chunk.n_learners} learners, its table {table.n_learners} rows")
         n, e = table.steps.shape
         names, codes = np.unique([pattern for pattern, _ in chunk.learners], return_inverse=True)
         pattern_column = pa.DictionaryArray.from_arrays(
@@ -314,9 +322,7 @@ class ResultsStore:
             learning = data.column("learning").to_numpy()[::n_episodes] if n_episodes else []
         except (KeyError, ValueError, pa.ArrowException) as exc:
             raise CorruptChunkError(path, f"missing or malformed columns ({exc})") from exc
-        if not (episode == np.arange(1, n_episodes + 1)).all() or list(learning) != [
-            lrn for _, lrn in chunk.learners
-        ]:
+        if not (episode == np.arange(1, n_episodes + 1)).all() or list(learning) != [lrn for _, lrn in chunk.learners]:
             raise CorruptChunkError(path, "episode or learning columns do not match the identity")
         return EpisodeTable(steps, returns, success)
 
@@ -454,7 +460,12 @@ def _is_temp(path: Path) -> bool:
 def _manifest_problem(data: Mapping[str, Any]) -> str | None:
     """What is wrong with a parsed ``config.json`` of the right format, if anything."""
     kinds: dict[str, type | tuple[type, ...]] = {
-        "domain": str, "methods": list, "config": dict, "seed": int, "chunk_size": int, "chunks": list,
+        "domain": str,
+        "methods": list,
+        "config": dict,
+        "seed": int,
+        "chunk_size": int,
+        "chunks": list,
     }
     for key, kind in kinds.items():
         if not isinstance(data.get(key), kind):
@@ -539,9 +550,7 @@ def load_results(
     wanted = known if methods is None else list(methods)
     unknown = [name for name in wanted if name not in known]
     if unknown:
-        raise results.UnknownMethodError(
-            f"unknown method(s) {unknown} for {store.root}; it holds {known}"
-        )
+        raise results.UnknownMethodError(f"unknown method(s) {unknown} for {store.root}; it holds {known}")
     by_method: dict[str, list[tuple[Chunk, EpisodeTable]]] = {name: [] for name in wanted}
     missing = []
     for chunk in planned_chunks(manifest):
@@ -553,8 +562,7 @@ def load_results(
             missing.append(chunk.name)
     if missing and not allow_incomplete:
         raise results.IncompleteResultsError(
-            f"{store.root}: {len(missing)} chunk(s) not computed yet (e.g. {missing[0]}); "
-            "re-run the sweep to finish it"
+            f"{store.root}: {len(missing)} chunk(s) not computed yet (e.g. {missing[0]}); re-run the sweep to finish it"
         )
     loaded = {}
     for name, parts in by_method.items():

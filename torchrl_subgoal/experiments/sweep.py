@@ -80,9 +80,7 @@ class RunChunk(Protocol):
         (2, 3, [6])
     """
 
-    def __call__(
-        self, chunk: Chunk, config: Mapping[str, Any], progress: Progress, /
-    ) -> EpisodeTable: ...
+    def __call__(self, chunk: Chunk, config: Mapping[str, Any], progress: Progress, /) -> EpisodeTable: ...
 
 
 class ChunkFailedError(RuntimeError):
@@ -198,11 +196,16 @@ def learner_seeds(seed: int, chunk: Chunk) -> np.ndarray:
         True
     """
     method_key = _name_key(chunk.method)
-    return np.array([
-        np.random.SeedSequence(entropy=seed, spawn_key=(method_key, _name_key(pattern), learning))
-        .generate_state(1, np.uint64)[0] >> np.uint64(1)
-        for pattern, learning in chunk.learners
-    ], dtype=np.int64)
+    return np.array(
+        [
+            np.random.SeedSequence(entropy=seed, spawn_key=(method_key, _name_key(pattern), learning)).generate_state(
+                1, np.uint64
+            )[0]
+            >> np.uint64(1)
+            for pattern, learning in chunk.learners
+        ],
+        dtype=np.int64,
+    )
 
 
 def _name_key(name: str) -> int:
@@ -339,9 +342,7 @@ def _failure(chunk: Chunk, exc: BaseException) -> ChunkFailedError:
 Finished = Generator[tuple[Chunk, EpisodeTable], None, None]
 
 
-def _run_inline(
-    chunks: Sequence[Chunk], run_chunk: RunChunk, config: Mapping[str, Any], bar: _ProgressBar
-) -> Finished:
+def _run_inline(chunks: Sequence[Chunk], run_chunk: RunChunk, config: Mapping[str, Any], bar: _ProgressBar) -> Finished:
     for chunk in chunks:
         progress = _ThrottledProgress(chunk.name, lambda msg: bar.add(*msg))
         try:
@@ -437,9 +438,7 @@ def _connect_ray(workers: int) -> tuple[Any, bool]:
     try:
         import ray
     except ImportError as exc:
-        raise ImportError(
-            "backend='ray' needs Ray: pip install 'torchrl_subgoal[ray]'"
-        ) from exc
+        raise ImportError("backend='ray' needs Ray: pip install 'torchrl_subgoal[ray]'") from exc
     if ray.is_initialized():
         return ray, False
     if os.environ.get("RAY_ADDRESS") == "local":  # a fresh instance, whatever else runs here
@@ -622,11 +621,7 @@ class Sweep:
                     f"{root} holds results of domain {stored['domain']!r}, not {self.domain!r}; "
                     "choose another results dir (or pass overwrite to discard them)"
                 )
-            differing = [
-                path
-                for key in IDENTITY_FIELDS
-                for path in diff_fields(stored.get(key), requested[key], key)
-            ]
+            differing = [path for key in IDENTITY_FIELDS for path in diff_fields(stored.get(key), requested[key], key)]
             if differing:
                 shown = ", ".join(differing[:12]) + (" ..." if len(differing) > 12 else "")
                 raise ConfigMismatchError(
@@ -679,8 +674,7 @@ class Sweep:
             raise TypeError(f"run_chunk returned {type(table).__name__} for {chunk.name}, not EpisodeTable")
         if table.n_learners != chunk.n_learners:
             raise ValueError(
-                f"run_chunk returned {table.n_learners} rows for {chunk.name}, "
-                f"which has {chunk.n_learners} learners"
+                f"run_chunk returned {table.n_learners} rows for {chunk.name}, which has {chunk.n_learners} learners"
             )
         if self.n_episodes is not None and table.n_episodes != self.n_episodes:
             raise ValueError(

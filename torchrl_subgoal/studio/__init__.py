@@ -33,7 +33,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ImportError as exc:
         import sys
 
-        print(f"error: the studio needs Flask ({exc}); install it with: pip install 'torchrl_subgoal[web]'",
-              file=sys.stderr)
+        print(
+            f"error: the studio needs Flask ({exc}); install it with: pip install 'torchrl_subgoal[web]'",
+            file=sys.stderr,
+        )
         return 2
     return serve_main(argv)

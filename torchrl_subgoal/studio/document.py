@@ -43,7 +43,14 @@ from torchrl_subgoal.subgoals import (
 )
 
 __all__ = [
-    "Drawing", "RequestError", "file_path", "parse_json", "read_drawing", "read_file", "save_drawing", "to_document",
+    "Drawing",
+    "RequestError",
+    "file_path",
+    "parse_json",
+    "read_drawing",
+    "read_file",
+    "save_drawing",
+    "to_document",
 ]
 
 MAX_REQUEST_BYTES = 256 * 1024
@@ -159,8 +166,9 @@ def _check_values(data: Any) -> None:
             try:
                 value.encode("utf-8")
             except UnicodeEncodeError as exc:
-                raise RequestError(f"request: a string holds {value[exc.start]!r}, which is not a character "
-                                   "(a lone surrogate)") from None
+                raise RequestError(
+                    f"request: a string holds {value[exc.start]!r}, which is not a character (a lone surrogate)"
+                ) from None
 
 
 def file_name(name: str) -> str:
@@ -172,7 +180,7 @@ def file_name(name: str) -> str:
         >>> file_name("../etc/passwd")
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.studio.document.RequestError: file name '../etc/passwd': use letters, digits, '_', '-' and '.' (at most 80, not starting with '.' or '-')
+        torchrl_subgoal.studio.document.RequestError: file name '../etc/passwd': use letters, digits, ...
     """
     if not isinstance(name, str) or not _NAME.fullmatch(name) or ".." in name:
         raise RequestError(
@@ -237,10 +245,12 @@ def _pattern_body(index: int, raw: Any, domain: Domain) -> tuple[str, dict[str, 
     _expect(isinstance(subgoals, list), f"{where}.subgoals: expected a list of subgoals")
     predicates, names = [], []
     for j, sg in enumerate(subgoals):
-        _expect(isinstance(sg, Mapping), f"{where}.subgoals[{j}]: expected an object such as {{\"cell\": [3, 6]}}")
+        _expect(isinstance(sg, Mapping), f'{where}.subgoals[{j}]: expected an object such as {{"cell": [3, 6]}}')
         label = sg.get("name")
-        _expect(label is None or (isinstance(label, str) and label.strip() != ""),
-                f"{where}.subgoals[{j}].name: expected a non-empty string or null")
+        _expect(
+            label is None or (isinstance(label, str) and label.strip() != ""),
+            f"{where}.subgoals[{j}].name: expected a non-empty string or null",
+        )
         names.append(label)
         try:
             predicates.append(domain.from_page({k: v for k, v in sg.items() if k != "name"}, f"{where}.subgoals[{j}]"))
@@ -256,8 +266,11 @@ def _pattern_body(index: int, raw: Any, domain: Domain) -> tuple[str, dict[str, 
         _expect(label not in seen, f"request: pattern {name!r}: the subgoal name {label!r} is used twice")
         seen.add(label)
     chain = [[a, b] for a, b in itertools.pairwise(full)]
-    return name, {**described, "subgoals": dict(zip(full, predicates, strict=True)),
-                  "order": chain if order is None else order}
+    return name, {
+        **described,
+        "subgoals": dict(zip(full, predicates, strict=True)),
+        "order": chain if order is None else order,
+    }
 
 
 def _load(data: Mapping[str, Any], source: str, domain: str) -> dict[str, SubgoalSeries]:
@@ -292,15 +305,19 @@ def read_drawing(data: Any, domains: Mapping[str, Domain], *, source: str = "dra
     """
     _expect(isinstance(data, Mapping), "request: expected a JSON object with domain, map and patterns")
     unknown = set(data) - {"domain", "map", "patterns", "file", "description"}
-    _expect(not unknown,
-            f"request: unknown field(s) {sorted(unknown)}; allowed: domain, map, patterns, file, description")
+    _expect(
+        not unknown, f"request: unknown field(s) {sorted(unknown)}; allowed: domain, map, patterns, file, description"
+    )
     domain = domains.get(str(data.get("domain")))
     _expect(domain is not None, f"request: domain: expected one of {sorted(domains)}, got {data.get('domain')!r}")
     assert domain is not None
     map_name = ""
     if domain.maps:
         map_name = data.get("map") or next(iter(domain.maps))
-        _expect(isinstance(map_name, str) and map_name in domain.maps, f"request: map: expected one of {list(domain.maps)}, got {map_name!r}")
+        _expect(
+            isinstance(map_name, str) and map_name in domain.maps,
+            f"request: map: expected one of {list(domain.maps)}, got {map_name!r}",
+        )
     raw = data.get("patterns")
     _expect(isinstance(raw, list) and len(raw) > 0, "request: patterns: expected a non-empty list of patterns")
     bodies: dict[str, Any] = {}
@@ -350,18 +367,21 @@ def save_drawing(drawing: Drawing, path: Path, *, overwrite: bool = False) -> No
         >>> save_drawing(drawing, path)
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.studio.document.RequestError: alice.yaml exists in the save folder; choose another name, or confirm replacing it
+        torchrl_subgoal.studio.document.RequestError: alice.yaml exists in the save folder; choose another name, ...
     """
     try:
         mode = os.lstat(path).st_mode
     except FileNotFoundError:
         mode = None
     if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISLNK(mode)):
-        raise RequestError(f"{path.name}: a directory (or another non-file) of that name is in the save folder; "
-                           "choose another name", status=409)
+        raise RequestError(
+            f"{path.name}: a directory (or another non-file) of that name is in the save folder; choose another name",
+            status=409,
+        )
     if mode is not None and not overwrite:
-        raise RequestError(f"{path.name} exists in the save folder; choose another name, or confirm replacing it",
-                           status=409)
+        raise RequestError(
+            f"{path.name} exists in the save folder; choose another name, or confirm replacing it", status=409
+        )
     with tempfile.TemporaryDirectory(prefix="studio-save-") as private:  # ours alone: nothing planted in it
         rendered = Path(private) / path.name
         save_patterns(rendered, drawing.patterns, domain=drawing.domain.name, description=drawing.description)
@@ -369,8 +389,7 @@ def save_drawing(drawing: Drawing, path: Path, *, overwrite: bool = False) -> No
     try:
         _write_new(path, text)
     except OSError as exc:
-        raise RequestError(f"cannot write {path.name} in the save folder ({exc.strerror or exc})", status=500) \
-            from None
+        raise RequestError(f"cannot write {path.name} in the save folder ({exc.strerror or exc})", status=500) from None
 
 
 def _write_new(path: Path, data: bytes) -> None:
@@ -456,8 +475,9 @@ def infer_domain(patterns: Mapping[str, SubgoalSeries], domains: Mapping[str, Do
         if check is None or all(check(p) is None for p in predicates):
             return domain
     kinds = sorted({p.kind for p in predicates})
-    raise RequestError(f"{source}: its subgoals ({', '.join(kinds)}) fit none of the studio's domains "
-                       f"{sorted(domains)}", status=422)
+    raise RequestError(
+        f"{source}: its subgoals ({', '.join(kinds)}) fit none of the studio's domains {sorted(domains)}", status=422
+    )
 
 
 def to_document(patterns: Mapping[str, SubgoalSeries], domain: Domain, source: str) -> list[dict[str, Any]]:

@@ -127,7 +127,10 @@ class StudioDomain:
     def describe(self) -> dict[str, Any]:
         """What the studio's ``/api/domains`` says about this domain."""
         return {
-            "name": self.name, "title": self.title or self.name, "maps": list(self.maps), "recipe": self.recipe,
+            "name": self.name,
+            "title": self.title or self.name,
+            "maps": list(self.maps),
+            "recipe": self.recipe,
             "try_note": self.try_note,
             "limits": {k: {"default": v.default, "min": v.low, "max": v.high} for k, v in self.limits.items()},
         }
@@ -161,8 +164,9 @@ def studio_domain(name: str) -> StudioDomain | None:
     studio = registered.part(StudioDomain) if registered is not None else None
     if registered is None or studio is None:
         return None
-    return dataclasses.replace(studio, name=registered.name, title=registered.title,
-                               check_subgoal=registered.check_subgoal)
+    return dataclasses.replace(
+        studio, name=registered.name, title=registered.title, check_subgoal=registered.check_subgoal
+    )
 
 
 def default_domains(pinball_maps: Mapping[str, str | Path] | None = None) -> dict[str, StudioDomain]:

@@ -75,9 +75,14 @@ class Job:
     def status(self) -> dict[str, Any]:
         """The JSON the page polls."""
         return {
-            "id": self.id, "key": self.key, "state": self.state, "done": self.done, "total": self.total,
+            "id": self.id,
+            "key": self.key,
+            "state": self.state,
+            "done": self.done,
+            "total": self.total,
             "progress": min(1.0, self.done / self.total) if self.total else 0.0,
-            "result": self.result, "error": self.error,
+            "result": self.result,
+            "error": self.error,
             "seconds": (self.finished or time.time()) - self.started,
         }
 
@@ -114,11 +119,17 @@ class Jobs:
             running = [j for j in self._jobs.values() if j.state == "running"]
             for job in running:
                 if job.key == key:
-                    raise JobError(f"{key}: a learning with this pattern is already running (job {job.id}); "
-                                   "wait for it or cancel it", 409)
+                    raise JobError(
+                        f"{key}: a learning with this pattern is already running (job {job.id}); "
+                        "wait for it or cancel it",
+                        409,
+                    )
             if len(running) >= self.max_running:
-                raise JobError(f"{len(running)} learnings are running, the most this studio runs at once; "
-                               "wait for one to finish or cancel it", 429)
+                raise JobError(
+                    f"{len(running)} learnings are running, the most this studio runs at once; "
+                    "wait for one to finish or cancel it",
+                    429,
+                )
             job = Job(uuid.uuid4().hex[:12], key, total)
             self._jobs[job.id] = job
             finished = [i for i, j in self._jobs.items() if j.state != "running"]

@@ -170,26 +170,32 @@ def _check_request(hosts: frozenset[str], token: str | None) -> None:
     name = _host_name(request.host)
     if name is None or not (name in hosts or _is_loopback(name)):
         served = ", ".join(["localhost", "127.0.0.1", "::1", *sorted(hosts - {"localhost", "127.0.0.1", "::1"})])
-        raise RequestError(f"request: the host {request.host!r} is not served by this studio (it answers to "
-                           f"{served}); open the address it printed, or start it with --allow-host NAME",
-                           status=403)
+        raise RequestError(
+            f"request: the host {request.host!r} is not served by this studio (it answers to "
+            f"{served}); open the address it printed, or start it with --allow-host NAME",
+            status=403,
+        )
     origin = request.headers.get("Origin")
     if origin is not None and origin.lower() != f"{request.scheme}://{request.host}".lower():
-        raise RequestError(f"request: from another site ({origin}); the studio answers only its own page",
-                           status=403)
+        raise RequestError(f"request: from another site ({origin}); the studio answers only its own page", status=403)
     private = request.path.startswith(("/api/", "/files/"))
     if private and request.headers.get("Sec-Fetch-Site") in ("cross-site", "same-site"):
         raise RequestError("request: from another site; the studio answers only its own page", status=403)
     if token is not None and (private or request.path == "/"):
         given = request.headers.get(TOKEN_HEADER) or request.args.get("token") or ""
         if not hmac.compare_digest(given.encode(), token.encode()):
-            raise RequestError("request: the studio's token is missing or wrong; open the address it printed "
-                               "(with its ?token=...)", status=403)
+            raise RequestError(
+                "request: the studio's token is missing or wrong; open the address it printed (with its ?token=...)",
+                status=403,
+            )
     bodiless = request.method == "DELETE" and not request.mimetype  # a DELETE carries nothing to read
     routed = request.url_rule is not None  # else the 404 or 405 says more
     if routed and request.method in _UNSAFE and not bodiless and request.mimetype != "application/json":
-        raise RequestError(f"request: {request.method} needs a JSON body (Content-Type: application/json), got "
-                           f"{request.mimetype or 'no content type'!r}", status=415)
+        raise RequestError(
+            f"request: {request.method} needs a JSON body (Content-Type: application/json), got "
+            f"{request.mimetype or 'no content type'!r}",
+            status=415,
+        )
 
 
 def create_app(
@@ -292,8 +298,14 @@ def create_app(
     @app.get("/api/files")
     def files() -> Response:
         resolved = root.resolve()
-        found = sorted(p for p in resolved.iterdir() if p.suffix.lower() in SUFFIXES and not p.name.startswith(".")
-                       and p.is_file() and p.resolve().parent == resolved)  # links out of the folder: not listed
+        found = sorted(
+            p
+            for p in resolved.iterdir()
+            if p.suffix.lower() in SUFFIXES
+            and not p.name.startswith(".")
+            and p.is_file()
+            and p.resolve().parent == resolved
+        )  # links out of the folder: not listed
         return jsonify(folder=str(resolved), files=[{"name": p.name, "bytes": p.stat().st_size} for p in found])
 
     @app.get("/api/files/<path:name>")
@@ -308,15 +320,22 @@ def create_app(
             except SubgoalFileError as exc:
                 raise RequestError(str(exc).replace(str(copy), path.name), status=422) from None
         domain = infer_domain(patterns, studio.domains, path.name)
-        return jsonify(file=path.name, path=str(path), domain=domain.name, recipe=_recipe(domain, path),
-                       description=description, patterns=to_document(patterns, domain, path.name))
+        return jsonify(
+            file=path.name,
+            path=str(path),
+            domain=domain.name,
+            recipe=_recipe(domain, path),
+            description=description,
+            patterns=to_document(patterns, domain, path.name),
+        )
 
     @app.get("/files/<path:name>")
     def download(name: str) -> Response:
         path, data = read_file(root, name)
         if len(data) > MAX_FILE_BYTES:
-            raise RequestError(f"{path.name}: larger than {MAX_FILE_BYTES} bytes, the limit for a subgoal file",
-                               status=422)
+            raise RequestError(
+                f"{path.name}: larger than {MAX_FILE_BYTES} bytes, the limit for a subgoal file", status=422
+            )
         return send_file(io.BytesIO(data), mimetype="text/plain", as_attachment=True, download_name=path.name)
 
     @app.put("/api/files/<path:name>")
@@ -326,8 +345,13 @@ def create_app(
         data = _body()
         drawing = read_drawing(data, studio.domains, source=path.name)
         save_drawing(drawing, path, overwrite=overwrite)
-        return jsonify(file=path.name, path=str(path), domain=drawing.domain.name, patterns=list(drawing.patterns),
-                       recipe=_recipe(drawing.domain, path, drawing.map))
+        return jsonify(
+            file=path.name,
+            path=str(path),
+            domain=drawing.domain.name,
+            patterns=list(drawing.patterns),
+            recipe=_recipe(drawing.domain, path, drawing.map),
+        )
 
     @app.post("/api/try")
     def start_try() -> tuple[Response, int]:
@@ -335,8 +359,7 @@ def create_app(
         if not isinstance(data, Mapping):
             raise RequestError("request: expected a JSON object")
         fields = {"pattern", "episodes", "learners", "max_steps"}
-        drawing = read_drawing({k: v for k, v in data.items() if k not in fields}, studio.domains,
-                               source=_source(data))
+        drawing = read_drawing({k: v for k, v in data.items() if k not in fields}, studio.domains, source=_source(data))
         name = data.get("pattern", next(iter(drawing.patterns)) if len(drawing.patterns) == 1 else None)
         if name not in drawing.patterns:
             raise RequestError(f"pattern: expected one of {list(drawing.patterns)}, got {name!r}")
@@ -479,16 +502,31 @@ def main(argv: Sequence[str] | None = None) -> int:
         prog="torchrl-subgoal studio",
         description="Subgoal studio: draw subgoal series on the map, save subgoal files, try them.",
     )
-    parser.add_argument("--folder", type=Path, default=Path("subgoals"),
-                        help="where subgoal files are opened and saved (default: ./subgoals)")
+    parser.add_argument(
+        "--folder",
+        type=Path,
+        default=Path("subgoals"),
+        help="where subgoal files are opened and saved (default: ./subgoals)",
+    )
     parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1)")
-    parser.add_argument("--port", type=int, default=None,
-                        help=f"port (default: {DEFAULT_PORT}, or a free one if taken; 0: a free one)")
-    parser.add_argument("--pinball-map", action="append", default=[], metavar="[NAME=]FILE",
-                        help="an extra PinBall configuration file to draw on (repeatable)")
+    parser.add_argument(
+        "--port", type=int, default=None, help=f"port (default: {DEFAULT_PORT}, or a free one if taken; 0: a free one)"
+    )
+    parser.add_argument(
+        "--pinball-map",
+        action="append",
+        default=[],
+        metavar="[NAME=]FILE",
+        help="an extra PinBall configuration file to draw on (repeatable)",
+    )
     parser.add_argument("--max-jobs", type=int, default=2, help="'Try it' learnings at once (default: 2)")
-    parser.add_argument("--allow-host", action="append", default=[], metavar="NAME",
-                        help="another host name the page may be opened under, e.g. behind a proxy (repeatable)")
+    parser.add_argument(
+        "--allow-host",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="another host name the page may be opened under, e.g. behind a proxy (repeatable)",
+    )
     parser.add_argument("--open", action="store_true", help="open the page in a web browser")
     args = parser.parse_args(argv)
     if args.max_jobs < 1:
@@ -500,8 +538,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     torch.set_num_threads(1)  # batched small ops run fastest on one thread
     token = secrets.token_urlsafe(24)
     try:
-        app = create_app(args.folder, pinball_maps=_pinball_maps(args.pinball_map), max_jobs=args.max_jobs,
-                         hosts=[*served_hosts(args.host), *args.allow_host], token=token)
+        app = create_app(
+            args.folder,
+            pinball_maps=_pinball_maps(args.pinball_map),
+            max_jobs=args.max_jobs,
+            hosts=[*served_hosts(args.host), *args.allow_host],
+            token=token,
+        )
     except (OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -515,8 +558,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OSError, ValueError):
         loopback = False
     if not loopback:
-        print(f"warning: listening on {args.host}: anyone who reaches it with the address below (its token) can "
-              f"write subgoal files in {args.folder} and start learnings", file=sys.stderr)
+        print(
+            f"warning: listening on {args.host}: anyone who reaches it with the address below (its token) can "
+            f"write subgoal files in {args.folder} and start learnings",
+            file=sys.stderr,
+        )
     url = studio_url(args.host, server.port, token)
     print(f"Subgoal studio at {url} (files in {args.folder.resolve()}); Ctrl-C stops it", flush=True)
     if args.open:

@@ -153,11 +153,16 @@ def try_pattern(
     curves: dict[str, Curve] = {}
     transform: SubgoalPotentialTransform | None = None
     for label in ("baseline", "shaped"):
-        env, agent, shaping = learner(settings.learners, settings.seed, settings.max_steps,
-                                      None if map is None else str(map))
+        env, agent, shaping = learner(
+            settings.learners, settings.seed, settings.max_steps, None if map is None else str(map)
+        )
         if label == "shaped":
             transform = shaping_transform(
-                HRS, env.batch_size, gamma=shaping["gamma"], value_lr=shaping["value_lr"], patterns=[series],
+                HRS,
+                env.batch_size,
+                gamma=shaping["gamma"],
+                value_lr=shaping["value_lr"],
+                patterns=[series],
                 pattern_index=torch.zeros(settings.learners, dtype=torch.long),
                 observation_key=shaping["observation_key"],
             )
@@ -169,7 +174,10 @@ def try_pattern(
     table = transform.potential.table.detach().double().reshape(settings.learners, -1)
     sem = table.std(0) / math.sqrt(settings.learners) if settings.learners > 1 else torch.zeros(table.shape[1])
     return TryResult(
-        shaped=curves["shaped"], baseline=curves["baseline"], potential=table.mean(0).tolist(),
-        potential_sem=sem.tolist(), settings={**asdict(settings), "domain": domain, "map": str(map or "")},
+        shaped=curves["shaped"],
+        baseline=curves["baseline"],
+        potential=table.mean(0).tolist(),
+        potential_sem=sem.tolist(),
+        settings={**asdict(settings), "domain": domain, "map": str(map or "")},
         seconds=time.perf_counter() - start,
     )

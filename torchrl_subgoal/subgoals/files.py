@@ -105,8 +105,7 @@ def parse_text(text: str | bytes, source: str = "<subgoals>") -> Any:
     """
     if len(text) > MAX_FILE_BYTES:
         raise SubgoalFileError(
-            f"{source}: larger than {MAX_FILE_BYTES} bytes, the limit for a subgoal file; "
-            "split it into several files"
+            f"{source}: larger than {MAX_FILE_BYTES} bytes, the limit for a subgoal file; split it into several files"
         )
     if isinstance(text, bytes):
         try:
@@ -144,7 +143,6 @@ def _read_file(path: Path) -> bytes:
             return handle.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
         raise SubgoalFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
-
 
 
 #: Why a predicate is not a valid subgoal on a domain's map (``None``: it is one).
@@ -217,9 +215,7 @@ def load_patterns(path: str | Path, *, domain: str | None = None) -> dict[str, S
     return patterns_from_data(parse_text(_read_file(path), str(path)), str(path), domain=domain)
 
 
-def patterns_from_data(
-    data: Any, source: str = "<subgoals>", *, domain: str | None = None
-) -> dict[str, SubgoalSeries]:
+def patterns_from_data(data: Any, source: str = "<subgoals>", *, domain: str | None = None) -> dict[str, SubgoalSeries]:
     """:func:`load_patterns` for a file's already parsed content (see :func:`parse_text`).
 
     Args:

@@ -20,7 +20,6 @@ def _unique(mapping: Any, where: str, what: str) -> None:
         raise SubgoalFileError(f"{where}: duplicate {what} {key!r}{at}; each must appear once")
 
 
-
 def _number(value: Any, where: str, *, integer: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise SubgoalFileError(f"{where}: expected a number, got {value!r}")

@@ -198,9 +198,7 @@ class Box(Predicate):
         return Region(lo, hi, torch.zeros(size), torch.zeros(size), math.inf)
 
     def to_dict(self) -> dict[str, Any]:
-        margin: float | list[float] = (
-            self.margin[0] if len(set(self.margin)) == 1 else list(self.margin)
-        )
+        margin: float | list[float] = self.margin[0] if len(set(self.margin)) == 1 else list(self.margin)
         return {"box": {"centre": list(self.centre), "margin": margin, "dims": list(self.box_dims)}}
 
 
@@ -269,8 +267,9 @@ class Condition(Predicate):
             'truth'
         """
         if not isinstance(path, str) or not path.strip():
-            raise SubgoalFileError(f"{where}: expected an import path such as 'my_package.subgoals:carrying', "
-                                   f"got {path!r}")
+            raise SubgoalFileError(
+                f"{where}: expected an import path such as 'my_package.subgoals:carrying', got {path!r}"
+            )
         if args is not None and not isinstance(args, Mapping):
             raise SubgoalFileError(f"{where}: args: expected a mapping of keyword arguments, got {args!r}")
         module_name, sep, attr = path.partition(":")
@@ -281,8 +280,9 @@ class Condition(Predicate):
         try:
             obj: Any = importlib.import_module(module_name)
         except ImportError as exc:
-            raise SubgoalFileError(f"{where}: cannot import module {module_name!r} ({exc}); is it installed "
-                                   "or on PYTHONPATH?") from None
+            raise SubgoalFileError(
+                f"{where}: cannot import module {module_name!r} ({exc}); is it installed or on PYTHONPATH?"
+            ) from None
         for part in attr.split("."):
             if not hasattr(obj, part):
                 raise SubgoalFileError(f"{where}: module {module_name!r} has no attribute {attr!r}")

@@ -242,9 +242,7 @@ class SubgoalSeries:
         return cls(preds, order=order, names=names, name=name, source=source, description=description)
 
     @classmethod
-    def from_file(
-        cls, path: str | Path, pattern: str | None = None, *, domain: str | None = None
-    ) -> SubgoalSeries:
+    def from_file(cls, path: str | Path, pattern: str | None = None, *, domain: str | None = None) -> SubgoalSeries:
         """Load one named pattern from a subgoal file.
 
         Args:

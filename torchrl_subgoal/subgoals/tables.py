@@ -151,8 +151,16 @@ class SubgoalTables:
         self._calls = [pred.fn if isinstance(pred, Condition) else pred for pred in slots]
         self._n, self._dims = flat.numel(), len(self.batch_shape)
         # the kernels read per-pattern tables and each learner's pattern (small, stays in cache)
-        self._kernel_tables = RegionTables(flat.contiguous().numpy(), lo.numpy(), hi.numpy(), centre.numpy(),
-                                           weight.numpy(), radius2.numpy(), succ.numpy(), 1)
+        self._kernel_tables = RegionTables(
+            flat.contiguous().numpy(),
+            lo.numpy(),
+            hi.numpy(),
+            centre.numpy(),
+            weight.numpy(),
+            radius2.numpy(),
+            succ.numpy(),
+            1,
+        )
 
     def kernel_state(self) -> RegionTables:
         """The region tables as the compiled kernels read them (numpy, per pattern; CPU).
@@ -187,8 +195,10 @@ class SubgoalTables:
 
     def _check_z(self, z: torch.Tensor) -> None:
         if z.numel() != self._rows.numel():
-            raise ValueError(f"{z.numel()} abstract states for subgoal tables compiled for "
-                             f"{self._rows.numel()} learners (batch shape {tuple(self.batch_shape)})")
+            raise ValueError(
+                f"{z.numel()} abstract states for subgoal tables compiled for "
+                f"{self._rows.numel()} learners (batch shape {tuple(self.batch_shape)})"
+            )
 
     def inside(self, observation: torch.Tensor) -> torch.Tensor:
         """Which subgoal regions contain the observation, ``[B, J]`` (flattened batch)."""
@@ -216,14 +226,21 @@ class SubgoalTables:
             mask = pred(tensordict)
         except Exception as exc:
             raise type(exc)(f"subgoal condition {pred!r} failed on the step's TensorDict: {exc}") from exc
-        if not isinstance(mask, torch.Tensor) or mask.numel() != n or mask.shape[:len(self.batch_shape)] != \
-                self.batch_shape:
+        if (
+            not isinstance(mask, torch.Tensor)
+            or mask.numel() != n
+            or mask.shape[: len(self.batch_shape)] != self.batch_shape
+        ):
             shape = tuple(mask.shape) if isinstance(mask, torch.Tensor) else type(mask).__name__
-            raise ValueError(f"subgoal condition {pred!r} returned {shape}; expected a boolean mask of shape "
-                             f"{tuple(self.batch_shape)} (or with a trailing 1)")
+            raise ValueError(
+                f"subgoal condition {pred!r} returned {shape}; expected a boolean mask of shape "
+                f"{tuple(self.batch_shape)} (or with a trailing 1)"
+            )
         if mask.dtype != torch.bool:  # a number is not a truth value: 2 would silently read as achieved
-            raise ValueError(f"subgoal condition {pred!r} returned a {mask.dtype} tensor; expected a boolean mask "
-                             "(a comparison such as `td['passenger'] == 4`)")
+            raise ValueError(
+                f"subgoal condition {pred!r} returned a {mask.dtype} tensor; expected a boolean mask "
+                "(a comparison such as `td['passenger'] == 4`)"
+            )
         return mask.reshape(n).to(device=self.lo.device)
 
     def advance(
@@ -273,10 +290,15 @@ class SubgoalTables:
             try:
                 mask = call(tensordict)
             except Exception as exc:
-                raise type(exc)(f"subgoal condition {self.conditions[c][0]!r} failed on the step's TensorDict: "
-                                f"{exc}") from exc
-            if not isinstance(mask, torch.Tensor) or mask.shape[:self._dims] != self.batch_shape \
-                    or mask.numel() != n or mask.dtype is not torch.bool:
+                raise type(exc)(
+                    f"subgoal condition {self.conditions[c][0]!r} failed on the step's TensorDict: {exc}"
+                ) from exc
+            if (
+                not isinstance(mask, torch.Tensor)
+                or mask.shape[: self._dims] != self.batch_shape
+                or mask.numel() != n
+                or mask.dtype is not torch.bool
+            ):
                 self._mask(self.conditions[c][0], tensordict)  # raises, saying what was expected
             masks[c] = mask.reshape(n)
         return torch.stack(masks, -1).numpy()
@@ -293,8 +315,15 @@ class SubgoalTables:
             j = zf.clamp(max=self.num_states - 2)
             obs = self.rows(observation).to(torch.float64)
             rows = self._rows
-            hit = _in_regions(obs, self.lo[rows, j], self.hi[rows, j], self.centre[rows, j],
-                              self.weight[rows, j], self.radius2[rows, j], self.uses_circle)
+            hit = _in_regions(
+                obs,
+                self.lo[rows, j],
+                self.hi[rows, j],
+                self.centre[rows, j],
+                self.weight[rows, j],
+                self.radius2[rows, j],
+                self.uses_circle,
+            )
             hit = hit & self.succ[self._rows, zf, j]
             return (zf + hit.long()).view_as(z)
         cand = self.succ[self._rows, zf] & self.achieved(observation, tensordict)
@@ -302,8 +331,15 @@ class SubgoalTables:
         return torch.where(cand.any(-1), first + 1, zf).view_as(z)
 
 
-def _in_regions(obs: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor, centre: torch.Tensor,
-                weight: torch.Tensor, radius2: torch.Tensor, circles: bool) -> torch.Tensor:
+def _in_regions(
+    obs: torch.Tensor,
+    lo: torch.Tensor,
+    hi: torch.Tensor,
+    centre: torch.Tensor,
+    weight: torch.Tensor,
+    radius2: torch.Tensor,
+    circles: bool,
+) -> torch.Tensor:
     """``_in_region`` in torch: the same float64 comparisons, summed in the same order,
     so both paths agree on every input (NaN is never inside; unread entries never matter)."""
     hit = ((obs >= lo) & (obs <= hi)).all(-1)
@@ -374,8 +410,15 @@ class StateAggregation:
             return torch.stack([getattr(r, name) for r in compiled])[None].numpy()  # [1, J, D]: one pattern
 
         agg.regions = RegionTables(  # every region allowed from every z; region j is z = j
-            np.zeros(0, np.int64), table("lo"), table("hi"), table("centre"), table("weight"),
-            np.array([[r.radius2 for r in compiled]], dtype=np.float32), np.ones((1, j, j), np.bool_), 0)
+            np.zeros(0, np.int64),
+            table("lo"),
+            table("hi"),
+            table("centre"),
+            table("weight"),
+            np.array([[r.radius2 for r in compiled]], dtype=np.float32),
+            np.ones((1, j, j), np.bool_),
+            0,
+        )
         return agg
 
     def _g(self, observation: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
@@ -390,8 +433,10 @@ class StateAggregation:
         regions = self.regions
         assert regions is not None
         n = z.numel()
-        lo, hi, centre, weight, radius2 = (torch.from_numpy(a[0]).to(z.device) for a in (
-            regions.lo, regions.hi, regions.centre, regions.weight, regions.radius2))
+        lo, hi, centre, weight, radius2 = (
+            torch.from_numpy(a[0]).to(z.device)
+            for a in (regions.lo, regions.hi, regions.centre, regions.weight, regions.radius2)
+        )
         obs = observation.reshape(n, 1, -1).to(torch.float64)
         inside = _in_regions(obs, lo, hi, centre, weight, radius2, bool(torch.isfinite(radius2).any()))
         return torch.where(inside.any(-1), inside.long().argmax(-1), z.reshape(-1)).view(z.shape)
@@ -401,7 +446,9 @@ class StateAggregation:
         if observation is None:
             raise ValueError("a state aggregation needs the observation it reads")
         if self.regions is not None:
-            return self._search(torch.zeros((*batch_shape, 1), dtype=torch.long, device=observation.device), observation)
+            return self._search(
+                torch.zeros((*batch_shape, 1), dtype=torch.long, device=observation.device), observation
+            )
         return self._g(observation, batch_shape).unsqueeze(-1)
 
     @property
@@ -419,8 +466,10 @@ class StateAggregation:
         if self.regions is not None and z.device.type == "cpu":
             n = z.numel()
             if n and not 0 <= int(z.min()) <= int(z.max()) < self.num_states:  # the kernel indexes by z unchecked
-                raise ValueError(f"abstract states must lie in [0, {self.num_states}) for this aggregation, got "
-                                 f"{int(z.min())}..{int(z.max())}")
+                raise ValueError(
+                    f"abstract states must lie in [0, {self.num_states}) for this aggregation, got "
+                    f"{int(z.min())}..{int(z.max())}"
+                )
             out = np.empty((n, 1), dtype=np.int64)
             advance_regions(self.regions, z.numpy().reshape(n, 1), observation.numpy().reshape(n, -1), out)
             return torch.from_numpy(out).view(z.shape)

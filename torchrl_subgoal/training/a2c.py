@@ -152,12 +152,15 @@ class A2CConfig:
         if self.env_workers and self.num_envs % self.env_workers:
             raise ValueError(f"num_envs ({self.num_envs}) must be a multiple of env_workers ({self.env_workers})")
         if self.frames_per_batch % self.num_envs:
-            raise ValueError(f"frames_per_batch ({self.frames_per_batch}) must be a multiple of num_envs "
-                             f"({self.num_envs})")
+            raise ValueError(
+                f"frames_per_batch ({self.frames_per_batch}) must be a multiple of num_envs ({self.num_envs})"
+            )
         if self.frames_per_batch % (self.num_envs * max(1, self.collector_workers)):
-            raise ValueError(f"frames_per_batch ({self.frames_per_batch}) must be a multiple of num_envs x "
-                             f"collector_workers ({self.num_envs} x {self.collector_workers}): each worker "
-                             "collects an equal share with its num_envs envs")
+            raise ValueError(
+                f"frames_per_batch ({self.frames_per_batch}) must be a multiple of num_envs x "
+                f"collector_workers ({self.num_envs} x {self.collector_workers}): each worker "
+                "collects an equal share with its num_envs envs"
+            )
         if self.features not in ("one_hot", "fourier", "mlp"):
             raise ValueError(f"features must be one_hot, fourier or mlp, got {self.features!r}")
         if self.value_optimizer not in ("adam", "sgd"):
@@ -218,7 +221,10 @@ def actor_critic(
     distribution = OneHotCategorical if isinstance(action_spec, OneHot) else torch.distributions.Categorical
     actor = ProbabilisticActor(
         TensorDictModule(_network(policy_trunk, policy_head), in_keys=in_keys, out_keys=["logits"]),
-        in_keys=["logits"], spec=action_spec, distribution_class=distribution, return_log_prob=True,
+        in_keys=["logits"],
+        spec=action_spec,
+        distribution_class=distribution,
+        return_log_prob=True,
     )
     critic = ValueOperator(_network(value_trunk, value_head), in_keys=in_keys)
     return actor, critic
@@ -267,13 +273,21 @@ def train_a2c(
     factory, trainer = learner_env(make_env, config, shaping)
     states = subgoal_states(config, shaping)
     probe, cap = _probe_env(make_env, episode_cap)
-    actor, critic = actor_critic(probe, observation_key, features=config.features, hidden=config.hidden,
-                                 fourier_order=config.fourier_order, subgoal_states=states)
+    actor, critic = actor_critic(
+        probe,
+        observation_key,
+        features=config.features,
+        hidden=config.hidden,
+        fourier_order=config.fourier_order,
+        subgoal_states=states,
+    )
     _close_probe(probe)
-    advantage = GAE(gamma=config.gamma, lmbda=config.gae_lambda, value_network=critic,
-                    average_gae=config.normalize_advantage)
-    loss = A2CLoss(actor, critic, entropy_coeff=config.entropy_coeff, critic_coeff=config.critic_coeff,
-                   loss_critic_type="l2")
+    advantage = GAE(
+        gamma=config.gamma, lmbda=config.gae_lambda, value_network=critic, average_gae=config.normalize_advantage
+    )
+    loss = A2CLoss(
+        actor, critic, entropy_coeff=config.entropy_coeff, critic_coeff=config.critic_coeff, loss_critic_type="l2"
+    )
     optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
     collector = make_collector(factory, actor, config)
     _seed_collector(collector, seed)
@@ -293,9 +307,16 @@ def train_a2c(
             potential_loss = trainer.step(data) if trainer is not None else math.nan
             if config.collector_workers:
                 collector.update_policy_weights_()
-            recorder.add(data, frames, {
-                "loss_objective": float(losses["loss_objective"].detach()), "loss_critic": float(losses["loss_critic"].detach()),
-                "loss_entropy": float(losses["loss_entropy"].detach()), "loss_potential": potential_loss})
+            recorder.add(
+                data,
+                frames,
+                {
+                    "loss_objective": float(losses["loss_objective"].detach()),
+                    "loss_critic": float(losses["loss_critic"].detach()),
+                    "loss_entropy": float(losses["loss_entropy"].detach()),
+                    "loss_potential": potential_loss,
+                },
+            )
     finally:
         close_collector(collector)
     return recorder.curve

@@ -126,9 +126,11 @@ def check_settings(config: LearnerSettings) -> None:
     if config.env_workers and config.num_envs % config.env_workers:
         raise ValueError(f"num_envs ({config.num_envs}) must be a multiple of env_workers ({config.env_workers})")
     if config.frames_per_batch % (config.num_envs * max(1, config.collector_workers)):
-        raise ValueError(f"frames_per_batch ({config.frames_per_batch}) must be a multiple of num_envs x "
-                         f"collector_workers ({config.num_envs} x {max(1, config.collector_workers)}): each "
-                         "collecting process steps its num_envs envs an equal number of times")
+        raise ValueError(
+            f"frames_per_batch ({config.frames_per_batch}) must be a multiple of num_envs x "
+            f"collector_workers ({config.num_envs} x {max(1, config.collector_workers)}): each "
+            "collecting process steps its num_envs envs an equal number of times"
+        )
     if not 0.0 <= config.gamma <= 1.0:
         raise ValueError(f"gamma must lie in [0, 1], got {config.gamma}")
     if not config.reward_scale > 0:
@@ -173,7 +175,9 @@ class Shaping:
         """Whether the potential has parameters to learn."""
         return any(p.requires_grad for p in self.potential.parameters())
 
-    def transform(self, potential: TensorDictModuleBase, gamma: float, value_lr: float | None) -> SubgoalPotentialTransform:
+    def transform(
+        self, potential: TensorDictModuleBase, gamma: float, value_lr: float | None
+    ) -> SubgoalPotentialTransform:
         """The transform over ``potential`` (the process's view of the shared one)."""
         return SubgoalPotentialTransform(self.subgoals, potential, gamma=gamma, value_update=value_lr, **self.options)
 
@@ -334,8 +338,15 @@ def _input_layer(spec: TensorSpec, features: Features, order: int) -> tuple[nn.M
     return (nn.Identity() if spec.dtype == torch.float32 else _Float()), (int(spec.shape[-1]) if spec.shape else 1)
 
 
-def _trunk(spec: TensorSpec, features: Features, hidden: Sequence[int], order: int, *,
-           activation: type[nn.Module] = nn.Tanh, subgoal_states: int = 0) -> tuple[nn.Module, int]:
+def _trunk(
+    spec: TensorSpec,
+    features: Features,
+    hidden: Sequence[int],
+    order: int,
+    *,
+    activation: type[nn.Module] = nn.Tanh,
+    subgoal_states: int = 0,
+) -> tuple[nn.Module, int]:
     """The input layers for an observation spec (and, with ``subgoal_states``, the one-hot ``z``
     joined to the features: concatenated, or their product when there is no hidden layer), then the
     hidden layers: a module over ``observation`` (or ``(observation, z)``) and its output size."""
@@ -426,11 +437,22 @@ def make_collector(
     if init_random_frames:  # whole batches (what the collector would do, with a warning)
         extra["init_random_frames"] = -(-init_random_frames // config.frames_per_batch) * config.frames_per_batch
     if config.collector_workers == 0:
-        return Collector(env_factory(), policy, frames_per_batch=config.frames_per_batch,
-                         total_frames=config.total_frames, auto_register_policy_transforms=False, **extra)
+        return Collector(
+            env_factory(),
+            policy,
+            frames_per_batch=config.frames_per_batch,
+            total_frames=config.total_frames,
+            auto_register_policy_transforms=False,
+            **extra,
+        )
     return MultiSyncCollector(
-        [env_factory] * config.collector_workers, policy, frames_per_batch=config.frames_per_batch,
-        total_frames=config.total_frames, cat_results="stack", auto_register_policy_transforms=False, **extra,
+        [env_factory] * config.collector_workers,
+        policy,
+        frames_per_batch=config.frames_per_batch,
+        total_frames=config.total_frames,
+        cat_results="stack",
+        auto_register_policy_transforms=False,
+        **extra,
     )
 
 
@@ -532,13 +554,13 @@ class EpisodeWindow:
         """Add a collected batch (any batch shape)."""
         done = data.get(("next", "done")).reshape(-1)
         finished = int(done.sum())
-        self.batches = [*self.batches, (data.numel(), finished)][-self.window:]
+        self.batches = [*self.batches, (data.numel(), finished)][-self.window :]
         if not finished:
             return
         nxt = data.get("next")
         returns = (nxt.get(EPISODE_RETURN).reshape(-1)[done] / self.reward_scale).tolist()
         terminated = nxt.get("terminated").reshape(-1)[done]
-        self.returns = (self.returns + returns)[-4 * self.window:]
+        self.returns = (self.returns + returns)[-4 * self.window :]
         self.last_success = bool(terminated[-1])
         self.count += finished
 
@@ -572,8 +594,14 @@ class CurveRecorder:
         ([4], [50.0])
     """
 
-    def __init__(self, window: int, cap: float, reward_scale: float, logger: Logger | None = None,
-                 progress: Callable[[int], None] | None = None) -> None:
+    def __init__(
+        self,
+        window: int,
+        cap: float,
+        reward_scale: float,
+        logger: Logger | None = None,
+        progress: Callable[[int], None] | None = None,
+    ) -> None:
         self.episodes = EpisodeWindow(window, cap, reward_scale)
         self.curve = LearningCurve()
         self.logger, self.progress = logger, progress
@@ -589,9 +617,13 @@ class CurveRecorder:
         curve.success.append(episodes.last_success)
         curve.episodes.append(episodes.count)
         if self.logger is not None:
-            logged = {"episode_length": curve.episode_length[-1], "episode_return": curve.episode_return[-1],
-                      "episodes": float(episodes.count), **scalars,
-                      "frames_per_second": frames / max(time.perf_counter() - self.start, 1e-9)}
+            logged = {
+                "episode_length": curve.episode_length[-1],
+                "episode_return": curve.episode_return[-1],
+                "episodes": float(episodes.count),
+                **scalars,
+                "frames_per_second": frames / max(time.perf_counter() - self.start, 1e-9),
+            }
             for name, value in logged.items():
                 if not math.isnan(value):
                     self.logger.log_scalar(name, value, step=frames)
@@ -626,14 +658,16 @@ class PotentialTrainer:
     optimizer: torch.optim.Optimizer
 
     @classmethod
-    def for_shaping(cls, shaping: Shaping, gamma: float, lr: float,
-                    optimizer: Literal["adam", "sgd"] = "adam") -> PotentialTrainer:
+    def for_shaping(
+        cls, shaping: Shaping, gamma: float, lr: float, optimizer: Literal["adam", "sgd"] = "adam"
+    ) -> PotentialTrainer:
         """Adam (the loss's mean reduction) or SGD (sum: the tabular update) on ``shaping.potential``."""
         sgd = optimizer == "sgd"
         opt_class = torch.optim.SGD if sgd else torch.optim.Adam
         loss = SubgoalValueLoss(shaping.potential, reduction="sum" if sgd else "mean").make_value_estimator(gamma=gamma)
-        return cls(shaping.transform(shaping.potential, gamma, None), loss,
-                   opt_class(shaping.potential.parameters(), lr=lr))
+        return cls(
+            shaping.transform(shaping.potential, gamma, None), loss, opt_class(shaping.potential.parameters(), lr=lr)
+        )
 
     def step(self, data: TensorDictBase) -> float:
         """One step on the real SMDP transitions closed in ``data``; the loss, NaN when none closed."""
@@ -697,8 +731,13 @@ class SampleReshaper:
         read, e.g. ``("next", "has_key")``)."""
         t = self.transform
         _reward, *read = t.in_keys  # the reward shaped is recomputed from the unshaped one
-        keys: list[NestedKey] = [*t.state_keys, t.observation_key, ("next", t.observation_key),
-                                 ("next", t.env_reward_key), *(("next", k) for k in read)]
+        keys: list[NestedKey] = [
+            *t.state_keys,
+            t.observation_key,
+            ("next", t.observation_key),
+            ("next", t.env_reward_key),
+            *(("next", k) for k in read),
+        ]
         return list(dict.fromkeys([*keys, *self.extra_keys]))
 
     def __call__(self, sample: TensorDictBase) -> TensorDictBase:
@@ -708,7 +747,9 @@ class SampleReshaper:
 
 
 def learner_env(
-    make_env: Callable[[int], EnvBase], config: LearnerSettings, shaping: Shaping | None,
+    make_env: Callable[[int], EnvBase],
+    config: LearnerSettings,
+    shaping: Shaping | None,
 ) -> tuple[EnvFactory[EnvBase], PotentialTrainer | None]:
     """A learner's collecting env factory and, unless its potential is fixed or trained online in the
     transform, the trainer of its potential.
@@ -730,9 +771,15 @@ def learner_env(
     """
     online = shaping is not None and config.online_potential and shaping.trained
     factory: EnvFactory[EnvBase] = EnvFactory(
-        shaped_env, make_env=make_env, num_envs=config.num_envs, env_workers=config.env_workers, shaping=shaping,
-        potential=shaping.potential if shaping is not None else None, gamma=config.gamma,
-        value_lr=config.value_lr if online else None, reward_scale=config.reward_scale,
+        shaped_env,
+        make_env=make_env,
+        num_envs=config.num_envs,
+        env_workers=config.env_workers,
+        shaping=shaping,
+        potential=shaping.potential if shaping is not None else None,
+        gamma=config.gamma,
+        value_lr=config.value_lr if online else None,
+        reward_scale=config.reward_scale,
     )
     trainer = None
     if shaping is not None and shaping.trained and not online:

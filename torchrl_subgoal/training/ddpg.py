@@ -157,10 +157,21 @@ class DDPGTrainConfig:
 
     def agent(self) -> DDPGConfig:
         """The agent's hyper-parameters (no return clipping)."""
-        return DDPGConfig(hidden=self.hidden, actor_lr=self.lr, critic_lr=self.lr, gamma=self.gamma,
-                          polyak=self.polyak, batch_size=self.batch_size, buffer_size=self.buffer_size,
-                          random_eps=self.random_eps, noise_eps=self.noise_eps, action_l2=self.action_l2, clip_return=None,
-                          clip_positive=False, norm_clip=self.norm_clip)
+        return DDPGConfig(
+            hidden=self.hidden,
+            actor_lr=self.lr,
+            critic_lr=self.lr,
+            gamma=self.gamma,
+            polyak=self.polyak,
+            batch_size=self.batch_size,
+            buffer_size=self.buffer_size,
+            random_eps=self.random_eps,
+            noise_eps=self.noise_eps,
+            action_l2=self.action_l2,
+            clip_return=None,
+            clip_positive=False,
+            norm_clip=self.norm_clip,
+        )
 
     def td3_settings(self) -> TD3Settings | None:
         """TD3's settings, or ``None`` for DDPG."""
@@ -195,10 +206,18 @@ def ddpg_agent(
         raise ValueError(f"DDPG needs bounded continuous actions, got {type(action_spec).__name__}")
     spec = env.observation_spec[observation_key]
     if len(spec.shape) != len(env.batch_size) + 1:
-        raise ValueError(f"DDPG reads a vector observation; {observation_key!r} has shape "
-                         f"{tuple(spec.shape[len(env.batch_size):])}")
-    return DDPGAgent(int(spec.shape[-1]), action_spec, config.agent(), observation_key=observation_key,
-                     subgoal_states=subgoal_states, td3=config.td3_settings(), keys=keys)
+        raise ValueError(
+            f"DDPG reads a vector observation; {observation_key!r} has shape {tuple(spec.shape[len(env.batch_size) :])}"
+        )
+    return DDPGAgent(
+        int(spec.shape[-1]),
+        action_spec,
+        config.agent(),
+        observation_key=observation_key,
+        subgoal_states=subgoal_states,
+        td3=config.td3_settings(),
+        keys=keys,
+    )
 
 
 def train_ddpg(
@@ -251,8 +270,9 @@ def train_ddpg(
         assert shaping is not None
         reshaper = SampleReshaper(shaping.transform(shaping.potential, config.gamma, None))
     probe, cap = _probe_env(make_env, episode_cap)
-    agent = ddpg_agent(probe, config, observation_key, subgoal_states=states,
-                       keys=tuple(reshaper.keys) if reshaper is not None else ())
+    agent = ddpg_agent(
+        probe, config, observation_key, subgoal_states=states, keys=tuple(reshaper.keys) if reshaper is not None else ()
+    )
     _close_probe(probe)
     collector = make_collector(factory, agent.policy, config, init_random_frames=config.learning_starts)
     _seed_collector(collector, seed)
@@ -276,8 +296,14 @@ def train_ddpg(
                     agent.soft_update()
             if config.collector_workers:
                 collector.update_policy_weights_()
-            recorder.add(data, frames, {**{name: sums[name] / counts[name] if counts[name] else math.nan
-                                           for name in sums}, "loss_potential": potential_loss})
+            recorder.add(
+                data,
+                frames,
+                {
+                    **{name: sums[name] / counts[name] if counts[name] else math.nan for name in sums},
+                    "loss_potential": potential_loss,
+                },
+            )
     finally:
         close_collector(collector)
     return recorder.curve

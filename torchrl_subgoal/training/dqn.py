@@ -62,11 +62,22 @@ DQN_PRESETS: dict[str, dict[str, Any]] = {
     # 16 steps with 8 gradient steps, ε annealed over 20% of the run to 0.07, [256, 256] hidden; the rest
     # are Stable-Baselines3's DQN defaults (Huber loss, gradients clipped at norm 10, ε from 1).
     "mountain_car": {
-        "num_envs": 1, "frames_per_batch": 16, "gradient_steps": 8, "total_frames": 120_000, "lr": 4e-3,
-        "batch_size": 128, "buffer_size": 10_000, "learning_starts": 1_000, "gamma": 0.98,
+        "num_envs": 1,
+        "frames_per_batch": 16,
+        "gradient_steps": 8,
+        "total_frames": 120_000,
+        "lr": 4e-3,
+        "batch_size": 128,
+        "buffer_size": 10_000,
+        "learning_starts": 1_000,
+        "gamma": 0.98,
         "target_update_interval": 300,  # gradient steps: 600 frames at 8 gradient steps per 16 frames
-        "eps_init": 1.0, "eps_end": 0.07, "exploration_frames": 24_000, "hidden": (256, 256),
-        "loss_function": "smooth_l1", "max_grad_norm": 10.0,
+        "eps_init": 1.0,
+        "eps_end": 0.07,
+        "exploration_frames": 24_000,
+        "hidden": (256, 256),
+        "loss_function": "smooth_l1",
+        "max_grad_norm": 10.0,
         "record_window": 100,  # 1,600 frames: the recorded episode length spans several 200-step episodes
     },
 }
@@ -164,8 +175,7 @@ class DQNConfig:
         check_settings(self)
         if self.features not in ("one_hot", "fourier", "mlp"):
             raise ValueError(f"features must be one_hot, fourier or mlp, got {self.features!r}")
-        for name in ("gradient_steps", "batch_size", "buffer_size", "target_update_interval",
-                     "exploration_frames"):
+        for name in ("gradient_steps", "batch_size", "buffer_size", "target_update_interval", "exploration_frames"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.learning_starts < 0:
@@ -286,18 +296,33 @@ def train_dqn(
     factory, trainer = learner_env(make_env, config, shaping)
     states = subgoal_states(config, shaping)
     probe, cap = _probe_env(make_env, episode_cap)
-    qnet = q_network(probe, observation_key, features=config.features, hidden=config.hidden,
-                     fourier_order=config.fourier_order, subgoal_states=states)
+    qnet = q_network(
+        probe,
+        observation_key,
+        features=config.features,
+        hidden=config.hidden,
+        fourier_order=config.fourier_order,
+        subgoal_states=states,
+    )
     action_spec = probe.full_action_spec_unbatched[probe.action_key]
     _close_probe(probe)
-    explore = EGreedyModule(action_spec, eps_init=config.eps_init, eps_end=config.eps_end,
-                            annealing_num_steps=config.exploration_frames)
+    explore = EGreedyModule(
+        action_spec, eps_init=config.eps_init, eps_end=config.eps_end, annealing_num_steps=config.exploration_frames
+    )
     policy = TensorDictSequential(qnet, explore)
-    loss = DQNLoss(qnet, loss_function=config.loss_function, delay_value=True, double_dqn=config.double_dqn,
-                   action_space=action_spec)
+    loss = DQNLoss(
+        qnet,
+        loss_function=config.loss_function,
+        delay_value=True,
+        double_dqn=config.double_dqn,
+        action_space=action_spec,
+    )
     loss.make_value_estimator(gamma=config.gamma)
-    updater = (HardUpdate(loss, value_network_update_interval=config.target_update_interval)
-               if config.target_update == "hard" else SoftUpdate(loss, tau=config.tau))
+    updater = (
+        HardUpdate(loss, value_network_update_interval=config.target_update_interval)
+        if config.target_update == "hard"
+        else SoftUpdate(loss, tau=config.tau)
+    )
     optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
     reshaper = None
     keys: list[NestedKey] = list(loss.in_keys)
@@ -306,8 +331,9 @@ def train_dqn(
         reshaper = SampleReshaper(shaping.transform(shaping.potential, config.gamma, None))
         keys += reshaper.keys
     keys = list(dict.fromkeys(keys))
-    replay = ReplayBuffer(storage=LazyTensorStorage(config.buffer_size), sampler=RandomSampler(),
-                          batch_size=config.batch_size)
+    replay = ReplayBuffer(
+        storage=LazyTensorStorage(config.buffer_size), sampler=RandomSampler(), batch_size=config.batch_size
+    )
     collector = make_collector(factory, policy, config, init_random_frames=config.learning_starts)
     _seed_collector(collector, seed)
     recorder = CurveRecorder(config.record_window, cap, config.reward_scale, logger, progress)
@@ -337,8 +363,9 @@ def train_dqn(
             potential_loss = trainer.step(data) if trainer is not None else math.nan
             if config.collector_workers:
                 collector.update_policy_weights_()
-            recorder.add(data, frames, {"loss_q": q_loss, "epsilon": float(explore.eps),
-                                        "loss_potential": potential_loss})
+            recorder.add(
+                data, frames, {"loss_q": q_loss, "epsilon": float(explore.eps), "loss_potential": potential_loss}
+            )
     finally:
         close_collector(collector)
     return recorder.curve

@@ -143,8 +143,9 @@ class PPOConfig:
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.frames_per_batch % self.minibatch_size:
-            raise ValueError(f"minibatch_size ({self.minibatch_size}) must divide frames_per_batch "
-                             f"({self.frames_per_batch})")
+            raise ValueError(
+                f"minibatch_size ({self.minibatch_size}) must divide frames_per_batch ({self.frames_per_batch})"
+            )
         for name in ("lr", "adam_eps", "clip_epsilon"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
@@ -202,8 +203,14 @@ def ppo_actor_critic(
     """
     action_spec = env.full_action_spec[env.action_key]
     if isinstance(action_spec, Categorical | OneHot):
-        return actor_critic(env, observation_key, features=features, hidden=hidden, fourier_order=fourier_order,
-                            subgoal_states=subgoal_states)
+        return actor_critic(
+            env,
+            observation_key,
+            features=features,
+            hidden=hidden,
+            fourier_order=fourier_order,
+            subgoal_states=subgoal_states,
+        )
     if not isinstance(action_spec, Bounded):
         raise ValueError(f"PPO here needs discrete or bounded continuous actions, got {type(action_spec).__name__}")
     spec = env.observation_spec[observation_key]
@@ -221,8 +228,11 @@ def ppo_actor_critic(
     policy = _network(policy_trunk, loc_head, AddStateIndependentNormalScale(action_size))
     actor = ProbabilisticActor(
         TensorDictModule(policy, in_keys=in_keys, out_keys=["loc", "scale"]),
-        in_keys=["loc", "scale"], spec=action_spec, distribution_class=TanhNormal,
-        distribution_kwargs={"low": low, "high": high, "tanh_loc": False}, return_log_prob=True,
+        in_keys=["loc", "scale"],
+        spec=action_spec,
+        distribution_class=TanhNormal,
+        distribution_kwargs={"low": low, "high": high, "tanh_loc": False},
+        return_log_prob=True,
     )
     critic = ValueOperator(_network(value_trunk, value_head), in_keys=in_keys)
     return actor, critic
@@ -271,16 +281,32 @@ def train_ppo(
     factory, trainer = learner_env(make_env, config, shaping)
     states = subgoal_states(config, shaping)
     probe, cap = _probe_env(make_env, episode_cap)
-    actor, critic = ppo_actor_critic(probe, observation_key, features=config.features, hidden=config.hidden,
-                                     fourier_order=config.fourier_order, subgoal_states=states)
+    actor, critic = ppo_actor_critic(
+        probe,
+        observation_key,
+        features=config.features,
+        hidden=config.hidden,
+        fourier_order=config.fourier_order,
+        subgoal_states=states,
+    )
     _close_probe(probe)
     advantage = GAE(gamma=config.gamma, lmbda=config.gae_lambda, value_network=critic, average_gae=False)
-    loss = ClipPPOLoss(actor, critic, clip_epsilon=config.clip_epsilon, entropy_bonus=config.entropy_coeff > 0,
-                       entropy_coeff=config.entropy_coeff, critic_coeff=config.critic_coeff,
-                       loss_critic_type=config.loss_critic_type, normalize_advantage=config.normalize_advantage)
+    loss = ClipPPOLoss(
+        actor,
+        critic,
+        clip_epsilon=config.clip_epsilon,
+        entropy_bonus=config.entropy_coeff > 0,
+        entropy_coeff=config.entropy_coeff,
+        critic_coeff=config.critic_coeff,
+        loss_critic_type=config.loss_critic_type,
+        normalize_advantage=config.normalize_advantage,
+    )
     optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr, eps=config.adam_eps)
-    minibatches = ReplayBuffer(storage=LazyTensorStorage(config.frames_per_batch),
-                               sampler=SamplerWithoutReplacement(), batch_size=config.minibatch_size)
+    minibatches = ReplayBuffer(
+        storage=LazyTensorStorage(config.frames_per_batch),
+        sampler=SamplerWithoutReplacement(),
+        batch_size=config.minibatch_size,
+    )
     total_updates = config.iterations * config.updates_per_batch
     collector = make_collector(factory, actor, config)
     _seed_collector(collector, seed)
@@ -299,8 +325,11 @@ def train_ppo(
                         for group in optimizer.param_groups:
                             group["lr"] = config.lr * (1.0 - updates / total_updates)
                     losses = loss(batch)
-                    parts = [losses["loss_objective"], losses["loss_critic"],
-                             losses.get("loss_entropy", torch.zeros(()))]
+                    parts = [
+                        losses["loss_objective"],
+                        losses["loss_critic"],
+                        losses.get("loss_entropy", torch.zeros(())),
+                    ]
                     optimizer.zero_grad(set_to_none=True)
                     sum(parts).backward()
                     if config.max_grad_norm:
@@ -312,8 +341,16 @@ def train_ppo(
             if config.collector_workers:
                 collector.update_policy_weights_()
             means = (sums / config.updates_per_batch).tolist()
-            recorder.add(data, frames, {"loss_objective": means[0], "loss_critic": means[1],
-                                        "loss_entropy": means[2], "loss_potential": potential_loss})
+            recorder.add(
+                data,
+                frames,
+                {
+                    "loss_objective": means[0],
+                    "loss_critic": means[1],
+                    "loss_entropy": means[2],
+                    "loss_potential": potential_loss,
+                },
+            )
     finally:
         close_collector(collector)
     return recorder.curve

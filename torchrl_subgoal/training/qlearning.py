@@ -134,10 +134,7 @@ class EpsilonGreedyQ(TensorDictModuleBase):
     def index(self, td: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
         """The ``(s, z)`` of every row of ``td`` (``z = 0`` when the table ignores it)."""
         s = td.get(self.observation_key).reshape(-1).long()
-        if self.table.shape[2] > 1:
-            z = td.get(self.subgoal_key).reshape(-1).long()
-        else:
-            z = torch.zeros_like(s)
+        z = td.get(self.subgoal_key).reshape(-1).long() if self.table.shape[2] > 1 else torch.zeros_like(s)
         return s, z
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
@@ -189,16 +186,25 @@ def train_qlearning(
     obs_spec = env.observation_spec[observation_key]
     act_spec = env.full_action_spec[env.action_key]
     if not isinstance(obs_spec, Categorical | OneHot) or isinstance(obs_spec, OneHot):
-        raise ValueError(f"tabular Q-learning needs a categorical observation {observation_key!r}, got "
-                         f"{type(obs_spec).__name__}")
+        raise ValueError(
+            f"tabular Q-learning needs a categorical observation {observation_key!r}, got {type(obs_spec).__name__}"
+        )
     if not isinstance(act_spec, Categorical):
         raise ValueError(f"tabular Q-learning needs categorical actions, got {type(act_spec).__name__}")
     abstract = 1
     if config.sees_subgoal and "subgoal_index" in env.observation_spec:
         abstract = int(env.observation_spec["subgoal_index"].space.high.max()) + 1
     generator = torch.Generator().manual_seed(seed)
-    policy = EpsilonGreedyQ(n, int(obs_spec.space.n), int(act_spec.space.n), abstract, config.epsilon, config.init,
-                            generator, observation_key=observation_key)
+    policy = EpsilonGreedyQ(
+        n,
+        int(obs_spec.space.n),
+        int(act_spec.space.n),
+        abstract,
+        config.epsilon,
+        config.init,
+        generator,
+        observation_key=observation_key,
+    )
     return_key = "env_reward" if "env_reward" in env.reward_keys else "reward"
     episodes = config.episodes
     steps = torch.zeros(n, episodes, dtype=torch.long)
@@ -223,8 +229,9 @@ def train_qlearning(
             table[rows, s, z, a] += lr * (target - table[rows, s, z, a])
             frames += 1
             done = nxt.get("done").reshape(-1)
-            count = record_episodes(done.numpy(), terminated.numpy(), nxt.get(return_key).reshape(-1).numpy(),
-                                             t, ret, filed, *outputs)
+            count = record_episodes(
+                done.numpy(), terminated.numpy(), nxt.get(return_key).reshape(-1).numpy(), t, ret, filed, *outputs
+            )
             if count and progress is not None:
                 progress(count)
             if filed.min() >= episodes or (config.max_frames and frames >= config.max_frames):
@@ -233,8 +240,11 @@ def train_qlearning(
         collector.shutdown()
     short = filed < episodes
     if short.any():  # capped: the missing episodes count as failures of the env's length
-        cap = float(getattr(env, "max_steps", math.nan)) if not hasattr(env, "base_env") else float(
-            getattr(env.base_env, "max_steps", math.nan))
+        cap = (
+            float(getattr(env, "max_steps", math.nan))
+            if not hasattr(env, "base_env")
+            else float(getattr(env.base_env, "max_steps", math.nan))
+        )
         for b in np.nonzero(short)[0]:
-            steps[b, filed[b]:] = int(cap) if math.isfinite(cap) else frames
+            steps[b, filed[b] :] = int(cap) if math.isfinite(cap) else frames
     return EpisodeRecords(steps, returns, success, frames * n)

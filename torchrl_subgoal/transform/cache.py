@@ -23,7 +23,8 @@ class ValueCache:
         >>> v, cache = TabularPotential(3), ValueCache()
         >>> cache.check(v)
         >>> cache.put("z", {"subgoal_index": torch.tensor([[1]])}, torch.tensor([[0.5]]))
-        >>> cache.get("z", {"subgoal_index": torch.tensor([[1]])}).item(), cache.get("z", {"subgoal_index": torch.tensor([[2]])})
+        >>> one, two = {"subgoal_index": torch.tensor([[1]])}, {"subgoal_index": torch.tensor([[2]])}
+        >>> cache.get("z", one).item(), cache.get("z", two)
         (0.5, None)
     """
 
@@ -69,7 +70,6 @@ def _equal(a: torch.Tensor, b: torch.Tensor) -> bool:
     if a.numel() >= 4096 and a.device.type == "cpu" and b.device.type == "cpu" and a.dtype in _NUMPY_DTYPES:
         return bool((a.detach().numpy() == b.detach().numpy()).all())
     return torch.equal(a, b)
-
 
 
 _NUMPY_DTYPES = (torch.float32, torch.float64, torch.int64, torch.bool)

@@ -57,7 +57,7 @@ def check_finite(reward: torch.Tensor, obs: torch.Tensor | None, reward_key: Nes
         >>> check_finite(torch.tensor([[1.0], [float("nan")]]), None, "reward", "observation")
         Traceback (most recent call last):
         ...
-        ValueError: SubgoalPotentialTransform: 'reward' is NaN or infinite at index (1, 0) (value nan): it would make the potential NaN for good; fix the env, or replace such values before this transform
+        ValueError: SubgoalPotentialTransform: 'reward' is NaN or infinite at index (1, 0) (value nan): ...
     """
     for tensor, key, bad in ((reward, reward_key, "NaN or infinite"), (obs, obs_key, "NaN")):
         if tensor is None or not tensor.is_floating_point():
@@ -109,15 +109,27 @@ def compiled_step(
     reward, env_reward = step.reward, step.env_reward
     z_col, rh_col, k_col, env_col, done_col = z.numpy(), r_h.numpy(), k.numpy(), env_reward.numpy(), step.done.numpy()
     if not z_col.shape == rh_col.shape == k_col.shape == env_col.shape == done_col.shape == col:
-        z_col, rh_col, k_col, env_col, done_col = (_column(t, n, name) for t, name in (
-            (z, keys.index), (r_h, keys.ret), (k, keys.steps), (env_reward, "reward"), (step.done, "done")))
+        z_col, rh_col, k_col, env_col, done_col = (
+            _column(t, n, name)
+            for t, name in (
+                (z, keys.index),
+                (r_h, keys.ret),
+                (k, keys.steps),
+                (env_reward, "reward"),
+                (step.done, "done"),
+            )
+        )
     ends = done_col
     if step.terminated is not step.done and (ends := step.terminated.numpy()).shape != col:
         ends = _column(step.terminated, n, "terminated")
     start = _column(current[keys.start], n, keys.start) if keys.start in current else setup.z_start
     achieved = _column(current[keys.achieved], n, keys.achieved) if keys.achieved in current else z_col
-    z_next, rh_out, k_out, shaped = torch.empty_like(z), torch.empty_like(r_h), torch.empty_like(k), \
-        torch.empty_like(reward)
+    z_next, rh_out, k_out, shaped = (
+        torch.empty_like(z),
+        torch.empty_like(r_h),
+        torch.empty_like(k),
+        torch.empty_like(reward),
+    )
     outputs: tuple[np.ndarray, ...] = (z_next.numpy(), rh_out.numpy(), k_out.numpy(), shaped.numpy())
     if z_next.ndim != 2:
         outputs = tuple(a.reshape(col) for a in outputs)
@@ -128,11 +140,13 @@ def compiled_step(
     inputs = (achieved, rh_col, k_col, env_col, done_col, ends, start)
     potential = setup.kernel[learn]  # type: ignore[index]
     if setup.regions is not None:
-        if not advance_and_shape(setup.regions, potential, setup.shared, z_col, _rows(step.obs, n, setup), *inputs,
-                                 *outputs, *extra):
+        if not advance_and_shape(
+            setup.regions, potential, setup.shared, z_col, _rows(step.obs, n, setup), *inputs, *outputs, *extra
+        ):
             check_finite(reward, step.obs, "reward", settings.observation_key)  # raises, naming the entry
-            raise ValueError(f"SubgoalPotentialTransform: the reward is not finite or {settings.observation_key!r} "
-                             "holds a NaN")
+            raise ValueError(
+                f"SubgoalPotentialTransform: the reward is not finite or {settings.observation_key!r} holds a NaN"
+            )
     else:  # conditions or a lookup: advanced first (conditions called in Python), then shaped
         if not finite_inputs(env_col, _NO_ENTRIES):
             check_finite(env_reward, None, "reward", settings.observation_key)
@@ -153,9 +167,17 @@ def compiled_step(
         if carried in current:
             out[carried] = current[carried]
     if settings.transitions:
-        out["transition"] = transition(setup.batch_shape, {key: current[key] for key in settings.inputs},
-                                       {key: out[key] for key in settings.inputs}, r_acc, k_acc, closed, step.done,
-                                       step.terminated, z_next != z)
+        out["transition"] = transition(
+            setup.batch_shape,
+            {key: current[key] for key in settings.inputs},
+            {key: out[key] for key in settings.inputs},
+            r_acc,
+            k_acc,
+            closed,
+            step.done,
+            step.terminated,
+            z_next != z,
+        )
     return out
 
 
@@ -167,8 +189,10 @@ def _rows(obs: torch.Tensor | None, n: int, setup: BatchSetup) -> np.ndarray:
     d = regions.lo.shape[2]
     a = obs.numpy()
     if a.size != n * d:
-        raise ValueError(f"the observation of shape {tuple(obs.shape)} does not fit the subgoal tables compiled for "
-                         f"{n} rows x {d} entries (batch shape {tuple(setup.batch_shape)})")
+        raise ValueError(
+            f"the observation of shape {tuple(obs.shape)} does not fit the subgoal tables compiled for "
+            f"{n} rows x {d} entries (batch shape {tuple(setup.batch_shape)})"
+        )
     return a.reshape(n, d)
 
 
@@ -189,8 +213,13 @@ class AbstractStates(NamedTuple):
     @classmethod
     def zeros(cls, n: int) -> AbstractStates:
         """Every learner in ``z = 0`` at the start of an episode."""
-        return cls(np.zeros((n, 1), np.int64), np.zeros((n, 1), np.bool_), np.zeros((n, 1), np.float32),
-                   np.zeros((n, 1), np.int64), np.zeros((n, 1), np.int64))
+        return cls(
+            np.zeros((n, 1), np.int64),
+            np.zeros((n, 1), np.bool_),
+            np.zeros((n, 1), np.float32),
+            np.zeros((n, 1), np.int64),
+            np.zeros((n, 1), np.int64),
+        )
 
 
 class ShapingKernelState(NamedTuple):
@@ -218,14 +247,23 @@ class ShapingKernelState(NamedTuple):
     def unshaped(cls, n: int) -> ShapingKernelState:
         """No shaping, for ``n`` learners (a bare env)."""
         empty3 = np.zeros((1, 1, 1), np.float32)
-        regions = RegionTables(np.zeros(0, np.int64), empty3, empty3, empty3, empty3, np.zeros((1, 1), np.float32),
-                               np.zeros((1, 1, 1), np.bool_), 1)
+        regions = RegionTables(
+            np.zeros(0, np.int64),
+            empty3,
+            empty3,
+            empty3,
+            empty3,
+            np.zeros((1, 1), np.float32),
+            np.zeros((1, 1, 1), np.bool_),
+            1,
+        )
         potential = PotentialKernelState(NO_TABLE, 0.0, 0.0, 0.0, 0.0, False, START_VALUE)
         return cls(NO_SHAPING, regions, np.zeros(1, np.int64), potential, AbstractStates.zeros(n))
 
 
-def kernel_state(setup: BatchSetup, state: tuple[torch.Tensor, torch.Tensor, torch.Tensor], learn: bool,
-                 observation_size: int) -> ShapingKernelState:
+def kernel_state(
+    setup: BatchSetup, state: tuple[torch.Tensor, torch.Tensor, torch.Tensor], learn: bool, observation_size: int
+) -> ShapingKernelState:
     """The record of a compiled loop for the env batch ``setup`` (set up for the compiled step), with every
     learner's ``state = (z, r_h, k)`` copied; ``learn``: the loop applies the online update.
 
@@ -248,17 +286,21 @@ def kernel_state(setup: BatchSetup, state: tuple[torch.Tensor, torch.Tensor, tor
         kind, regions = REGION_SHAPING, abstraction.kernel_state()
     elif isinstance(abstraction.mapping, torch.Tensor):
         if observation_size != 1:
-            raise TypeError(f"a lookup aggregation reads a state number, not an observation of {observation_size} "
-                            "entries (observation_key)")
+            raise TypeError(
+                f"a lookup aggregation reads a state number, not an observation of {observation_size} "
+                "entries (observation_key)"
+            )
         kind, lookup = LOOKUP_SHAPING, abstraction.mapping.numpy()
     elif abstraction.regions is not None:
         kind, regions = REGION_SHAPING, abstraction.regions
     else:
-        raise TypeError("a compiled loop needs a subgoal series, a lookup or a region aggregation, "
-                        "not a function aggregation")
+        raise TypeError(
+            "a compiled loop needs a subgoal series, a lookup or a region aggregation, not a function aggregation"
+        )
     n = setup.batch_shape.numel()
     z, r_h, k = (t.reshape(n, 1).numpy().copy() for t in state)
     potential = setup.kernel[learn]  # type: ignore[index]
     # both envs of the fused engine start every episode in the same place
-    return ShapingKernelState(kind, regions, lookup, potential, AbstractStates(z, np.zeros((n, 1), np.bool_), r_h, k,
-                                                                               z.copy()))
+    return ShapingKernelState(
+        kind, regions, lookup, potential, AbstractStates(z, np.zeros((n, 1), np.bool_), r_h, k, z.copy())
+    )

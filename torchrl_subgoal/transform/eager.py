@@ -27,7 +27,10 @@ __all__ = ["potential_value", "start_entries", "torch_step"]
 
 
 def potential_value(
-    potential: TensorDictModuleBase, cache: ValueCache, entries: dict[str, torch.Tensor], batch_shape: torch.Size,
+    potential: TensorDictModuleBase,
+    cache: ValueCache,
+    entries: dict[str, torch.Tensor],
+    batch_shape: torch.Size,
     slot: str,
 ) -> torch.Tensor:
     """``Φ`` of abstract-state entries, ``[*B, 1]``: given back by ``cache`` (under ``slot``) while the
@@ -70,9 +73,9 @@ def torch_step(
         >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9, backend="torch")
         >>> batch = t._batch(torch.Size([2]), torch.zeros(2, 1, dtype=torch.long), 1, torch.zeros(2, 1), online=True)
         >>> z, zero = torch.zeros(2, 1, dtype=torch.long), torch.zeros(2, 1)
-        >>> out = torch_step(batch, t._settings, t.potential, ValueCache(), {"subgoal_index": z, "subgoal_return": zero,
-        ...                  "subgoal_steps": z}, StepInputs(torch.tensor([[1], [0]]), zero, zero, z.bool(), z.bool(), None),
-        ...                  update=None)
+        >>> current = {"subgoal_index": z, "subgoal_return": zero, "subgoal_steps": z}
+        >>> step = StepInputs(torch.tensor([[1], [0]]), zero, zero, z.bool(), z.bool(), None)
+        >>> out = torch_step(batch, t._settings, t.potential, ValueCache(), current, step, update=None)
         >>> out["subgoal_index"].tolist()
         [[1], [0]]
     """
@@ -96,9 +99,17 @@ def torch_step(
             nxt[carried] = current[carried]
     smdp = None
     if update is not None or settings.transitions:
-        smdp = transition(batch_shape, {key: current[key] for key in settings.inputs},
-                          {key: nxt[key] for key in settings.inputs},
-                          r_h, k, closed, step.done, step.terminated, achieved)
+        smdp = transition(
+            batch_shape,
+            {key: current[key] for key in settings.inputs},
+            {key: nxt[key] for key in settings.inputs},
+            r_h,
+            k,
+            closed,
+            step.done,
+            step.terminated,
+            achieved,
+        )
     if update is not None and bool(closed.any()):
         assert smdp is not None
         update(smdp)
@@ -110,8 +121,10 @@ def torch_step(
         phi = potential_value(potential, cache, current, batch_shape, "z")
         phi_next = potential_value(potential, cache, nxt, batch_shape, "z")
         if settings.start != "value" and not isinstance(potential, NaivePotential):
-            level = start_level(potential_value(potential, cache, start_entries(current, settings), batch_shape,
-                                                "start"), settings.start)
+            level = start_level(
+                potential_value(potential, cache, start_entries(current, settings), batch_shape, "start"),
+                settings.start,
+            )
             assert level is not None
             phi, phi_next = phi - level, phi_next - level
     shaped = shaped_reward(step.reward, phi, phi_next, step.terminated, settings.gamma, settings.zero_terminal)

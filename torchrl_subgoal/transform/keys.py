@@ -13,8 +13,19 @@ from tensordict.utils import NestedKey
 from torchrl.data import Binary, Bounded, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase
 
-__all__ = ["EnvKeys", "SubgoalKeys", "add_env_reward", "at", "declare", "kept_specs", "observation", "read",
-           "state_specs", "transition_spec", "write"]
+__all__ = [
+    "EnvKeys",
+    "SubgoalKeys",
+    "add_env_reward",
+    "at",
+    "declare",
+    "kept_specs",
+    "observation",
+    "read",
+    "state_specs",
+    "transition_spec",
+    "write",
+]
 
 RETURN = "subgoal_return"
 STEPS = "subgoal_steps"
@@ -51,7 +62,9 @@ class SubgoalKeys:
     achieved = _named("achieved", "Whether ``z`` was entered on this step.")
     anchor = _named("anchor", "The observation at which ``z`` was entered.")
     learner = _named("learner", "Which env of the batch the row belongs to (its learner).")
-    start = _named("start", "The potential's input at reset (``z_0`` of an aggregation, ``o_0`` of a neural potential).")
+    start = _named(
+        "start", "The potential's input at reset (``z_0`` of an aggregation, ``o_0`` of a neural potential)."
+    )
 
     @functools.cached_property
     def optional(self) -> tuple[str, ...]:
@@ -86,7 +99,7 @@ class EnvKeys(NamedTuple):
     Examples:
         >>> from torchrl_subgoal.envs import FourRoomsEnv
         >>> EnvKeys.resolve(FourRoomsEnv(2))
-        EnvKeys(group=(), reward='reward', env_reward='env_reward', done='done', terminated='terminated', shaped_before=False)
+        EnvKeys(group=(), reward='reward', env_reward='env_reward', done='done', terminated='terminated', ...)
     """
 
     group: tuple[str, ...]  #: where the kept entries live
@@ -107,19 +120,24 @@ class EnvKeys(NamedTuple):
             return cls((), "reward", ENV_REWARD, "done", "terminated", False)
         rewards = [k for k in parent.reward_keys if _last(k) != ENV_REWARD]
         if len(rewards) != 1:
-            raise ValueError(f"SubgoalPotentialTransform shapes one reward; the env has {rewards}: combine them into "
-                             "one entry first (a transform before this one)")
+            raise ValueError(
+                f"SubgoalPotentialTransform shapes one reward; the env has {rewards}: combine them into "
+                "one entry first (a transform before this one)"
+            )
         reward = rewards[0]
         roots = [_root(k) for k in parent._filtered_reset_keys]
-        group = max((r for r in roots if _root(reward)[:len(r)] == r), key=len, default=None)
+        group = max((r for r in roots if _root(reward)[: len(r)] == r), key=len, default=None)
         if group is None:
-            raise ValueError(f"SubgoalPotentialTransform: no done entry of the env ({parent.done_keys}) covers the "
-                             f"reward {reward!r}")
+            raise ValueError(
+                f"SubgoalPotentialTransform: no done entry of the env ({parent.done_keys}) covers the reward {reward!r}"
+            )
         done, terminated = at(group, "done"), at(group, "terminated")
         done_keys = [k if isinstance(k, str) or len(k) > 1 else k[0] for k in parent.done_keys]
         if done not in done_keys:
-            raise ValueError(f"SubgoalPotentialTransform reads the done entry {done!r}, which the env lacks; "
-                             f"its done entries: {parent.done_keys}")
+            raise ValueError(
+                f"SubgoalPotentialTransform reads the done entry {done!r}, which the env lacks; "
+                f"its done entries: {parent.done_keys}"
+            )
         env_reward = at(_root(reward), ENV_REWARD)
         shaped_before = env_reward in [k if isinstance(k, str) or len(k) > 1 else k[0] for k in parent.reward_keys]
         return cls(group, reward, env_reward, done, terminated if terminated in done_keys else done, shaped_before)
@@ -155,7 +173,11 @@ def write(td: TensorDictBase, key: NestedKey, value: torch.Tensor) -> None:
 
 
 def state_specs(
-    keys: SubgoalKeys, kept: tuple[str, ...], num_states: int, shape: torch.Size, anchor: TensorSpec | None,
+    keys: SubgoalKeys,
+    kept: tuple[str, ...],
+    num_states: int,
+    shape: torch.Size,
+    anchor: TensorSpec | None,
 ) -> dict[str, TensorSpec]:
     """The specs of the ``kept`` abstract-state entries, each ``[*shape, 1]`` (the anchor ``[*shape, D]``),
     ``anchor`` the spec of the observation the anchor snapshots.
@@ -177,7 +199,7 @@ def state_specs(
         specs[keys.learner] = Bounded(0, max(shape.numel() - 1, 0), shape=col, dtype=torch.long)
     if keys.anchor in kept:
         assert anchor is not None
-        size = anchor.shape[len(shape):].numel() if len(anchor.shape) > len(shape) else 1
+        size = anchor.shape[len(shape) :].numel() if len(anchor.shape) > len(shape) else 1
         specs[keys.anchor] = Unbounded(shape=(*shape, size), dtype=torch.float32)
     if keys.start in kept:  # what the potential reads at reset: the anchor or z_0
         specs[keys.start] = specs[keys.anchor if keys.anchor in kept else keys.index].clone()
@@ -195,11 +217,21 @@ def transition_spec(inputs: dict[str, TensorSpec], shape: torch.Size) -> Composi
     """
     col = (*shape, 1)
     flag = Binary(n=1, shape=col, dtype=torch.bool)
-    nxt = Composite(**{k: s.clone() for k, s in inputs.items()}, reward=Unbounded(shape=col, dtype=torch.float32),
-                    done=flag.clone(), terminated=flag.clone(), shape=shape)
-    return Composite(**{k: s.clone() for k, s in inputs.items()},
-                     steps_to_next_obs=Unbounded(shape=col, dtype=torch.long), mask=flag.clone(),
-                     achieved=flag.clone(), next=nxt, shape=shape)
+    nxt = Composite(
+        **{k: s.clone() for k, s in inputs.items()},
+        reward=Unbounded(shape=col, dtype=torch.float32),
+        done=flag.clone(),
+        terminated=flag.clone(),
+        shape=shape,
+    )
+    return Composite(
+        **{k: s.clone() for k, s in inputs.items()},
+        steps_to_next_obs=Unbounded(shape=col, dtype=torch.long),
+        mask=flag.clone(),
+        achieved=flag.clone(),
+        next=nxt,
+        shape=shape,
+    )
 
 
 def observation(spec: Composite, key: NestedKey, what: str) -> TensorSpec:
@@ -211,13 +243,16 @@ def observation(spec: Composite, key: NestedKey, what: str) -> TensorSpec:
         torch.Size([2, 2])
     """
     if key not in spec.keys(True, True):
-        raise KeyError(f"SubgoalPotentialTransform: {what} {key!r} is not an observation of the env; "
-                       f"available: {sorted(map(str, spec.keys(True, True)))}")
+        raise KeyError(
+            f"SubgoalPotentialTransform: {what} {key!r} is not an observation of the env; "
+            f"available: {sorted(map(str, spec.keys(True, True)))}"
+        )
     return spec[key]
 
 
-def kept_specs(parent: EnvBase, env: EnvKeys, keys: SubgoalKeys, kept: tuple[str, ...], num_states: int,
-               observation_key: NestedKey) -> dict[str, TensorSpec]:
+def kept_specs(
+    parent: EnvBase, env: EnvKeys, keys: SubgoalKeys, kept: tuple[str, ...], num_states: int, observation_key: NestedKey
+) -> dict[str, TensorSpec]:
     """The specs of the ``kept`` entries in ``parent``'s group ``env.group`` (names relative to the group).
 
     Examples:
@@ -228,8 +263,9 @@ def kept_specs(parent: EnvBase, env: EnvKeys, keys: SubgoalKeys, kept: tuple[str
         torch.Size([2, 1])
     """
     shape = parent.full_done_spec[env.done].shape[:-1]
-    anchor = observation(parent.full_observation_spec, observation_key, "observation_key") \
-        if keys.anchor in kept else None
+    anchor = (
+        observation(parent.full_observation_spec, observation_key, "observation_key") if keys.anchor in kept else None
+    )
     return state_specs(keys, kept, num_states, shape, anchor)
 
 
@@ -247,9 +283,11 @@ def add_env_reward(reward_spec: Composite, parent: EnvBase, env: EnvKeys) -> Non
     """
     done = parent.full_done_spec[env.done]
     if reward_spec[env.reward].shape != done.shape:
-        raise ValueError(f"SubgoalPotentialTransform: the reward {env.reward!r} has shape "
-                         f"{tuple(reward_spec[env.reward].shape)} but episodes end by {env.done!r} of shape "
-                         f"{tuple(done.shape)}: one reward per episode row is needed (combine the rewards first)")
+        raise ValueError(
+            f"SubgoalPotentialTransform: the reward {env.reward!r} has shape "
+            f"{tuple(reward_spec[env.reward].shape)} but episodes end by {env.done!r} of shape "
+            f"{tuple(done.shape)}: one reward per episode row is needed (combine the rewards first)"
+        )
     if not env.shaped_before:
         reward_spec[env.env_reward] = reward_spec[env.reward].clone()
 
@@ -274,6 +312,8 @@ def declare(spec: Composite, parent: EnvBase, env: EnvKeys, specs: dict[str, Ten
     for name, value in specs.items():
         key = at(env.group, name)
         if refuse_taken and key in spec.keys(True, True):
-            raise ValueError(f"SubgoalPotentialTransform: {key!r} is kept already by another transform on this env; "
-                             "give this one another prefix (prefix='room') and its potential matching keys")
+            raise ValueError(
+                f"SubgoalPotentialTransform: {key!r} is kept already by another transform on this env; "
+                "give this one another prefix (prefix='room') and its potential matching keys"
+            )
         spec[key] = value

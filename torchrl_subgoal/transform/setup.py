@@ -25,8 +25,18 @@ from torchrl_subgoal.subgoals import (
 from torchrl_subgoal.transform.keys import SubgoalKeys
 from torchrl_subgoal.transform.shaping import START_MODES, StartPotential
 
-__all__ = ["BatchSetup", "PotentialKernelState", "Settings", "Subgoals", "check_potential", "compiled_potential",
-           "initial_state", "kept_entries", "observation_layout", "online_update"]
+__all__ = [
+    "BatchSetup",
+    "PotentialKernelState",
+    "Settings",
+    "Subgoals",
+    "check_potential",
+    "compiled_potential",
+    "initial_state",
+    "kept_entries",
+    "observation_layout",
+    "online_update",
+]
 
 #: ``table`` of a naive potential in the kernels: no table, ``Φ = η · achieved``
 NO_TABLE = np.zeros((0, 1), dtype=np.float32)
@@ -115,12 +125,20 @@ class Subgoals:
     def pattern_of(self, n_learners: int) -> torch.Tensor:
         """The pattern each of ``n_learners`` learners (flattened env batch) follows."""
         if self.aggregation is None and self._given not in (1, n_learners):
-            raise ValueError(f"{self._given} subgoal series for a batch of {n_learners} envs: give one series "
-                             "for every env, or one per env")
+            raise ValueError(
+                f"{self._given} subgoal series for a batch of {n_learners} envs: give one series "
+                "for every env, or one per env"
+            )
         return torch.zeros(n_learners, dtype=torch.long) if self._index is None else self._index
 
-    def compile(self, learner: torch.Tensor, batch_shape: torch.Size, n_learners: int, layout: tuple[int, bool],
-                observation_key: NestedKey) -> SubgoalTables | StateAggregation:
+    def compile(
+        self,
+        learner: torch.Tensor,
+        batch_shape: torch.Size,
+        n_learners: int,
+        layout: tuple[int, bool],
+        observation_key: NestedKey,
+    ) -> SubgoalTables | StateAggregation:
         """The abstraction for a batch whose rows belong to ``learner`` (``[*B, 1]``), observations of
         ``layout = (entries, one-hot)``."""
         if self.aggregation is not None:
@@ -198,8 +216,9 @@ class BatchSetup:
     def __post_init__(self) -> None:
         self.rows = self.batch_shape.numel()  #: rows of the batch
 
-    def use_kernels(self, potential: TensorDictModuleBase, settings: Settings, update: ValueUpdate | None,
-                    online: bool) -> None:
+    def use_kernels(
+        self, potential: TensorDictModuleBase, settings: Settings, update: ValueUpdate | None, online: bool
+    ) -> None:
         """Set the potential up for the compiled step, trained online by ``update`` (``online``: the env's
         batch, whose rows are the learners; else stored rows, each reading its learner's table, copied)."""
         abstraction = self.abstraction
@@ -223,9 +242,12 @@ class BatchSetup:
         mode = START_MODES[settings.start]
         loss = update.loss if update is not None else None
         expectile, bootstrap = (0.5, True) if loss is None else (loss.expectile, loss.bootstrap_truncated)
-        self.kernel = tuple(PotentialKernelState(table, eta, settings.gamma, settings.value_gamma, lr,
-                                                 settings.zero_terminal, mode, expectile, bootstrap)
-                            for lr in (0.0, update.lr if update else 0.0))  # type: ignore[assignment]
+        self.kernel = tuple(
+            PotentialKernelState(
+                table, eta, settings.gamma, settings.value_gamma, lr, settings.zero_terminal, mode, expectile, bootstrap
+            )
+            for lr in (0.0, update.lr if update else 0.0)
+        )  # type: ignore[assignment]
         self.z_start = np.zeros((max(1, n), 1), np.int64)  # a subgoal series starts every episode in z = 0
         self.compiled = True
 
@@ -246,16 +268,20 @@ def check_potential(potential: TensorDictModuleBase, keys: SubgoalKeys) -> None:
         raise TypeError(
             "the potential must be a TensorDict module whose (last) output entry is the value (a Potential, or e.g. "
             f"TensorDictModule(net, in_keys=[{keys.anchor!r}], out_keys=['subgoal_value'])), "
-            f"got {type(potential).__name__}")
+            f"got {type(potential).__name__}"
+        )
     provided = (keys.index, *keys.optional)
     unknown = [k for k in potential.in_keys if k not in provided]
     if unknown:
-        raise ValueError(f"the potential reads {unknown}, which this transform does not keep; it keeps "
-                         f"{list(provided)} (prefix {keys.prefix!r}): build the potential with those keys")
+        raise ValueError(
+            f"the potential reads {unknown}, which this transform does not keep; it keeps "
+            f"{list(provided)} (prefix {keys.prefix!r}): build the potential with those keys"
+        )
 
 
-def kept_entries(keys: SubgoalKeys, potential: TensorDictModuleBase, subgoals: Subgoals,
-                 start: StartPotential) -> tuple[str, ...]:
+def kept_entries(
+    keys: SubgoalKeys, potential: TensorDictModuleBase, subgoals: Subgoals, start: StartPotential
+) -> tuple[str, ...]:
     """The entries kept: ``z``, ``r_h``, ``k``, those the potential reads, and its input at reset when the
     start level needs it (unless that input is ``z = 0``, where every subgoal series starts).
 
@@ -266,14 +292,18 @@ def kept_entries(keys: SubgoalKeys, potential: TensorDictModuleBase, subgoals: S
     """
     reads = potential.in_keys
     extra = tuple(k for k in keys.optional if k in reads)
-    if start != "value" and not isinstance(potential, NaivePotential) and (
-            keys.anchor in reads or (subgoals.aggregation is not None and keys.index in reads)):
+    if (
+        start != "value"
+        and not isinstance(potential, NaivePotential)
+        and (keys.anchor in reads or (subgoals.aggregation is not None and keys.index in reads))
+    ):
         extra = (*extra, keys.start)
     return (keys.index, keys.ret, keys.steps, *extra)
 
 
-def online_update(value_update: ValueUpdate | float | None, potential: TensorDictModuleBase,
-                  gamma: float) -> ValueUpdate | None:
+def online_update(
+    value_update: ValueUpdate | float | None, potential: TensorDictModuleBase, gamma: float
+) -> ValueUpdate | None:
     """``value_update`` as a :class:`ValueUpdate` whose loss trains ``potential`` (``None``: none); the
     default loss has ``γ_v = gamma``.
 
@@ -293,8 +323,9 @@ def online_update(value_update: ValueUpdate | float | None, potential: TensorDic
     return update
 
 
-def observation_layout(spec: TensorSpec | None, obs: torch.Tensor | None, batch_shape: torch.Size,
-                       subgoals: Subgoals) -> tuple[int, bool]:
+def observation_layout(
+    spec: TensorSpec | None, obs: torch.Tensor | None, batch_shape: torch.Size, subgoals: Subgoals
+) -> tuple[int, bool]:
     """(entries per observation, one-hot?): from the env's ``spec`` when there is one, else from the data
     (where a :class:`State` predicate reads an observation of more than one entry as one-hot).
 
@@ -304,11 +335,11 @@ def observation_layout(spec: TensorSpec | None, obs: torch.Tensor | None, batch_
         (4, True)
     """
     if spec is not None:
-        shape = spec.shape[len(batch_shape):]
+        shape = spec.shape[len(batch_shape) :]
         return (shape.numel() if len(shape) else 1), isinstance(spec, OneHot)
     if obs is None:
         return 0, False
-    size = obs.shape[len(batch_shape):].numel() if obs.dim() > len(batch_shape) else 1
+    size = obs.shape[len(batch_shape) :].numel() if obs.dim() > len(batch_shape) else 1
     return size, subgoals.one_hot_states and size > 1
 
 
@@ -327,8 +358,11 @@ def initial_state(setup: BatchSetup, settings: Settings, obs: torch.Tensor | Non
     """
     batch_shape, k, kept = setup.batch_shape, settings.keys, settings.kept
     col = (*batch_shape, 1)
-    state = {k.index: setup.abstraction.initial(obs, batch_shape), k.ret: torch.zeros(col),
-             k.steps: torch.zeros(col, dtype=torch.long)}
+    state = {
+        k.index: setup.abstraction.initial(obs, batch_shape),
+        k.ret: torch.zeros(col),
+        k.steps: torch.zeros(col, dtype=torch.long),
+    }
     if k.achieved in kept:
         state[k.achieved] = torch.zeros(col, dtype=torch.bool)
     if k.anchor in kept:

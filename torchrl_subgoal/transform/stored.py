@@ -57,8 +57,8 @@ def learners_of(
 
     Examples:
         >>> from torchrl_subgoal import State, SubgoalSeries, TabularPotential
-        >>> one_table = learners_of(None, torch.Size([5]), 1, Subgoals(SubgoalSeries([State(1)])), TabularPotential(2), 8,
-        ...                         "subgoal_learner")
+        >>> subgoals = Subgoals(SubgoalSeries([State(1)]))
+        >>> one_table = learners_of(None, torch.Size([5]), 1, subgoals, TabularPotential(2), 8, "subgoal_learner")
         >>> one_table[0].reshape(-1).tolist(), one_table[1]  # no row's learner matters: all are learner 0
         ([0, 0, 0, 0, 0], 1)
     """
@@ -66,8 +66,10 @@ def learners_of(
     if not per_learner:
         return torch.zeros((*batch_shape, 1), dtype=torch.long), 1
     n_learners = (
-        env_learners if env_learners is not None
-        else potential.learners if isinstance(potential, TabularPotential) and potential.batch_shape
+        env_learners
+        if env_learners is not None
+        else potential.learners
+        if isinstance(potential, TabularPotential) and potential.batch_shape
         else subgoals.envs or 1
     )
     if stored is not None:
@@ -105,7 +107,8 @@ def shape_stored(
         >>> from torchrl.envs import TransformedEnv
         >>> from torchrl_subgoal import Cell, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
         >>> from torchrl_subgoal.envs import FourRoomsEnv
-        >>> t = SubgoalPotentialTransform(SubgoalSeries([Cell(1, 2)]), TabularPotential(2), gamma=0.9, observation_key="cell")
+        >>> series = SubgoalSeries([Cell(1, 2)])
+        >>> t = SubgoalPotentialTransform(series, TabularPotential(2), gamma=0.9, observation_key="cell")
         >>> data = TransformedEnv(FourRoomsEnv(2), t).rollout(6)
         >>> bool((t(data.clone())["next", "reward"] == data["next", "reward"]).all())  # forward() calls it
         True
@@ -113,16 +116,24 @@ def shape_stored(
     time = time_dim(data)
     nxt = data.get("next", None)
     stored_reward = nxt is not None and read(nxt, env.env_reward) is not None  # then the one shaped
-    missing = [("next", key) for key in in_keys if key != env.env_reward and not (key == env.reward and stored_reward)
-               and (nxt is None or read(nxt, key) is None)]
+    missing = [
+        ("next", key)
+        for key in in_keys
+        if key != env.env_reward
+        and not (key == env.reward and stored_reward)
+        and (nxt is None or read(nxt, key) is None)
+    ]
     if missing:
-        raise KeyError(f"SubgoalPotentialTransform: the stored data has no {missing}; store the steps' entries the "
-                       "transform reads (in_keys)")
+        raise KeyError(
+            f"SubgoalPotentialTransform: the stored data has no {missing}; store the steps' entries the "
+            "transform reads (in_keys)"
+        )
     steps = data.unbind(time)
     group: Callable[[TensorDictBase], TensorDictBase] = lambda td: td.get(env.group) if env.group else td  # noqa: E731
     first, keys, kept = group(steps[0]), settings.keys, settings.kept
-    setup = set_up(first.batch_size, group(data).get(keys.learner, None), time,
-                   read(steps[0], settings.observation_key))
+    setup = set_up(
+        first.batch_size, group(data).get(keys.learner, None), time, read(steps[0], settings.observation_key)
+    )
     if all(first.get(name, None) is not None for name in kept):  # a slice from the middle of an episode
         current = {name: first.get(name) for name in kept}
         if keys.learner in current:
@@ -136,8 +147,9 @@ def shape_stored(
         reward = read(step_next, env.reward) if reward is None else reward
         done, terminated = read(step_next, env.done), read(step_next, env.terminated)
         obs = read(step_next, settings.observation_key) if settings.reads_observation else None
-        out = advance(setup, current, StepInputs(obs, reward, reward, done, done if terminated is None else terminated,
-                                                 step_next))
+        out = advance(
+            setup, current, StepInputs(obs, reward, reward, done, done if terminated is None else terminated, step_next)
+        )
         outs.append({**out, ENV_REWARD: reward})
         if t + 1 < len(steps):
             restart = initial_state(setup, settings, read(steps[t + 1], settings.observation_key))

@@ -127,14 +127,28 @@ class SubgoalPotentialTransform(Transform):
         self.potential = potential
         self.backend, self.transitions_key = backend, transitions_key
         self.value_update = setup.online_update(value_update, potential, gamma)
-        self.value_optimizer = torch.optim.SGD(potential.parameters(), self.value_update.lr) if self.value_update else None
+        self.value_optimizer = (
+            torch.optim.SGD(potential.parameters(), self.value_update.lr) if self.value_update else None
+        )
         self._parameters_list = list(potential.parameters())
-        value_gamma = float(gamma) if not isinstance(value_update, ValueUpdate) or value_update.loss is None \
+        value_gamma = (
+            float(gamma)
+            if not isinstance(value_update, ValueUpdate) or value_update.loss is None
             else value_update.loss.gamma
+        )
         kept = setup.kept_entries(self.keys, potential, self.subgoals, start_potential)
-        self._settings = Settings(self.keys, kept, float(gamma), value_gamma, zero_terminal_potential, start_potential,
-                                  observation_key, self.subgoals.reads_observation, transitions_key is not None,
-                                  tuple(potential.in_keys))
+        self._settings = Settings(
+            self.keys,
+            kept,
+            float(gamma),
+            value_gamma,
+            zero_terminal_potential,
+            start_potential,
+            observation_key,
+            self.subgoals.reads_observation,
+            transitions_key is not None,
+            tuple(potential.in_keys),
+        )
         self._env = EnvKeys.resolve(None)
         self._online: BatchSetup | None = None
         self._layout: tuple[int, bool] | None = None
@@ -144,16 +158,21 @@ class SubgoalPotentialTransform(Transform):
 
     gamma = property(lambda self: self._settings.gamma, doc="The discount of the shaping term.")
     value_gamma = property(lambda self: self._settings.value_gamma, doc="The discount of the SMDP return.")
-    observation_key = property(lambda self: self._settings.observation_key,
-                               doc="The observation the region predicates read and the anchor snapshots.")
+    observation_key = property(
+        lambda self: self._settings.observation_key,
+        doc="The observation the region predicates read and the anchor snapshots.",
+    )
     zero_terminal_potential = property(lambda self: self._settings.zero_terminal, doc="``Φ = 0`` at terminal states.")
     start_potential = property(lambda self: self._settings.start, doc="The level of ``Φ``.")
-    state_keys = property(lambda self: self._settings.kept,
-                          doc="The abstract-state entries kept (``\"subgoal_*\"``, in the reward's group).")
+    state_keys = property(
+        lambda self: self._settings.kept,
+        doc='The abstract-state entries kept (``"subgoal_*"``, in the reward\'s group).',
+    )
     env_reward_key = property(lambda self: self._env.env_reward, doc="Where the unshaped reward is kept.")
     value_key = property(lambda self: self.potential.out_keys[-1], doc="The potential's value entry.")
-    num_abstract_states = property(lambda self: self.subgoals.num_states,
-                                   doc="Number of abstract states ``z`` (the terminal one excluded).")
+    num_abstract_states = property(
+        lambda self: self.subgoals.num_states, doc="Number of abstract states ``z`` (the terminal one excluded)."
+    )
     aggregation = property(lambda self: self.subgoals.aggregation, doc="The hand-given aggregation, if any.")
 
     @property
@@ -163,8 +182,12 @@ class SubgoalPotentialTransform(Transform):
         env = self._env
         read_obs = self._settings.reads_observation or self.keys.anchor in self.state_keys
         done = [env.done] if env.terminated == env.done else [env.done, env.terminated]
-        return [env.reward, *([env.env_reward] if env.shaped_before else []), *done,
-                *([self.observation_key] if read_obs else [])]
+        return [
+            env.reward,
+            *([env.env_reward] if env.shaped_before else []),
+            *done,
+            *([self.observation_key] if read_obs else []),
+        ]
 
     @in_keys.setter
     def in_keys(self, value: Any) -> None:  # Transform.__init__ sets None
@@ -198,16 +221,20 @@ class SubgoalPotentialTransform(Transform):
 
     # ------------------------------------------------------------------ set-up and specs
 
-    def _batch(self, batch_shape: torch.Size, learner: torch.Tensor, n_learners: int, obs: torch.Tensor | None,
-               online: bool) -> BatchSetup:
+    def _batch(
+        self, batch_shape: torch.Size, learner: torch.Tensor, n_learners: int, obs: torch.Tensor | None, online: bool
+    ) -> BatchSetup:
         """Set up a batch whose rows belong to ``learner`` (``online``: the env's batch, in order)."""
         pot = self.potential
         if isinstance(pot, TabularPotential) and pot.batch_shape and pot.learners != n_learners:
-            raise ValueError(f"TabularPotential has batch_shape {tuple(pot.batch_shape)} but the env batch has "
-                             f"{n_learners} envs: use one table per env or a shared one (batch_shape=())")
+            raise ValueError(
+                f"TabularPotential has batch_shape {tuple(pot.batch_shape)} but the env batch has "
+                f"{n_learners} envs: use one table per env or a shared one (batch_shape=())"
+            )
         if isinstance(pot, TabularPotential) and pot.num_states < self.num_abstract_states:
-            raise ValueError(f"TabularPotential has {pot.num_states} states; the abstraction has "
-                             f"{self.num_abstract_states}")
+            raise ValueError(
+                f"TabularPotential has {pot.num_states} states; the abstraction has {self.num_abstract_states}"
+            )
         layout = self._layout  # the observation's entries and encoding: the env's spec's once known
         if layout is None:
             spec = None
@@ -218,8 +245,11 @@ class SubgoalPotentialTransform(Transform):
                 self._layout = layout
         abstraction = self.subgoals.compile(learner, batch_shape, n_learners, layout, self.observation_key)
         batch = BatchSetup(batch_shape, abstraction, learner, compiled_search=self.backend != "torch")
-        why = "backend='torch'" if self.backend == "torch" else setup.compiled_potential(
-            pot, self.value_update.loss if self.value_update is not None else None)
+        why = (
+            "backend='torch'"
+            if self.backend == "torch"
+            else setup.compiled_potential(pot, self.value_update.loss if self.value_update is not None else None)
+        )
         if why is None:
             batch.use_kernels(pot, self._settings, self.value_update, online)
         elif self.backend == "compiled":
@@ -236,8 +266,7 @@ class SubgoalPotentialTransform(Transform):
     def _kept_specs(self) -> dict[str, TensorSpec]:
         self._env = EnvKeys.resolve(self.parent)
         s = self._settings
-        return keys.kept_specs(self.parent, self._env, self.keys, s.kept, self.num_abstract_states,
-                               s.observation_key)
+        return keys.kept_specs(self.parent, self._env, self.keys, s.kept, self.num_abstract_states, s.observation_key)
 
     def transform_observation_spec(self, observation_spec: TensorSpec) -> TensorSpec:
         assert isinstance(observation_spec, Composite)
@@ -271,7 +300,9 @@ class SubgoalPotentialTransform(Transform):
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
         return self._start(tensordict_reset, native=False)  # every env's: TorchRL keeps the rest where not "_reset"
 
-    def _reset_on_native_autoreset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+    def _reset_on_native_autoreset(
+        self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase
+    ) -> TensorDictBase:
         return self._start(tensordict_reset, native=True)  # the env reset itself in its step: where "_reset" is set
 
     def _start(self, td: TensorDictBase, native: bool) -> TensorDictBase:
@@ -284,32 +315,48 @@ class SubgoalPotentialTransform(Transform):
         batch = self._online_batch(root.batch_size, obs)
         state = setup.initial_state(batch, self._settings, obs)
         for name, value in state.items():
-            write(root, name, value if reset is None else torch.where(reset.reshape(*batch.batch_shape, 1), value,
-                                                                        root.get(name)))
+            write(
+                root,
+                name,
+                value if reset is None else torch.where(reset.reshape(*batch.batch_shape, 1), value, root.get(name)),
+            )
         if self.transitions_key is not None and not native:
-            write(td, self.transitions_key, empty_transition(batch.batch_shape, state, self._settings.inputs, self.keys))
+            write(
+                td, self.transitions_key, empty_transition(batch.batch_shape, state, self._settings.inputs, self.keys)
+            )
         return td
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         # every env step comes here: entries are read and written unchecked (their shapes are the specs')
         env, settings = self._env, self._settings
-        root, nxt = (tensordict.get(env.group), next_tensordict.get(env.group)) if env.group \
-            else (tensordict, next_tensordict)
+        root, nxt = (
+            (tensordict.get(env.group), next_tensordict.get(env.group)) if env.group else (tensordict, next_tensordict)
+        )
         current = {}
         for name in settings.kept:
             value = root._get_str(name, None)
             if value is None:
-                raise KeyError(f"SubgoalPotentialTransform: {name!r} is missing from the step's input: reset the "
-                               "env through the transform (env.reset()) before stepping")
+                raise KeyError(
+                    f"SubgoalPotentialTransform: {name!r} is missing from the step's input: reset the "
+                    "env through the transform (env.reset()) before stepping"
+                )
             current[name] = value
         reward, done = read(next_tensordict, env.reward), read(next_tensordict, env.done)
         obs = read(next_tensordict, settings.observation_key) if settings.reads_observation else None
-        step = StepInputs(obs, reward, read(next_tensordict, env.env_reward) if env.shaped_before else reward, done,
-                          done if env.terminated == env.done else read(next_tensordict, env.terminated),
-                          next_tensordict)
+        step = StepInputs(
+            obs,
+            reward,
+            read(next_tensordict, env.env_reward) if env.shaped_before else reward,
+            done,
+            done if env.terminated == env.done else read(next_tensordict, env.terminated),
+            next_tensordict,
+        )
         batch = self._online  # set up again for another batch shape, or when a table moved (to shared memory…)
-        if batch is None or batch.batch_shape != nxt.batch_size or (
-                batch.table is not None and batch.table.data_ptr() != batch.table_ptr):
+        if (
+            batch is None
+            or batch.batch_shape != nxt.batch_size
+            or (batch.table is not None and batch.table.data_ptr() != batch.table_ptr)
+        ):
             batch = self._online_batch(nxt.batch_size, obs)
         out = self._advance(batch, current, step, self.value_update is not None and self.learning)
         for name in settings.kept:
@@ -330,8 +377,9 @@ class SubgoalPotentialTransform(Transform):
             return compiled_step(batch, self._settings, current, step, learn)
         if step.obs is None and self._settings.reads_observation:
             raise KeyError(f"SubgoalPotentialTransform: the step has no {self.observation_key!r} entry")
-        return torch_step(batch, self._settings, self.potential, self._cache, current, step,
-                          self.update_potential if learn else None)
+        return torch_step(
+            batch, self._settings, self.potential, self._cache, current, step, self.update_potential if learn else None
+        )
 
     def update_potential(self, transitions: TensorDictBase) -> None:
         """The online update: one SGD step of ``value_update``'s loss on ``transitions`` (SMDP layout, masked).
@@ -339,7 +387,8 @@ class SubgoalPotentialTransform(Transform):
         Examples:
             >>> from torchrl_subgoal import State
             >>> from torchrl_subgoal.transform.transitions import transition
-            >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9, value_update=0.5)
+            >>> series = SubgoalSeries([State(1)])
+            >>> t = SubgoalPotentialTransform(series, TabularPotential(2), gamma=0.9, value_update=0.5)
             >>> z, one = torch.zeros(1, 1, dtype=torch.long), torch.ones(1, 1, dtype=torch.bool)
             >>> t.update_potential(transition(torch.Size([1]), {"subgoal_index": z}, {"subgoal_index": z + 1},
             ...                               one.float(), z + 1, one, one, one, one))  # r_h = 1, then terminated
@@ -386,14 +435,30 @@ class SubgoalPotentialTransform(Transform):
         or pattern: then each row's is read from ``"subgoal_learner"`` (or the rows are the env batch in
         order); otherwise any sample, shuffled or not, is shaped.
         """
-        def set_up(batch_shape: torch.Size, learned: torch.Tensor | None, time: int,
-                   obs: torch.Tensor | None) -> BatchSetup:
-            learner, n = stored.learners_of(learned, batch_shape, time, self.subgoals, self.potential,
-                                            self._online.rows if self._online else None, self.keys.learner)
+
+        def set_up(
+            batch_shape: torch.Size, learned: torch.Tensor | None, time: int, obs: torch.Tensor | None
+        ) -> BatchSetup:
+            learner, n = stored.learners_of(
+                learned,
+                batch_shape,
+                time,
+                self.subgoals,
+                self.potential,
+                self._online.rows if self._online else None,
+                self.keys.learner,
+            )
             return self._batch(batch_shape, learner, n, obs, online=False)
 
-        return stored.shape_stored(tensordict, self._env, self._settings, self.in_keys, self.transitions_key, set_up,
-                                   lambda batch, current, step: self._advance(batch, current, step, learn=False))
+        return stored.shape_stored(
+            tensordict,
+            self._env,
+            self._settings,
+            self.in_keys,
+            self.transitions_key,
+            set_up,
+            lambda batch, current, step: self._advance(batch, current, step, learn=False),
+        )
 
     def kernel_state(self, tensordict: TensorDictBase) -> ShapingKernelState:
         """This transform for a compiled loop: its abstraction, its potential and each learner's abstract
@@ -416,9 +481,12 @@ class SubgoalPotentialTransform(Transform):
         batch = self._online
         if batch is None or not batch.compiled:
             why = setup.compiled_potential(self.potential, self.value_update.loss if self.value_update else None)
-            raise TypeError("kernel_state needs the env reset through the transform first (env.reset())" if batch is
-                            None else f"a compiled loop shapes as the compiled step does, which it cannot here: "
-                            f"{why or 'backend=' + repr(self.backend)}")
+            raise TypeError(
+                "kernel_state needs the env reset through the transform first (env.reset())"
+                if batch is None
+                else f"a compiled loop shapes as the compiled step does, which it cannot here: "
+                f"{why or 'backend=' + repr(self.backend)}"
+            )
         root = tensordict.get(self._env.group) if self._env.group else tensordict
         state = (root.get(self.keys.index), root.get(self.keys.ret), root.get(self.keys.steps))
         return compiled.kernel_state(batch, state, self.learning, (self._layout or (1, False))[0])

@@ -37,8 +37,9 @@ def transition(
         (1, 1)
     """
     nxt = TensorDict({**next_inputs, "reward": r_h, "done": done, "terminated": terminated}, batch_size=batch_shape)
-    return TensorDict({**inputs, "steps_to_next_obs": k, "mask": mask, "achieved": achieved, "next": nxt},
-                      batch_size=batch_shape)
+    return TensorDict(
+        {**inputs, "steps_to_next_obs": k, "mask": mask, "achieved": achieved, "next": nxt}, batch_size=batch_shape
+    )
 
 
 def empty_transition(
@@ -55,8 +56,17 @@ def empty_transition(
     """
     at_reset = {k: state[k] for k in inputs}
     false = torch.zeros_like(state[keys.index], dtype=torch.bool)
-    return transition(batch_shape, at_reset, at_reset, torch.zeros_like(state[keys.ret]), state[keys.steps], false,
-                      false, false, false)
+    return transition(
+        batch_shape,
+        at_reset,
+        at_reset,
+        torch.zeros_like(state[keys.ret]),
+        state[keys.steps],
+        false,
+        false,
+        false,
+        false,
+    )
 
 
 def rebuild(
@@ -75,7 +85,8 @@ def rebuild(
         >>> data = TensorDict({"subgoal_index": zero, "subgoal_return": torch.zeros(1, 2, 1), "subgoal_steps": zero,
         ...                    "next": {"subgoal_index": torch.tensor([[[0], [1]]]), "reward": torch.ones(1, 2, 1),
         ...                             "done": zero.bool(), "terminated": zero.bool()}}, [1, 2])
-        >>> rebuild(data, SubgoalKeys(), EnvKeys.resolve(None), ["subgoal_index"], 0.9)["next", "subgoal_index"].tolist()
+        >>> real = rebuild(data, SubgoalKeys(), EnvKeys.resolve(None), ["subgoal_index"], 0.9)
+        >>> real["next", "subgoal_index"].tolist()
         [[1]]
     """
     index, ret, steps = (at(env.group, name) for name in (keys.index, keys.ret, keys.steps))
@@ -83,8 +94,10 @@ def rebuild(
     missing: list[NestedKey] = [k for k in (index, ret, steps) if data.get(k, None) is None]
     missing += [("next", k) for k in (index, env.done) if nxt is None or nxt.get(k, None) is None]
     if missing:
-        raise KeyError(f"SubgoalPotentialTransform.transitions: the data has no {missing}; pass data collected "
-                       "through the transform (or shaped by it)")
+        raise KeyError(
+            f"SubgoalPotentialTransform.transitions: the data has no {missing}; pass data collected "
+            "through the transform (or shaped by it)"
+        )
     group = data.get(env.group) if env.group else data
     n, dims = group.batch_size.numel(), group.batch_dims
     nxt_group = nxt.get(env.group) if env.group else nxt
@@ -106,6 +119,14 @@ def rebuild(
     inputs = {key: v.index_select(0, rows) for key in in_keys if (v := flat(group, key)) is not None}
     next_inputs = {key: v.index_select(0, rows) for key in in_keys if (v := flat(nxt_group, key)) is not None}
     done = done.index_select(0, rows)
-    return transition(torch.Size([done.shape[0]]), inputs, next_inputs, r_h.to(torch.float32), k,
-                      torch.ones_like(done), done, done if terminated is None else terminated.index_select(0, rows),
-                      achieved.index_select(0, rows))
+    return transition(
+        torch.Size([done.shape[0]]),
+        inputs,
+        next_inputs,
+        r_h.to(torch.float32),
+        k,
+        torch.ones_like(done),
+        done,
+        done if terminated is None else terminated.index_select(0, rows),
+        achieved.index_select(0, rows),
+    )
