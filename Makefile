@@ -29,8 +29,11 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(PY) recipes/four_rooms.py
 
+SOURCES := torchrl_subgoal recipes tests benchmarks tools docs/tutorials
+
 lint: $(STAMP)
-	$(PY) -m ruff check torchrl_subgoal recipes tests benchmarks tools docs/tutorials
+	$(PY) -m ruff format --check $(SOURCES)
+	$(PY) -m ruff check $(SOURCES)
 	$(PY) -m mypy
 
 # MkDocs + Material + mkdocstrings (the docs extra, part of dev); --strict turns every

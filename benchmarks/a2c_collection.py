@@ -353,7 +353,8 @@ def transform_cost(domain: LearnerDomain, repeats: int, batches: int, calls: boo
     costs, plain = paired_costs(setups, repeats, "plain A2C")
     print(
         f"        load average after {load_average()}; plain A2C iteration (median): CPU "
-        f"{1e3 * plain['cpu'] * config.frames_per_batch:.1f} ms, wall {1e3 * plain['wall'] * config.frames_per_batch:.1f} ms"
+        f"{1e3 * plain['cpu'] * config.frames_per_batch:.1f} ms, "
+        f"wall {1e3 * plain['wall'] * config.frames_per_batch:.1f} ms"
     )
     print("        cost = time over the plain iteration's in the same round - 1, median [lowest, highest]")
     for name, clocks in costs.items():

@@ -38,7 +38,8 @@ def clean(text: str, tmp: Path | None = None) -> str:
     temporary directory ``tmp`` written ``RESULTS``.
 
     Examples:
-        >>> clean("\x1b[32mok\x1b[0m\n2026-01-02 03:04:05,678 [torchrl][INFO] storage\nResults: `/tmp/x/a`", Path("/tmp/x"))
+        >>> log = "\x1b[32mok\x1b[0m\n2026-01-02 03:04:05,678 [torchrl][INFO] storage\nResults: `/tmp/x/a`"
+        >>> clean(log, Path("/tmp/x"))
         'ok\nResults: `RESULTS/a`'
     """
     text = _STAMPED.sub("", _ANSI.sub("", text))

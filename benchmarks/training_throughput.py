@@ -126,9 +126,9 @@ def run_cell(block: str, domain: Domain, shaped: bool, batches: int) -> tuple[fl
     elif block == "dqn":
         fpb = DQNConfig.frames_per_batch
         config = DQNConfig(
-            features=domain.features,
+            features=domain.features,  # type: ignore[arg-type]
             total_frames=batches * fpb,
-            learning_starts=fpb,  # type: ignore[arg-type]
+            learning_starts=fpb,
             reward_scale=scale,
         )
         train = train_dqn

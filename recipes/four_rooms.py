@@ -119,6 +119,8 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
         observation_key=OBSERVATION_KEY,
         zero_terminal_potential=config["zero_terminal_potential"],
         start_potential=config["start_potential"],
+        expectile=config.get("expectile", 0.5),
+        bootstrap_truncated=config.get("bootstrap_truncated", True),
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     subgoal_aware = config["agent_state"] == "s,z" and method.shaping in ("subgoals", "naive")
@@ -154,6 +156,8 @@ def plan(cfg: Config) -> Plan:
                 "reward",
                 "engine",
                 "agent_state",
+                "expectile",
+                "bootstrap_truncated",
             )
         },
         "sarsa": dataclasses.asdict(SARSA_PRESETS[cfg.preset]),

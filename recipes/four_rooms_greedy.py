@@ -93,6 +93,8 @@ def run(cfg: Config) -> int:
             observation_key="cell",
             zero_terminal_potential=zero_terminal,
             start_potential=start,  # type: ignore[arg-type]
+            expectile=0.5,
+            bootstrap_truncated=True,  # the paper's mean target: the conventions alone differ
         )
         agent = SoftmaxSarsa(n, env.num_states, 4, sarsa, seed=cfg.seed)
         records = run_episodes(TransformedEnv(env, shaping), agent, cfg.episodes, engine="fused")

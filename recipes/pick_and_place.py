@@ -16,8 +16,8 @@ with ``--collector-workers 0``, a ``Collector`` here over ``TransformedEnv(envs,
 shaping)``. The authors' schedule (epochs of cycles: every env collects one episode,
 V takes one step of ``SubgoalValueLoss`` on the cycle's SMDP transitions, ``updates``
 DDPG gradient steps, one soft target update), then ``test_episodes`` greedy episodes
-whose final-step success gives the epoch's success rate. Every epoch is checkpointed, so a re-run resumes mid-learning; results go
-through the experiment engine (one chunk per learning) and the report gives success
+whose final-step success gives the epoch's success rate. Every epoch is checkpointed, so a re-run resumes
+mid-learning; results go through the experiment engine (one chunk per learning) and the report gives success
 curves, epochs to a success rate of 0.6 and the asymptotic success beside the paper's.
 
     python recipes/pick_and_place.py                          # paper scale: 5 learnings x 200 epochs
@@ -209,7 +209,12 @@ def make_shaping(
     shaping.potential = NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, config["ddpg"]["hidden"]))
     trainer = PotentialTrainer(
         shaping.transform(shaping.potential, gamma, None),
-        SubgoalValueLoss(shaping.potential, reduction="mean").make_value_estimator(gamma=gamma),
+        SubgoalValueLoss(
+            shaping.potential,
+            reduction="mean",
+            expectile=0.5,  # the paper's mean target
+            bootstrap_truncated=True,
+        ).make_value_estimator(gamma=gamma),
         torch.optim.Adam(shaping.potential.parameters(), lr=config["value_lr"]),
     )
     return shaping, trainer
@@ -410,7 +415,7 @@ def check_shaping(options: Mapping[str, Any]) -> None:
         >>> check_shaping({"foo": 1})
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.experiments.cli.ConfigError: --shaping: unknown option 'foo'; SubgoalPotentialTransform takes ...
+        torchrl_subgoal.experiments.cli.ConfigError: --shaping: unknown option 'foo'; ...
     """
     parameters = {
         name: p

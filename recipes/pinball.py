@@ -144,6 +144,8 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
         zero_terminal_potential=config["zero_terminal_potential"],
         observation_key=OBSERVATION_KEY,
         start_potential=config["start_potential"],
+        expectile=config.get("expectile", 0.5),
+        bootstrap_truncated=config.get("bootstrap_truncated", True),
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     spec = env.observation_spec["observation"]
@@ -173,6 +175,8 @@ def plan(cfg: Config) -> Plan:
                 "map",
                 "max_steps",
                 "engine",
+                "expectile",
+                "bootstrap_truncated",
             )
         },
         "actor_critic": dataclasses.asdict(AC_PRESETS[cfg.preset]),

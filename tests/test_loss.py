@@ -10,6 +10,9 @@ from torchrl.objectives.value import TD0Estimator
 
 from torchrl_subgoal import NeuralPotential, SubgoalValueLoss, TabularPotential
 
+#: the paper's target: the mean, time-outs bootstrapped
+PAPER = {"expectile": 0.5, "bootstrap_truncated": True}
+
 
 def transitions(n: int, num_states: int, seed: int) -> TensorDict:
     g = torch.Generator().manual_seed(seed)
@@ -50,7 +53,7 @@ def test_sgd_step_is_the_papers_update() -> None:
         target = float(data["next", "reward"][b, 0]) + gamma**k * v_next
         expected[b, z] += lr * (target - float(before[b, z]))
 
-    loss = SubgoalValueLoss(v).make_value_estimator(gamma=gamma)
+    loss = SubgoalValueLoss(v, **PAPER).make_value_estimator(gamma=gamma)
     opt = torch.optim.SGD(v.parameters(), lr=lr)
     loss(data)["loss_value"].backward()
     opt.step()
@@ -71,7 +74,7 @@ def test_target_equals_torchrl_td0_estimator() -> None:
     with torch.no_grad():
         reference = estimator.value_estimate(data.clone())
     assert (data["steps_to_next_obs"] > 1).any() and not torch.allclose(reference, data["next", "reward"])
-    out = SubgoalValueLoss(v).make_value_estimator(gamma=0.9)(data)
+    out = SubgoalValueLoss(v, bootstrap_truncated=True).make_value_estimator(gamma=0.9)(data)
     value = v(data["subgoal_index"]).detach()
     assert torch.allclose(out["td_error"] + value, reference, atol=1e-6)
 
@@ -208,7 +211,7 @@ def test_set_keys_value_takes_effect() -> None:
     both = TensorDictModule(lambda z: (z.float(), 10 * z.float()), in_keys=["subgoal_index"], out_keys=["small", "big"])
     data = transitions(5, 3, seed=7)
     data["mask"] = torch.ones(5, 1, dtype=torch.bool)
-    loss = SubgoalValueLoss(both).make_value_estimator(gamma=0.9)
+    loss = SubgoalValueLoss(both, bootstrap_truncated=True).make_value_estimator(gamma=0.9)
     assert loss.tensor_keys.value == "big"
     big = loss(data)["td_error"]
     loss.set_keys(value="small")
@@ -221,3 +224,61 @@ def test_set_keys_value_takes_effect() -> None:
         data["next", "reward"] + 0.9 ** data["steps_to_next_obs"] * 10 * z2 * ~data["next", "terminated"] - 10 * z,
         atol=1e-4,
     )
+
+
+def test_the_expectile_weights_each_sgd_step() -> None:
+    """With ``τ`` and SGD (sum reduction), a target above ``V(z)`` moves it by ``α 2τ δ``, one below by
+    ``α 2(1 − τ) δ``: ``V`` settles at the ``τ``-expectile of its targets."""
+    v = TabularPotential(2, batch_shape=(2,))
+    one = torch.ones(2, 1, dtype=torch.bool)
+    data = TensorDict(
+        {
+            "subgoal_index": torch.zeros(2, 1, dtype=torch.long),
+            "steps_to_next_obs": torch.ones(2, 1, dtype=torch.long),
+            "mask": one,
+            "achieved": one,
+            "next": {
+                "subgoal_index": torch.ones(2, 1, dtype=torch.long),
+                "reward": torch.tensor([[2.0], [-2.0]]),
+                "terminated": one,
+                "done": one,
+            },
+        },
+        batch_size=[2],
+    )
+    loss = SubgoalValueLoss(v, expectile=0.9).make_value_estimator(gamma=0.9)
+    loss(data)["loss_value"].backward()
+    with torch.no_grad():
+        v.table -= 0.1 * v.table.grad
+    assert v.table[:, 0].tolist() == pytest.approx([0.1 * 1.8 * 2.0, 0.1 * 0.2 * -2.0])
+    with pytest.raises(ValueError, match="expectile"):
+        SubgoalValueLoss(v, expectile=1.0)
+
+
+def test_a_time_out_inside_z_trains_nothing_unless_bootstrapped() -> None:
+    """Rows: a time-out inside ``z``; a time-out the step a subgoal was achieved; a termination. By default
+    the first is skipped (its TD error 0); ``bootstrap_truncated=True`` trains on all three; without an
+    ``"achieved"`` entry every truncated row is skipped."""
+    v = TabularPotential(3, batch_shape=(3,))
+    col = (3, 1)
+    data = TensorDict(
+        {
+            "subgoal_index": torch.zeros(col, dtype=torch.long),
+            "steps_to_next_obs": torch.ones(col, dtype=torch.long),
+            "mask": torch.ones(col, dtype=torch.bool),
+            "achieved": torch.tensor([[False], [True], [True]]),
+            "next": {
+                "subgoal_index": torch.tensor([[0], [1], [1]]),
+                "reward": -torch.ones(col),
+                "terminated": torch.tensor([[False], [False], [True]]),
+                "done": torch.ones(col, dtype=torch.bool),
+            },
+        },
+        batch_size=[3],
+    )
+    skipped = SubgoalValueLoss(v).make_value_estimator(gamma=0.9)(data)["td_error"]
+    assert skipped.reshape(-1).tolist() == [0.0, -1.0, -1.0]
+    every = SubgoalValueLoss(v, bootstrap_truncated=True).make_value_estimator(gamma=0.9)(data)["td_error"]
+    assert every.reshape(-1).tolist() == [-1.0, -1.0, -1.0]
+    unknown = SubgoalValueLoss(v).make_value_estimator(gamma=0.9)(data.exclude("achieved"))["td_error"]
+    assert unknown.reshape(-1).tolist() == [0.0, 0.0, -1.0]

@@ -408,3 +408,21 @@ def test_a_lambda_cannot_be_written_to_a_file(tmp_path: Path) -> None:
     series = SubgoalSeries([lambda td: td["x"] > 0], name="anon")
     with pytest.raises(SubgoalFileError, match="has no import path"):
         save_patterns(tmp_path / "x.yaml", {"anon": series})
+
+
+def test_a_condition_must_return_a_boolean_mask() -> None:
+    """A number is not a truth value: a condition returning the passenger's index (an int) instead of
+    a comparison is refused in one line naming it, not read as 'achieved wherever non-zero'."""
+    from tensordict import TensorDict
+
+    from torchrl_subgoal.subgoals import SubgoalTables
+
+    def passenger(td):  # forgot the `== 4`
+        return td["passenger"]
+
+    tables = SubgoalTables([SubgoalSeries([passenger])], torch.zeros(2, dtype=torch.long), 1)
+    td = TensorDict({"passenger": torch.tensor([4, 0])}, [2])
+    with pytest.raises(ValueError, match=r"passenger.*int64 tensor; expected a boolean mask"):
+        tables.advance(torch.zeros(2, 1, dtype=torch.long), None, td)
+    tables = SubgoalTables([SubgoalSeries([lambda td: td["passenger"] == 4])], torch.zeros(2, dtype=torch.long), 1)
+    assert tables.advance(torch.zeros(2, 1, dtype=torch.long), None, td).reshape(-1).tolist() == [1, 0]

@@ -19,7 +19,9 @@ from torchrl_subgoal import (
     SubgoalFileError,
     SubgoalPotentialTransform,
     SubgoalSeries,
+    SubgoalValueLoss,
     TabularPotential,
+    ValueUpdate,
 )
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import room_aggregation
@@ -54,11 +56,12 @@ def test_smdp_arithmetic_by_hand(backend: str, start: str) -> None:
     v = TabularPotential(3)
     with torch.no_grad():
         v.table.copy_(torch.tensor([0.1, 0.2, 0.3]))
+    paper = ValueUpdate(0.5, SubgoalValueLoss(v, expectile=0.5).make_value_estimator(gamma=0.9))
     t = SubgoalPotentialTransform(
         SubgoalSeries([State(1), State(3)]),
         v,
         gamma=0.9,
-        value_update=0.5,
+        value_update=paper,
         transitions_key="smdp",
         start_potential=start,
         backend=backend,  # type: ignore[arg-type]
@@ -674,7 +677,9 @@ def test_arbitrary_tensordict_module_as_the_potential() -> None:
     )
     potential = TensorDictSequential(embed, head)
     before = [p.detach().clone() for p in potential.parameters()]
-    t = SubgoalPotentialTransform(HALLWAYS, potential, gamma=0.9, observation_key="cell", value_update=0.01)
+    # random walks of 40 steps mostly time out inside z: bootstrapped, they train the module too
+    update = ValueUpdate(0.01, SubgoalValueLoss(potential, bootstrap_truncated=True).make_value_estimator(gamma=0.9))
+    t = SubgoalPotentialTransform(HALLWAYS, potential, gamma=0.9, observation_key="cell", value_update=update)
     env = TransformedEnv(FourRoomsEnv(4, max_steps=40), t)
     check_env_specs(env)
     data = env.rollout(100, break_when_any_done=False)
@@ -722,8 +727,8 @@ class _CountingNet(torch.nn.Module):
 @pytest.mark.parametrize("change", ["none", "optimizer", "data", "shared"])
 def test_potential_value_is_reused_only_while_inputs_and_parameters_are_unchanged(change: str) -> None:
     """Φ(z) of a step is the previous step's Φ(z'), Φ(z') is Φ(z) until a subgoal is achieved and Φ(z_0)
-    that of the episode, without evaluating the potential again; any change of the parameters (an optimiser step, an in-place ``.data`` write
-    that moves no version counter, shared memory written by another process) is seen."""
+    that of the episode, without evaluating the potential again; any change of the parameters (an optimiser step,
+    an in-place ``.data`` write that moves no version counter, shared memory written by another process) is seen."""
     torch.manual_seed(0)
     net = _CountingNet()
     if change == "shared":

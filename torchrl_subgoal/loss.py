@@ -30,8 +30,20 @@ class SubgoalValueLoss(LossModule):
     target is TorchRL's :class:`~torchrl.objectives.value.TD0Estimator`
     estimate, which raises ``γ_v`` to the ``"steps_to_next_obs"`` entry; the
     potential is its value network. The loss is ``½ (target − V(z))²`` per
-    real transition, with the target held fixed, reduced by TorchRL's
-    reduction (a masked row contributes nothing, not even a NaN it holds).
+    real transition, with the target held fixed, weighted as an expectile
+    regression (``2τ`` where the target lies above ``V(z)``, ``2(1 − τ)``
+    below) and reduced by TorchRL's reduction (a masked row contributes
+    nothing, not even a NaN it holds).
+
+    The defaults make ``V`` an optimistic estimate of the value of
+    *progressing* through the subgoals rather than the mean return of the
+    agent's past behaviour: ``expectile=0.9`` leans towards the better
+    outcomes seen from ``z``, and a time-out inside ``z``
+    (``bootstrap_truncated=False``) trains nothing. Under a step cost the
+    mean return of an early, wandering policy is very negative, and a
+    potential that low pays the agent ``(1 − γ)|Φ|`` per step for staying
+    where it is (docs/shaping_defaults.md has the measurements).
+    ``expectile=0.5, bootstrap_truncated=True`` is the paper's mean TD target.
 
     ``γ_v`` is set as for TorchRL's losses, through
     :meth:`make_value_estimator` (``loss.make_value_estimator(gamma=0.99)``;
@@ -58,6 +70,12 @@ class SubgoalValueLoss(LossModule):
         reduction: ``"sum"`` (default; the tabular update above), ``"mean"``
             over real transitions (for networks with adaptive optimisers) or
             ``"none"`` (per-row losses, zero where masked).
+        expectile: ``τ`` in ``(0, 1)`` of the target (default 0.9; 0.5: the mean).
+        bootstrap_truncated: whether a transition that ended in a time-out
+            without leaving ``z`` trains ``V(z)`` (bootstrapping from ``V(z)``).
+            Default ``False``: it is skipped, as a masked row. It is told by
+            the transitions' ``"achieved"`` entry (``z' ≠ z``); without one,
+            every truncated transition is skipped.
         gamma: not accepted: ``γ_v`` goes through :meth:`make_value_estimator`
             (a ``TypeError`` says so).
 
@@ -66,7 +84,7 @@ class SubgoalValueLoss(LossModule):
         >>> from tensordict import TensorDict
         >>> from torchrl_subgoal import SubgoalValueLoss, TabularPotential
         >>> v = TabularPotential(3)
-        >>> loss = SubgoalValueLoss(v).make_value_estimator(gamma=0.9)
+        >>> loss = SubgoalValueLoss(v, expectile=0.5).make_value_estimator(gamma=0.9)
         >>> smdp = TensorDict({
         ...     "subgoal_index": torch.tensor([[0]]),
         ...     "steps_to_next_obs": torch.tensor([[2]]),
@@ -92,6 +110,7 @@ class SubgoalValueLoss(LossModule):
             terminated: ``("next", terminated)``; ``V(z') = 0`` when set.
             steps_to_next_obs: ``k``, steps spent in ``z``.
             mask: which entries are real transitions.
+            achieved: whether the transition reached the next subgoal (``z' ≠ z``).
         """
 
         value: NestedKey = "subgoal_value"
@@ -100,6 +119,7 @@ class SubgoalValueLoss(LossModule):
         terminated: NestedKey = "terminated"
         steps_to_next_obs: NestedKey = "steps_to_next_obs"
         mask: NestedKey = "mask"
+        achieved: NestedKey = "achieved"
 
     default_keys = _AcceptedKeys
     tensor_keys: _AcceptedKeys
@@ -111,6 +131,8 @@ class SubgoalValueLoss(LossModule):
         potential: TensorDictModuleBase,
         *,
         reduction: Reduction = "sum",
+        expectile: float = 0.9,
+        bootstrap_truncated: bool = False,
         gamma: float | None = None,
     ) -> None:
         if gamma is not None:
@@ -126,9 +148,14 @@ class SubgoalValueLoss(LossModule):
             )
         if reduction not in ("sum", "mean", "none"):
             raise ValueError(f"reduction must be 'sum', 'mean' or 'none', got {reduction!r}")
+        if not 0.0 < float(expectile) < 1.0:
+            raise ValueError(f"expectile must lie strictly between 0 and 1, got {expectile}")
         self.potential = potential
         self.reduction = reduction
+        self.expectile = float(expectile)
+        self.bootstrap_truncated = bool(bootstrap_truncated)
         self._value_estimator: ValueEstimatorBase | None = None
+        self._gamma: float | None = None
         self.set_keys(value=potential.out_keys[-1])
 
     @property
@@ -140,8 +167,10 @@ class SubgoalValueLoss(LossModule):
 
     @property
     def gamma(self) -> float:
-        """``γ_v``: the value estimator's discount (see :meth:`make_value_estimator`)."""
-        return float(self.value_estimator.gamma)
+        """``γ_v``: the value estimator's discount (see :meth:`make_value_estimator`), as it was given
+        (the estimator keeps it as a float32 tensor)."""
+        given = getattr(self, "_gamma", None)
+        return float(self.value_estimator.gamma) if given is None else given
 
     def make_value_estimator(self, value_type: ValueEstimators | None = None, **hyperparams: Any) -> SubgoalValueLoss:
         """The TD(0) estimator over the potential (the SMDP target is one-step): ``gamma=γ_v``.
@@ -154,7 +183,7 @@ class SubgoalValueLoss(LossModule):
         Examples:
             >>> from torchrl_subgoal import TabularPotential
             >>> SubgoalValueLoss(TabularPotential(3)).make_value_estimator(gamma=0.9).gamma
-            0.8999999761581421
+            0.9
         """
         if value_type is None:
             value_type = self.default_value_estimator
@@ -162,11 +191,13 @@ class SubgoalValueLoss(LossModule):
             if not isinstance(value_type, TD0Estimator):
                 raise NotImplementedError("the SMDP target is a TD(0) estimate: give a TD0Estimator")
             self._value_estimator = value_type
+            self._gamma = None
         elif value_type in (ValueEstimators.TD0, TD0Estimator):
             kwargs = {**default_value_kwargs(ValueEstimators.TD0), **hyperparams}
             if not 0.0 <= float(kwargs["gamma"]) <= 1.0:
                 raise ValueError(f"gamma must lie in [0, 1], got {kwargs['gamma']}")
             self._value_estimator = TD0Estimator(value_network=self.potential, **kwargs)
+            self._gamma = float(kwargs["gamma"])
         else:
             raise NotImplementedError(f"the SMDP target is a TD(0) estimate; {value_type} is not supported")
         self.value_type = TD0Estimator
@@ -229,12 +260,30 @@ class SubgoalValueLoss(LossModule):
                 batch_size=batch,
             )
             target = self.value_estimator.value_estimate(estimate, next_value=next_value).to(value.dtype)
-        mask = tensordict.get(keys.mask, None)
         td_error = target - value
-        if mask is not None:  # selected, not multiplied: a masked row's NaN reaches neither the loss nor a gradient
-            td_error = torch.where(self._expand_loss_mask(mask.bool(), td_error), td_error, torch.zeros_like(td_error))
-        loss = self._reduce_loss(0.5 * td_error.square(), tensordict)
+        real = self._trains(tensordict)
+        if real is not None:  # selected, not multiplied: a masked row's NaN reaches neither the loss nor a gradient
+            td_error = torch.where(self._expand_loss_mask(real, td_error), td_error, torch.zeros_like(td_error))
+        losses = 0.5 * td_error.square()
+        if self.expectile != 0.5:
+            losses = losses * torch.where(td_error > 0, 2.0 * self.expectile, 2.0 * (1.0 - self.expectile))
+        rows = tensordict if real is None else TensorDict({keys.mask: real}, batch_size=batch)
+        loss = self._reduce_loss(losses, rows)
         return TensorDict({"loss_value": loss, "td_error": td_error.detach()}, batch_size=[])
+
+    def _trains(self, tensordict: TensorDictBase) -> torch.Tensor | None:
+        """Which rows train ``V``: the real transitions, less the time-outs inside ``z`` unless
+        ``bootstrap_truncated`` (``None``: every row)."""
+        keys = self.tensor_keys
+        mask = tensordict.get(keys.mask, None)
+        real = None if mask is None else mask.bool()
+        if self.bootstrap_truncated:
+            return real
+        terminated = tensordict.get(("next", keys.terminated))
+        truncated = tensordict.get(("next", keys.done), terminated).bool() & ~terminated.bool()
+        achieved = tensordict.get(keys.achieved, None)
+        timeout = truncated if achieved is None else truncated & ~achieved.bool()
+        return ~timeout if real is None else real & ~timeout
 
 
 @dataclass(frozen=True)
@@ -259,7 +308,7 @@ class ValueUpdate:
         >>> v = TabularPotential(3)
         >>> update = ValueUpdate(0.25, SubgoalValueLoss(v).make_value_estimator(gamma=0.95))
         >>> update.lr, update.loss.gamma
-        (0.25, 0.949999988079071)
+        (0.25, 0.95)
     """
 
     lr: float

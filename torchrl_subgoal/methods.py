@@ -23,6 +23,7 @@ from typing import Any, Literal
 import torch
 from tensordict.utils import NestedKey
 
+from torchrl_subgoal.loss import SubgoalValueLoss, ValueUpdate
 from torchrl_subgoal.potentials import NaivePotential, Potential, TabularPotential
 from torchrl_subgoal.subgoals import Predicate, StateAggregation, SubgoalSeries
 from torchrl_subgoal.transform import StartPotential, SubgoalPotentialTransform
@@ -157,6 +158,8 @@ def shaping_transform(
     aggregation_key: NestedKey = "observation",
     zero_terminal_potential: bool = True,
     start_potential: StartPotential = "nonpositive",
+    expectile: float = 0.9,
+    bootstrap_truncated: bool = False,
 ) -> SubgoalPotentialTransform | None:
     """The shaping transform of ``method`` for a batch of learners, or ``None`` for the baseline.
 
@@ -174,6 +177,8 @@ def shaping_transform(
         aggregation_key: what ``g`` reads.
         zero_terminal_potential: see :class:`SubgoalPotentialTransform`.
         start_potential: see :class:`SubgoalPotentialTransform`.
+        expectile: ``τ`` of the learned potential's target (see :class:`SubgoalValueLoss`).
+        bootstrap_truncated: whether a time-out inside ``z`` trains ``V(z)`` (see :class:`SubgoalValueLoss`).
 
     Examples:
         >>> import torch
@@ -199,5 +204,8 @@ def shaping_transform(
     if parts is None:
         return None
     subgoals, potential, options = parts
-    learned = value_lr if isinstance(potential, TabularPotential) else None
-    return SubgoalPotentialTransform(subgoals, potential, gamma=gamma, value_update=learned, **options)
+    update = None
+    if value_lr is not None and isinstance(potential, TabularPotential):
+        loss = SubgoalValueLoss(potential, expectile=expectile, bootstrap_truncated=bootstrap_truncated)
+        update = ValueUpdate(value_lr, loss.make_value_estimator(gamma=gamma))
+    return SubgoalPotentialTransform(subgoals, potential, gamma=gamma, value_update=update, **options)

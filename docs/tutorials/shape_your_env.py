@@ -154,7 +154,7 @@ def train(
             potential,
             gamma=GAMMA,
             observation_key="observation",
-            value_update=VALUE_LR,  # train Φ online: the paper's tabular SMDP update, before shaping each step
+            value_update=VALUE_LR,  # train Φ online (the SMDP update, optimistic target), then shape
         )
     env = make_env_with(transform, num_envs, seed)
     actor, update = a2c_agent()

@@ -16,6 +16,7 @@ from pathlib import Path
 from types import ModuleType
 
 import pytest
+import torch
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = sorted([ROOT / "README.md", *(ROOT / "docs").rglob("*.md")])
@@ -75,3 +76,33 @@ def test_the_benchmarks_page_keeps_no_time_stamp_or_temporary_path() -> None:
     assert clean(out, Path("/tmp/bench-docs-x")) == (
         "raw 994 env-steps/s\nResults: `RESULTS/four_rooms`, 1000 episodes per learner.\n"
     )
+
+
+def test_the_readme_snippet_shapes_a_collector_and_learns_the_potential(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The README's 'Use it on your env' code, as printed, on a four-rooms batch behind a collector: the
+    reward is shaped and the potential trains only on steps that close a transition."""
+    from torchrl.collectors import Collector
+
+    from torchrl_subgoal import State, SubgoalSeries, save_patterns
+    from torchrl_subgoal.envs import FourRoomsEnv
+
+    text = (ROOT / "README.md").read_text()
+    start = text.index("## Use it on your env")
+    code = text[
+        text.index("```python\n", start) + len("```python\n") : text.index("```", text.index("```python\n", start) + 3)
+    ]
+    monkeypatch.chdir(tmp_path)
+    save_patterns(tmp_path / "my_subgoals.yaml", {"alice": SubgoalSeries([State(25), State(62)], name="alice")})
+    namespace: dict = {"base_env": FourRoomsEnv(num_envs=4, goal_reward=0.0, step_reward=-1.0)}
+    exec(compile(code, "README.md", "exec"), namespace)
+    shaping, env, potential = namespace["shaping"], namespace["env"], namespace["potential"]
+    collector = Collector(env, None, frames_per_batch=400, total_frames=1200)
+    try:
+        for data in collector:
+            nxt = data["next"]
+            assert not torch.equal(nxt["reward"], nxt["env_reward"])
+    finally:
+        collector.shutdown()
+    assert shaping.value_update is not None and potential.table.detach().abs().sum() > 0

@@ -39,7 +39,7 @@ def test_replay_of_real_transitions_trains_per_env_tables_like_the_paper_update(
             0.0 if bool(row["next", "terminated"]) else float(before[b, z2])
         )
         expected[b, z] += lr * (target - float(before[b, z]))
-    loss = SubgoalValueLoss(v).make_value_estimator(gamma=gamma)
+    loss = SubgoalValueLoss(v, expectile=0.5, bootstrap_truncated=True).make_value_estimator(gamma=gamma)
     optimizer = torch.optim.SGD(v.parameters(), lr=lr)
     loss(sample)["loss_value"].backward()
     optimizer.step()

@@ -32,6 +32,22 @@ def _td_error(table, row, zb, znb, terminated, r, discount, value_gamma):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _learns_from(bootstrap_truncated, zb, znb, terminated):
+    """Whether a closed transition trains ``V``: always, except a time-out inside ``z`` when
+    ``bootstrap_truncated`` is off (it says how long the episode was allowed, not what ``z`` is worth)."""
+    return bootstrap_truncated or terminated or znb != zb
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _expectile_weight(expectile, delta):
+    """The expectile loss's weight of a TD error: ``2τ`` above the value, ``2(1 − τ)`` below; exactly 1
+    for the mean (``τ = 0.5``), so that the mean's update is unchanged bit for bit."""
+    if expectile == 0.5:
+        return 1.0
+    return 2.0 * expectile if delta > 0.0 else 2.0 * (1.0 - expectile)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _shaped_reward(
     table, row, zb, znb, achieved_prev, terminated, z_start, reward, eta, gamma, zero_terminal, start_mode
 ):
@@ -67,10 +83,15 @@ def _shape_learner(potential, row, zb, znb, achieved_prev, r_h, k, reward, done,
     """
     emit, r, discount, kb = _smdp_accumulate(zb, znb, r_h, k, reward, done, potential.value_gamma)
     table = potential.table
-    if emit and potential.value_lr > 0.0 and table.shape[0] > 0:
+    if (
+        emit
+        and potential.value_lr > 0.0
+        and table.shape[0] > 0
+        and _learns_from(potential.bootstrap_truncated, zb, znb, terminated)
+    ):
         delta = _td_error(table, row, zb, znb, terminated, r, discount, potential.value_gamma)
         if delta != 0.0:
-            table[row, zb] += potential.value_lr * delta
+            table[row, zb] += potential.value_lr * _expectile_weight(potential.expectile, delta) * delta
     shaped = _shaped_reward(
         table,
         row,
@@ -200,7 +221,7 @@ def _shape_shared(
         emit, r, discount, kb = _smdp_accumulate(
             z[b, 0], z_next[b, 0], r_h[b, 0], k[b, 0], reward[b, 0], done[b, 0], potential.value_gamma
         )
-        if emit and learn:
+        if emit and learn and _learns_from(potential.bootstrap_truncated, z[b, 0], z_next[b, 0], terminated[b, 0]):
             delta[b] = _td_error(table, 0, z[b, 0], z_next[b, 0], terminated[b, 0], r, discount, potential.value_gamma)
         rh_out[b, 0] = 0.0 if emit else r
         k_out[b, 0] = 0 if emit else kb
@@ -211,7 +232,7 @@ def _shape_shared(
     if learn:
         for b in range(n):
             if delta[b] != 0.0:
-                table[0, z[b, 0]] += potential.value_lr * delta[b]
+                table[0, z[b, 0]] += potential.value_lr * _expectile_weight(potential.expectile, delta[b]) * delta[b]
     for b in range(n):
         reward_out[b, 0] = _shaped_reward(
             table,
@@ -234,7 +255,8 @@ def _shape_shared(
 # A fused loop unpacks a ShapingKernelState (torchrl_subgoal.transform) once, before its loop:
 # ``kind, regions, lookup, potential, learners = shaping``, then ``z, achieved, r_h, k, z_start = learners``
 # and ``pattern, …, offset = regions``. Per step, when ``kind != NO_SHAPING``, it advances the learner's
-# abstract state (region_search when ``kind == REGION_SHAPING``, written out in fused_run, ``lookup`` when LOOKUP_SHAPING) and
+# abstract state (region_search when ``kind == REGION_SHAPING``, written out in fused_run, ``lookup`` when
+# LOOKUP_SHAPING) and
 # calls shaping_step, then shaping_carry with shaping_start's abstract state where the env reset,
 # whatever the env and the learner. Each helper takes only the arrays or values it reads: numba counts
 # references to every array of a tuple passed to an inlined function or read from it, and that per step

@@ -69,7 +69,7 @@ def _box_from_page(subgoal: dict[str, Any], where: str) -> dict[str, Any]:
         >>> _box_from_page({"box": {"components": []}}, "patterns.p.subgoals[0]")
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.studio.domains.FormError: patterns.p.subgoals[0].box.components: expected a non-empty list of component names, got []
+        torchrl_subgoal.studio.domains.FormError: patterns.p.subgoals[0].box.components: expected a non-empty list ...
     """
     box = subgoal.get("box")
     if not isinstance(box, Mapping) or "components" not in box:

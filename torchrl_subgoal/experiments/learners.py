@@ -145,7 +145,7 @@ def learner_settings(
         >>> learner_settings(LearnerRecipeConfig(reshape_samples=True), "ppo", four_rooms)
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.experiments.cli.ConfigError: --reshape-samples: ppo learns on-policy and keeps no replay samples; only dqn and ddpg re-shape them
+        torchrl_subgoal.experiments.cli.ConfigError: --reshape-samples: ppo learns on-policy and keeps no ...
     """
     learner = LEARNERS[algo]
     base = domain.defaults.get(algo) or learner.config()
@@ -209,7 +209,7 @@ def learner_plan(
         >>> learner_plan(cfg, "ddpg")
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.experiments.cli.ConfigError: --algo: ddpg needs continuous actions; four_rooms's are discrete: choose a2c, ppo or dqn
+        torchrl_subgoal.experiments.cli.ConfigError: --algo: ddpg needs continuous actions; ...
     """
     check(algo in LEARNERS, "algo", f"unknown learner {algo!r}; choose from {', '.join(LEARNERS)}")
     try:

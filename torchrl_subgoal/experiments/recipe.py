@@ -438,6 +438,12 @@ class ReproductionConfig(RecipeConfig):
         "nonpositive (Φ(z_0) = min(V(z_0), 0), the library default)",
         choices=["value", "zero", "nonpositive"],
     )
+    expectile: float = setting(
+        0.5, "τ of the learned potential's TD target: 0.5 the mean (the authors), 0.9 the library default"
+    )
+    bootstrap_truncated: bool = setting(
+        True, "train V(z) on a time-out inside z (this engine's reproductions; the library default skips it)"
+    )
     engine: str = setting(
         "fused",
         "fused: one compiled loop; torchrl: step_and_maybe_reset (identical results)",
@@ -454,6 +460,7 @@ class ReproductionConfig(RecipeConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         check(self.eta >= 0, "eta", f"must be >= 0, got {self.eta}")
+        check(0.0 < self.expectile < 1.0, "expectile", f"must lie strictly between 0 and 1, got {self.expectile}")
 
 
 def sweep_entries(cfg: RecipeConfig, subgoal_file: str, patterns: PatternSets) -> dict[str, Any]:
@@ -511,8 +518,9 @@ def config_main(
     errors: tuple[type[BaseException], ...] = RECIPE_ERRORS,
 ) -> int:
     """A script's ``main``: parse the flags into ``config_cls`` and ``run`` it; its exit code, or a
-    one-line error on stderr (see :func:`fail`; a bad flag exits with code 2, as argparse does). :func:`recipe_main` is this with a sweep and its report as ``run``;
-    a script that prints something else (``recipes/four_rooms_greedy.py``) uses this directly.
+    one-line error on stderr (see :func:`fail`; a bad flag exits with code 2, as argparse does).
+    :func:`recipe_main` is this with a sweep and its report as ``run``; a script that prints something else
+    (``recipes/four_rooms_greedy.py``) uses this directly.
 
     Args:
         config_cls: the settings, a dataclass of :func:`~torchrl_subgoal.experiments.cli.setting` fields.

@@ -442,7 +442,8 @@ def render_markdown(
     out += ["", "## Notes", ""]
     out += [
         f"- IQM: mean of the middle 50% of learners; CI: {boot['confidence']:.0%} percentile interval "
-        f"of a bootstrap stratified by subgoal pattern, patterns of one learner pooled ({boot['n_boot']} samples, seed {boot['seed']}), "
+        f"of a bootstrap stratified by subgoal pattern, patterns of one learner pooled "
+        f"({boot['n_boot']} samples, seed {boot['seed']}), "
         "after Agarwal et al. (2021), *Deep RL at the Edge of the Statistical Precipice*.",
         "- Probability of improvement: P(X better than Y) over random learner pairs, ties ½ "
         f"(Agarwal et al. 2021). For times to threshold, fewer {unit}s is better.",

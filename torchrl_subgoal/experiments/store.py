@@ -128,7 +128,9 @@ def diff_fields(stored: Any, requested: Any, prefix: str = "") -> list[str]:
     """Dotted paths where two JSON values differ, e.g. ``['config.lr', 'seed']``.
 
     Examples:
-        >>> diff_fields({"config": {"lr": 0.1, "gamma": 0.99}, "seed": 0}, {"config": {"lr": 0.2, "gamma": 0.99}, "seed": 1})
+        >>> old = {"config": {"lr": 0.1, "gamma": 0.99}, "seed": 0}
+        >>> new = {"config": {"lr": 0.2, "gamma": 0.99}, "seed": 1}
+        >>> diff_fields(old, new)
         ['config.lr', 'seed']
     """
     if isinstance(stored, dict) and isinstance(requested, dict):

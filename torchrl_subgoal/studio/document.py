@@ -180,7 +180,7 @@ def file_name(name: str) -> str:
         >>> file_name("../etc/passwd")
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.studio.document.RequestError: file name '../etc/passwd': use letters, digits, '_', '-' and '.' (at most 80, not starting with '.' or '-')
+        torchrl_subgoal.studio.document.RequestError: file name '../etc/passwd': use letters, digits, ...
     """
     if not isinstance(name, str) or not _NAME.fullmatch(name) or ".." in name:
         raise RequestError(
@@ -367,7 +367,7 @@ def save_drawing(drawing: Drawing, path: Path, *, overwrite: bool = False) -> No
         >>> save_drawing(drawing, path)
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.studio.document.RequestError: alice.yaml exists in the save folder; choose another name, or confirm replacing it
+        torchrl_subgoal.studio.document.RequestError: alice.yaml exists in the save folder; choose another name, ...
     """
     try:
         mode = os.lstat(path).st_mode

@@ -236,7 +236,12 @@ class SubgoalTables:
                 f"subgoal condition {pred!r} returned {shape}; expected a boolean mask of shape "
                 f"{tuple(self.batch_shape)} (or with a trailing 1)"
             )
-        return mask.reshape(n).to(device=self.lo.device, dtype=torch.bool)
+        if mask.dtype != torch.bool:  # a number is not a truth value: 2 would silently read as achieved
+            raise ValueError(
+                f"subgoal condition {pred!r} returned a {mask.dtype} tensor; expected a boolean mask "
+                "(a comparison such as `td['passenger'] == 4`)"
+            )
+        return mask.reshape(n).to(device=self.lo.device)
 
     def advance(
         self, z: torch.Tensor, observation: torch.Tensor | None, tensordict: TensorDictBase | None = None
@@ -288,9 +293,14 @@ class SubgoalTables:
                 raise type(exc)(
                     f"subgoal condition {self.conditions[c][0]!r} failed on the step's TensorDict: {exc}"
                 ) from exc
-            if not isinstance(mask, torch.Tensor) or mask.shape[: self._dims] != self.batch_shape or mask.numel() != n:
+            if (
+                not isinstance(mask, torch.Tensor)
+                or mask.shape[: self._dims] != self.batch_shape
+                or mask.numel() != n
+                or mask.dtype is not torch.bool
+            ):
                 self._mask(self.conditions[c][0], tensordict)  # raises, saying what was expected
-            masks[c] = mask.reshape(n) if mask.dtype is torch.bool else mask.reshape(n).bool()
+            masks[c] = mask.reshape(n)
         return torch.stack(masks, -1).numpy()
 
     def advance_eager(
@@ -455,6 +465,11 @@ class StateAggregation:
             raise ValueError("a state aggregation needs the observation it reads")
         if self.regions is not None and z.device.type == "cpu":
             n = z.numel()
+            if n and not 0 <= int(z.min()) <= int(z.max()) < self.num_states:  # the kernel indexes by z unchecked
+                raise ValueError(
+                    f"abstract states must lie in [0, {self.num_states}) for this aggregation, got "
+                    f"{int(z.min())}..{int(z.max())}"
+                )
             out = np.empty((n, 1), dtype=np.int64)
             advance_regions(self.regions, z.numpy().reshape(n, 1), observation.numpy().reshape(n, -1), out)
             return torch.from_numpy(out).view(z.shape)

@@ -23,7 +23,8 @@ class ValueCache:
         >>> v, cache = TabularPotential(3), ValueCache()
         >>> cache.check(v)
         >>> cache.put("z", {"subgoal_index": torch.tensor([[1]])}, torch.tensor([[0.5]]))
-        >>> cache.get("z", {"subgoal_index": torch.tensor([[1]])}).item(), cache.get("z", {"subgoal_index": torch.tensor([[2]])})
+        >>> one, two = {"subgoal_index": torch.tensor([[1]])}, {"subgoal_index": torch.tensor([[2]])}
+        >>> cache.get("z", one).item(), cache.get("z", two)
         (0.5, None)
     """
 

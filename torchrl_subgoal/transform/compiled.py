@@ -57,7 +57,7 @@ def check_finite(reward: torch.Tensor, obs: torch.Tensor | None, reward_key: Nes
         >>> check_finite(torch.tensor([[1.0], [float("nan")]]), None, "reward", "observation")
         Traceback (most recent call last):
         ...
-        ValueError: SubgoalPotentialTransform: 'reward' is NaN or infinite at index (1, 0) (value nan): it would make the potential NaN for good; fix the env, or replace such values before this transform
+        ValueError: SubgoalPotentialTransform: 'reward' is NaN or infinite at index (1, 0) (value nan): ...
     """
     for tensor, key, bad in ((reward, reward_key, "NaN or infinite"), (obs, obs_key, "NaN")):
         if tensor is None or not tensor.is_floating_point():
@@ -176,6 +176,7 @@ def compiled_step(
             closed,
             step.done,
             step.terminated,
+            z_next != z,
         )
     return out
 

@@ -73,9 +73,9 @@ def torch_step(
         >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9, backend="torch")
         >>> batch = t._batch(torch.Size([2]), torch.zeros(2, 1, dtype=torch.long), 1, torch.zeros(2, 1), online=True)
         >>> z, zero = torch.zeros(2, 1, dtype=torch.long), torch.zeros(2, 1)
-        >>> out = torch_step(batch, t._settings, t.potential, ValueCache(), {"subgoal_index": z, "subgoal_return": zero,
-        ...                  "subgoal_steps": z}, StepInputs(torch.tensor([[1], [0]]), zero, zero, z.bool(), z.bool(), None),
-        ...                  update=None)
+        >>> current = {"subgoal_index": z, "subgoal_return": zero, "subgoal_steps": z}
+        >>> step = StepInputs(torch.tensor([[1], [0]]), zero, zero, z.bool(), z.bool(), None)
+        >>> out = torch_step(batch, t._settings, t.potential, ValueCache(), current, step, update=None)
         >>> out["subgoal_index"].tolist()
         [[1], [0]]
     """
@@ -108,6 +108,7 @@ def torch_step(
             closed,
             step.done,
             step.terminated,
+            achieved,
         )
     if update is not None and bool(closed.any()):
         assert smdp is not None

@@ -99,7 +99,7 @@ class EnvKeys(NamedTuple):
     Examples:
         >>> from torchrl_subgoal.envs import FourRoomsEnv
         >>> EnvKeys.resolve(FourRoomsEnv(2))
-        EnvKeys(group=(), reward='reward', env_reward='env_reward', done='done', terminated='terminated', shaped_before=False)
+        EnvKeys(group=(), reward='reward', env_reward='env_reward', done='done', terminated='terminated', ...)
     """
 
     group: tuple[str, ...]  #: where the kept entries live
@@ -228,6 +228,7 @@ def transition_spec(inputs: dict[str, TensorSpec], shape: torch.Size) -> Composi
         **{k: s.clone() for k, s in inputs.items()},
         steps_to_next_obs=Unbounded(shape=col, dtype=torch.long),
         mask=flag.clone(),
+        achieved=flag.clone(),
         next=nxt,
         shape=shape,
     )

@@ -164,6 +164,8 @@ class PotentialKernelState(NamedTuple):
     value_lr: float  #: ``α_v`` of the online update (0: none)
     zero_terminal: bool  #: ``Φ = 0`` at a terminal state
     start_mode: int  #: ``_kernels.shaping.START_VALUE``, ``START_ZERO`` or ``START_NONPOSITIVE``
+    expectile: float = 0.5  #: ``τ`` of the online update's target (0.5: the mean)
+    bootstrap_truncated: bool = True  #: whether a time-out inside ``z`` trains ``V(z)``
 
 
 def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss | None) -> str | None:
@@ -214,9 +216,11 @@ class BatchSetup:
     def __post_init__(self) -> None:
         self.rows = self.batch_shape.numel()  #: rows of the batch
 
-    def use_kernels(self, potential: TensorDictModuleBase, settings: Settings, value_lr: float, online: bool) -> None:
-        """Set the potential up for the compiled step (``online``: the env's batch, whose rows are the
-        learners; else stored rows, each reading its learner's table, copied)."""
+    def use_kernels(
+        self, potential: TensorDictModuleBase, settings: Settings, update: ValueUpdate | None, online: bool
+    ) -> None:
+        """Set the potential up for the compiled step, trained online by ``update`` (``online``: the env's
+        batch, whose rows are the learners; else stored rows, each reading its learner's table, copied)."""
         abstraction = self.abstraction
         if isinstance(abstraction, SubgoalTables):
             self.regions = abstraction.kernel_state() if abstraction.fusable else None
@@ -236,9 +240,13 @@ class BatchSetup:
         if not self.shared and table.shape[0] not in (0, n):
             raise ValueError(f"the potential has {table.shape[0]} tables for a batch of {n} rows")
         mode = START_MODES[settings.start]
+        loss = update.loss if update is not None else None
+        expectile, bootstrap = (0.5, True) if loss is None else (loss.expectile, loss.bootstrap_truncated)
         self.kernel = tuple(
-            PotentialKernelState(table, eta, settings.gamma, settings.value_gamma, lr, settings.zero_terminal, mode)
-            for lr in (0.0, value_lr)
+            PotentialKernelState(
+                table, eta, settings.gamma, settings.value_gamma, lr, settings.zero_terminal, mode, expectile, bootstrap
+            )
+            for lr in (0.0, update.lr if update else 0.0)
         )  # type: ignore[assignment]
         self.z_start = np.zeros((max(1, n), 1), np.int64)  # a subgoal series starts every episode in z = 0
         self.compiled = True

@@ -57,8 +57,8 @@ def learners_of(
 
     Examples:
         >>> from torchrl_subgoal import State, SubgoalSeries, TabularPotential
-        >>> one_table = learners_of(None, torch.Size([5]), 1, Subgoals(SubgoalSeries([State(1)])), TabularPotential(2), 8,
-        ...                         "subgoal_learner")
+        >>> subgoals = Subgoals(SubgoalSeries([State(1)]))
+        >>> one_table = learners_of(None, torch.Size([5]), 1, subgoals, TabularPotential(2), 8, "subgoal_learner")
         >>> one_table[0].reshape(-1).tolist(), one_table[1]  # no row's learner matters: all are learner 0
         ([0, 0, 0, 0, 0], 1)
     """
@@ -107,7 +107,8 @@ def shape_stored(
         >>> from torchrl.envs import TransformedEnv
         >>> from torchrl_subgoal import Cell, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
         >>> from torchrl_subgoal.envs import FourRoomsEnv
-        >>> t = SubgoalPotentialTransform(SubgoalSeries([Cell(1, 2)]), TabularPotential(2), gamma=0.9, observation_key="cell")
+        >>> series = SubgoalSeries([Cell(1, 2)])
+        >>> t = SubgoalPotentialTransform(series, TabularPotential(2), gamma=0.9, observation_key="cell")
         >>> data = TransformedEnv(FourRoomsEnv(2), t).rollout(6)
         >>> bool((t(data.clone())["next", "reward"] == data["next", "reward"]).all())  # forward() calls it
         True

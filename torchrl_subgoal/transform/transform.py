@@ -74,8 +74,8 @@ class SubgoalPotentialTransform(Transform):
             tasks); ``False`` shapes with ``V(z')`` at the goal, as the authors' released code does.
         start_potential: the level of ``Φ``, set by the potential of the state
             the episode started in: ``"value"`` (``Φ = V``), ``"zero"``
-            (``Φ = V − V(z_0)``) or ``"nonpositive"`` (default,
-            ``Φ = V − max(V(z_0), 0)``; see docs/shaping_defaults.md).
+            (``Φ = V − V(z_0)``) or ``"nonpositive"`` (default, ``Φ = V − max(V(z_0), 0)``;
+            see docs/shaping_defaults.md).
         transitions_key: if given, every step also writes its SMDP transition
             under ``("next", transitions_key)`` (``"mask"`` tells the real ones).
         prefix: the names of the kept entries; two transforms on one env need
@@ -251,7 +251,7 @@ class SubgoalPotentialTransform(Transform):
             else setup.compiled_potential(pot, self.value_update.loss if self.value_update is not None else None)
         )
         if why is None:
-            batch.use_kernels(pot, self._settings, self.value_update.lr if self.value_update else 0.0, online)
+            batch.use_kernels(pot, self._settings, self.value_update, online)
         elif self.backend == "compiled":
             raise TypeError(f"SubgoalPotentialTransform(backend='compiled'): {why}; use backend='torch' or 'auto'")
         return batch
@@ -387,12 +387,13 @@ class SubgoalPotentialTransform(Transform):
         Examples:
             >>> from torchrl_subgoal import State
             >>> from torchrl_subgoal.transform.transitions import transition
-            >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9, value_update=0.5)
+            >>> series = SubgoalSeries([State(1)])
+            >>> t = SubgoalPotentialTransform(series, TabularPotential(2), gamma=0.9, value_update=0.5)
             >>> z, one = torch.zeros(1, 1, dtype=torch.long), torch.ones(1, 1, dtype=torch.bool)
             >>> t.update_potential(transition(torch.Size([1]), {"subgoal_index": z}, {"subgoal_index": z + 1},
-            ...                               one.float(), z + 1, one, one, one))  # r_h = 1, then terminated
-            >>> t.potential.table.tolist()  # V(0) += 0.5 (1 + 0 − 0)
-            [0.5, 0.0]
+            ...                               one.float(), z + 1, one, one, one, one))  # r_h = 1, then terminated
+            >>> t.potential.table.tolist()  # V(0) += 0.5 · 2τ (1 + 0 − 0), τ = 0.9
+            [0.8999999761581421, 0.0]
         """
         update = self.value_update
         assert update is not None and update.loss is not None and self.value_optimizer is not None

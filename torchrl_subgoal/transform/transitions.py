@@ -22,20 +22,24 @@ def transition(
     mask: torch.Tensor,
     done: torch.Tensor,
     terminated: torch.Tensor,
+    achieved: torch.Tensor,
 ) -> TensorDict:
     """An SMDP transition ``(z, r_h, k, z', done, terminated)`` in the layout of TorchRL's value estimators:
     the potential's ``inputs`` at ``z`` (root) and at ``z'`` (``"next"``), ``r_h`` as the next reward and
-    ``k`` as ``"steps_to_next_obs"``; ``mask`` tells the real ones.
+    ``k`` as ``"steps_to_next_obs"``; ``mask`` tells the real ones, ``achieved`` those that reached the
+    next subgoal (``z' ≠ z``; the others closed with the episode).
 
     Examples:
         >>> one = torch.ones(1, 1)
         >>> t = transition(torch.Size([1]), {"subgoal_index": one.long() * 0}, {"subgoal_index": one.long()},
-        ...                one, one.long(), one.bool(), one.bool(), one.bool())
+        ...                one, one.long(), one.bool(), one.bool(), one.bool(), one.bool())
         >>> t["next", "subgoal_index"].item(), t["steps_to_next_obs"].item()
         (1, 1)
     """
     nxt = TensorDict({**next_inputs, "reward": r_h, "done": done, "terminated": terminated}, batch_size=batch_shape)
-    return TensorDict({**inputs, "steps_to_next_obs": k, "mask": mask, "next": nxt}, batch_size=batch_shape)
+    return TensorDict(
+        {**inputs, "steps_to_next_obs": k, "mask": mask, "achieved": achieved, "next": nxt}, batch_size=batch_shape
+    )
 
 
 def empty_transition(
@@ -53,7 +57,15 @@ def empty_transition(
     at_reset = {k: state[k] for k in inputs}
     false = torch.zeros_like(state[keys.index], dtype=torch.bool)
     return transition(
-        batch_shape, at_reset, at_reset, torch.zeros_like(state[keys.ret]), state[keys.steps], false, false, false
+        batch_shape,
+        at_reset,
+        at_reset,
+        torch.zeros_like(state[keys.ret]),
+        state[keys.steps],
+        false,
+        false,
+        false,
+        false,
     )
 
 
@@ -73,7 +85,8 @@ def rebuild(
         >>> data = TensorDict({"subgoal_index": zero, "subgoal_return": torch.zeros(1, 2, 1), "subgoal_steps": zero,
         ...                    "next": {"subgoal_index": torch.tensor([[[0], [1]]]), "reward": torch.ones(1, 2, 1),
         ...                             "done": zero.bool(), "terminated": zero.bool()}}, [1, 2])
-        >>> rebuild(data, SubgoalKeys(), EnvKeys.resolve(None), ["subgoal_index"], 0.9)["next", "subgoal_index"].tolist()
+        >>> real = rebuild(data, SubgoalKeys(), EnvKeys.resolve(None), ["subgoal_index"], 0.9)
+        >>> real["next", "subgoal_index"].tolist()
         [[1]]
     """
     index, ret, steps = (at(env.group, name) for name in (keys.index, keys.ret, keys.steps))
@@ -96,6 +109,7 @@ def rebuild(
     z, z_next = flat(group, keys.index), flat(nxt_group, keys.index)
     done, terminated = flat(nxt, env.done), flat(nxt, env.terminated)
     assert z is not None and z_next is not None and done is not None
+    achieved = z_next != z
     rows = closes(z, z_next, done).reshape(-1).nonzero().squeeze(1)  # found once, gathered per entry
     reward = flat(nxt, env.env_reward)
     reward = flat(nxt, env.reward) if reward is None else reward
@@ -114,4 +128,5 @@ def rebuild(
         torch.ones_like(done),
         done,
         done if terminated is None else terminated.index_select(0, rows),
+        achieved.index_select(0, rows),
     )

@@ -1,0 +1,222 @@
+"""Tabular Q-learning on a TorchRL Collector with subgoal shaping, under a step cost or a goal reward.
+
+The first learner a TorchRL user writes (an ε-greedy table, a ``Collector``, one
+Q-learning update per step; :mod:`torchrl_subgoal.training.qlearning`) against:
+
+* Q        — no shaping (the table over ``s``),
+* HRS      — the learned subgoal potential, the library's defaults (``SubgoalValueLoss``:
+  the 0.9-expectile target, no update on a time-out inside ``z``; ``--expectile`` and
+  ``--bootstrap-truncated`` change them),
+* HRS-mean — the same with the paper's mean target, time-outs bootstrapped,
+* NRS      — naive subgoal shaping, ``Φ = η`` once a subgoal is achieved.
+
+The shaped learners' tables are over ``(s, z)`` (``--agent-state s`` for ``s``). Tasks:
+``four_rooms`` (the participants' subgoal series; ``--reward step-cost``: −1 per step and
+0 at the goal, or ``goal``: +1 at the goal) and ``taxi`` (gymnasium's Taxi: −1 per step,
+−10 per illegal action, +20 at delivery; subgoals: passenger in the taxi, then at the
+destination). Results go to ``--results`` chunk by chunk (re-run to resume); the report
+gives episodes to each threshold of steps per episode, the final steps and the tests.
+
+    python recipes/qlearning.py --task four_rooms --reward step-cost    # 20 learners per method
+    python recipes/qlearning.py --task taxi --episodes 400
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from importlib.resources import files
+from typing import Any
+
+import torch
+from torchrl.envs import EnvBase, TransformedEnv
+
+from torchrl_subgoal import (
+    NaivePotential,
+    SubgoalPotentialTransform,
+    SubgoalValueLoss,
+    TabularPotential,
+    ValueUpdate,
+    load_patterns,
+)
+from torchrl_subgoal.envs import FourRoomsEnv
+from torchrl_subgoal.experiments import Chunk, EpisodeTable
+from torchrl_subgoal.experiments.cli import check, setting
+from torchrl_subgoal.experiments.recipe import (
+    Plan,
+    RecipeConfig,
+    check_methods,
+    check_patterns,
+    chunk_patterns,
+    method_specs,
+    pattern_sets,
+    recipe_main,
+    sweep_entries,
+)
+from torchrl_subgoal.methods import Method
+from torchrl_subgoal.training.qlearning import QLearningConfig, train_qlearning
+
+METHODS = {
+    "Q": Method("Q", "none", "none"),
+    "HRS": Method("HRS", "subgoals", "human"),
+    "HRS-mean": Method("HRS-mean", "subgoals", "human"),
+    "NRS": Method("NRS", "naive", "human"),
+}
+#: the paper's target (HRS-mean); HRS's comes from the flags (default: the library's)
+MEAN_TARGET = {"expectile": 0.5, "bootstrap_truncated": True}
+PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")
+#: per task: the env's subgoal-read key, the report's thresholds and moving-average window
+TASKS: dict[str, dict[str, Any]] = {
+    "four_rooms": {"subgoal_key": "cell", "thresholds": [100, 50], "window": 1},
+    "taxi": {"subgoal_key": "observation", "thresholds": [100, 50, 25], "window": 20},
+}
+
+
+@dataclass
+class Config(RecipeConfig):
+    """Tabular ε-greedy Q-learning with HRS (library defaults), HRS-mean and NRS against no shaping."""
+
+    task: str = setting("four_rooms", "four_rooms or taxi", choices=sorted(TASKS))
+    reward: str = setting(
+        "step-cost", "four_rooms only: step-cost (-1 per step) or goal (+1 at the goal)", choices=["step-cost", "goal"]
+    )
+    methods: str = setting(",".join(METHODS), "comma-separated methods to run")
+    learnings: int = setting(2, "learnings per subgoal pattern (four_rooms has 10 patterns, taxi 1)")
+    episodes: int = setting(200, "episodes per learning")
+    lr: float = setting(0.25, "Q-learning step size alpha")
+    epsilon: float = setting(0.1, "probability of a random action")
+    gamma: float = setting(0.99, "discount gamma (of the learner and of the shaping term)")
+    value_lr: float = setting(0.1, "alpha_v of the learned potentials' online update")
+    eta: float = setting(1.0, "NRS potential η")
+    agent_state: str = setting("s,z", "what the shaped learners' tables are over", choices=["s,z", "s"])
+    expectile: float = setting(0.9, "HRS: τ of the potential's target (HRS-mean: 0.5)")
+    bootstrap_truncated: bool = setting(False, "HRS: train V(z) on a time-out inside z (HRS-mean: true)")
+    zero_terminal_potential: bool = setting(True, "HRS, HRS-mean: Φ = 0 at the goal")
+    start_potential: str = setting(
+        "nonpositive", "HRS, HRS-mean: the level of Φ", choices=["value", "zero", "nonpositive"]
+    )
+    chunk_size: int = setting(100, "learners per batch (one policy seed per chunk)")
+    results: str = setting("", "results directory (default results/qlearning_<task>[_<reward>]; re-run to resume)")
+
+    AT_LEAST_ONE = ("learnings", "episodes", "chunk_size")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("lr", "value_lr"):
+            check(0.0 < getattr(self, name) <= 1.0, name, f"must lie in (0, 1], got {getattr(self, name)}")
+        check(0.0 <= self.epsilon <= 1.0, "epsilon", f"must lie in [0, 1], got {self.epsilon}")
+        check(0.0 <= self.gamma <= 1.0, "gamma", f"must lie in [0, 1], got {self.gamma}")
+        check(self.eta >= 0.0, "eta", f"must be >= 0, got {self.eta}")
+        check(0.0 < self.expectile < 1.0, "expectile", f"must lie strictly between 0 and 1, got {self.expectile}")
+
+
+def make_env(config: Mapping[str, Any], n: int) -> EnvBase:
+    """The task's batch of ``n`` envs."""
+    if config["task"] == "taxi":
+        from torchrl_subgoal.envs.taxi import make_taxi
+
+        return make_taxi(n)
+    goal = config["reward"] == "goal"
+    return FourRoomsEnv(num_envs=n, goal_reward=1.0 if goal else 0.0, step_reward=0.0 if goal else -1.0)
+
+
+def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
+    """One batch of learnings of one method: one Q table per env."""
+    method = METHODS[chunk.method]
+    env = make_env(config, chunk.n_learners)
+    if method.shaping != "none":
+        patterns, index = chunk_patterns(chunk, config)
+        series = [patterns[i] for i in index.tolist()]
+        gamma = config["gamma"]
+        if method.shaping == "naive":
+            potential, update = NaivePotential(config["eta"]), None
+        else:
+            potential = TabularPotential(max(len(p) for p in patterns) + 1, (chunk.n_learners,))
+            target = MEAN_TARGET if chunk.method == "HRS-mean" else config["target"]
+            loss = SubgoalValueLoss(potential, **target).make_value_estimator(gamma=gamma)
+            update = ValueUpdate(config["value_lr"], loss)
+        env = TransformedEnv(
+            env,
+            SubgoalPotentialTransform(
+                series,
+                potential,
+                gamma=gamma,
+                value_update=update,
+                observation_key=TASKS[config["task"]]["subgoal_key"],
+                zero_terminal_potential=config["zero_terminal_potential"],
+                start_potential=config["start_potential"],
+            ),
+        )
+    settings = QLearningConfig(
+        episodes=config["episodes"],
+        lr=config["lr"],
+        gamma=config["gamma"],
+        epsilon=config["epsilon"],
+        sees_subgoal=config["agent_state"] == "s,z",
+    )
+    records = train_qlearning(env, settings, seed=chunk.seed, progress=progress)
+    return EpisodeTable(records.steps, records.returns, records.success)
+
+
+def plan(cfg: Config) -> Plan:
+    """The sweep of ``cfg``: every method's learners, the stored configuration, the report's thresholds."""
+    check_methods(METHODS, cfg.method_names)
+    task = TASKS[cfg.task]
+    if cfg.task == "taxi":
+        from torchrl_subgoal.envs.taxi import taxi_subgoals
+
+        human, subgoal_file = {"pick_up_then_drive": taxi_subgoals()}, "torchrl_subgoal.envs.taxi:taxi_subgoals"
+    else:
+        human, subgoal_file = load_patterns(PARTICIPANTS, domain="four_rooms"), PARTICIPANTS
+    patterns = pattern_sets(human, [], 0, cfg.seed, random_needed=False)
+    settings = dataclasses.asdict(cfg)
+    config: dict[str, Any] = {
+        k: settings[k]
+        for k in (
+            "task",
+            "reward",
+            "episodes",
+            "lr",
+            "epsilon",
+            "gamma",
+            "value_lr",
+            "eta",
+            "agent_state",
+            "zero_terminal_potential",
+            "start_potential",
+        )
+    }
+    check_patterns(patterns, make_env(config, 1), task["subgoal_key"])
+    name = cfg.task if cfg.task == "taxi" else f"{cfg.task}_{cfg.reward.replace('-', '_')}"
+    config.update(
+        domain=cfg.task,
+        target={"expectile": cfg.expectile, "bootstrap_truncated": cfg.bootstrap_truncated},
+        **sweep_entries(cfg, subgoal_file, patterns),
+        report={
+            "metric": "steps",
+            "thresholds": task["thresholds"],
+            "window": min(task["window"], cfg.episodes),
+            "asymptotic_window": [max(0, cfg.episodes - 20), cfg.episodes],
+        },
+    )
+    specs = method_specs(METHODS, cfg.method_names, patterns, cfg.learnings)
+    return Plan(
+        f"qlearning_{name}",
+        specs,
+        run_chunk,
+        config,
+        episodes=cfg.episodes,
+        chunk_size=cfg.chunk_size,
+        results=cfg.results or f"results/qlearning_{name}",
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    torch.set_num_threads(1)
+    return recipe_main(Config, plan, argv, description=__doc__.splitlines()[0] if __doc__ else None)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
