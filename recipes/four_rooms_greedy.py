@@ -92,7 +92,7 @@ def run(cfg: Config) -> int:
             pattern_index=torch.arange(n) % len(patterns),
             observation_key="cell",
             zero_terminal_potential=zero_terminal,
-            start_potential=start,  # type: ignore[arg-type]
+            start_potential=start,
             expectile=0.5,
             bootstrap_truncated=True,  # the paper's mean target: the conventions alone differ
         )

@@ -144,6 +144,10 @@ def shaping_parts(
     return per_env, TabularPotential(num_states, batch_shape), options
 
 
+#: the keyword arguments of :func:`shaping_transform` that configure the learned potential's loss
+TARGET_OPTIONS = ("expectile", "bootstrap_truncated")
+
+
 def shaping_transform(
     method: Method,
     batch_shape: torch.Size,
@@ -156,10 +160,7 @@ def shaping_transform(
     eta: float = 1.0,
     observation_key: NestedKey = "observation",
     aggregation_key: NestedKey = "observation",
-    zero_terminal_potential: bool = True,
-    start_potential: StartPotential = "nonpositive",
-    expectile: float = 0.9,
-    bootstrap_truncated: bool = False,
+    **conventions: Any,
 ) -> SubgoalPotentialTransform | None:
     """The shaping transform of ``method`` for a batch of learners, or ``None`` for the baseline.
 
@@ -175,10 +176,9 @@ def shaping_transform(
         eta: the naive potential's ``η`` (NRS).
         observation_key: what subgoal predicates read.
         aggregation_key: what ``g`` reads.
-        zero_terminal_potential: see :class:`SubgoalPotentialTransform`.
-        start_potential: see :class:`SubgoalPotentialTransform`.
-        expectile: ``τ`` of the learned potential's target (see :class:`SubgoalValueLoss`).
-        bootstrap_truncated: whether a time-out inside ``z`` trains ``V(z)`` (see :class:`SubgoalValueLoss`).
+        **conventions: ``zero_terminal_potential`` and ``start_potential`` (the transform's, see
+            :class:`SubgoalPotentialTransform`), ``expectile`` and ``bootstrap_truncated`` (the learned
+            potential's target, see :class:`SubgoalValueLoss`); the library's defaults otherwise.
 
     Examples:
         >>> import torch
@@ -198,14 +198,13 @@ def shaping_transform(
         eta=eta,
         observation_key=observation_key,
         aggregation_key=aggregation_key,
-        zero_terminal_potential=zero_terminal_potential,
-        start_potential=start_potential,
+        **{k: v for k, v in conventions.items() if k not in TARGET_OPTIONS},
     )
     if parts is None:
         return None
     subgoals, potential, options = parts
     update = None
     if value_lr is not None and isinstance(potential, TabularPotential):
-        loss = SubgoalValueLoss(potential, expectile=expectile, bootstrap_truncated=bootstrap_truncated)
+        loss = SubgoalValueLoss(potential, **{k: v for k, v in conventions.items() if k in TARGET_OPTIONS})
         update = ValueUpdate(value_lr, loss.make_value_estimator(gamma=gamma))
     return SubgoalPotentialTransform(subgoals, potential, gamma=gamma, value_update=update, **options)

@@ -53,7 +53,10 @@ def test_neural_potential_step_matches_the_smdp_target() -> None:
     pick_and_place = recipe("pick_and_place")
     trainer = pick_and_place.PotentialTrainer(
         env.transform,
-        SubgoalValueLoss(potential, reduction="mean").make_value_estimator(gamma=GAMMA),
+        # the recipe's (the paper's) target: the mean, a time-out bootstrapped
+        SubgoalValueLoss(potential, reduction="mean", expectile=0.5, bootstrap_truncated=True).make_value_estimator(
+            gamma=GAMMA
+        ),
         torch.optim.SGD(potential.parameters(), lr=lr),
     )
     trainer.step(data)
@@ -67,7 +70,9 @@ def test_parallel_env_shapes_with_the_potential_the_loss_trains() -> None:
     potential = NeuralPotential(nn.Linear(fetch.OBSERVATION_SIZE, 1))
     env = fetch_env(2, potential, parallel=True)
     transform = env.transform
-    loss = SubgoalValueLoss(transform.potential, reduction="mean").make_value_estimator(gamma=GAMMA)
+    loss = SubgoalValueLoss(
+        transform.potential, reduction="mean", expectile=0.5, bootstrap_truncated=True
+    ).make_value_estimator(gamma=GAMMA)  # the recipe's target: the time-outs train V
     trainer = pick_and_place.PotentialTrainer(transform, loss, torch.optim.Adam(loss.potential.parameters(), lr=0.1))
     collector = Collector(env, None, frames_per_batch=100, total_frames=200, auto_register_policy_transforms=False)
     batches = iter(collector)

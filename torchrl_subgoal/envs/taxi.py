@@ -47,12 +47,25 @@ def decode(state: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tenso
 
 
 def passenger_in_taxi(td: TensorDictBase) -> torch.Tensor:
-    """Subgoal 1: the passenger is in the taxi."""
+    """Subgoal 1: the passenger is in the taxi.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> passenger_in_taxi(TensorDict({"observation": torch.tensor([16, 0])}, [2])).tolist()  # passenger field 4, 0
+        [True, False]
+    """
     return decode(td["observation"])[2] == 4
 
 
 def at_destination(td: TensorDictBase) -> torch.Tensor:
-    """Subgoal 2: the taxi carries the passenger and stands on the destination."""
+    """Subgoal 2: the taxi carries the passenger and stands on the destination.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> at_stand_b = ((4 * 5 + 3) * 5 + 4) * 4 + 3  # row 4, column 3 (stand B), passenger aboard, destination B
+        >>> at_destination(TensorDict({"observation": torch.tensor([at_stand_b, at_stand_b - 1])}, [2])).tolist()
+        [True, False]
+    """
     row, col, passenger, destination = decode(td["observation"])
     stand = STANDS[destination]
     return (passenger == 4) & (row == stand[..., 0]) & (col == stand[..., 1])

@@ -57,25 +57,13 @@ from torchrl_subgoal.training.shared import EnvFactory
 from torchrl_subgoal.training.smdp import smdp_transitions
 from torchrl_subgoal.transform import SubgoalPotentialTransform
 
+# fmt: off
 __all__ = [
-    "EPISODE_RETURN",
-    "SUBGOAL_INDEX",
-    "CurveRecorder",
-    "EpisodeWindow",
-    "FourierFeatures",
-    "LearnerSettings",
-    "LearningCurve",
-    "PotentialTrainer",
-    "SampleReshaper",
-    "Shaping",
-    "batched",
-    "check_settings",
-    "close_collector",
-    "learner_env",
-    "make_collector",
-    "shaped_env",
-    "subgoal_states",
+    "EPISODE_RETURN", "SUBGOAL_INDEX", "CurveRecorder", "EpisodeWindow", "FourierFeatures", "LearnerSettings",
+    "LearningCurve", "PotentialTrainer", "SampleReshaper", "Shaping", "batched", "check_settings",
+    "close_collector", "learner_env", "make_collector", "shaped_env", "subgoal_states",
 ]
+# fmt: on
 
 Features = Literal["one_hot", "fourier", "mlp"]
 #: The env return of the episode so far (a ``RewardSum`` over the unshaped reward), in ``"next"``.

@@ -30,12 +30,14 @@ __all__ = [
     "PotentialKernelState",
     "Settings",
     "Subgoals",
+    "check_options",
     "check_potential",
     "compiled_potential",
     "initial_state",
     "kept_entries",
     "observation_layout",
     "online_update",
+    "settings",
 ]
 
 #: ``table`` of a naive potential in the kernels: no table, ``Φ = η · achieved``
@@ -186,6 +188,104 @@ def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss
     if update is not None and (type(update) is not SubgoalValueLoss or update.reduction != "sum"):
         return "its online update is one SGD step of the default SubgoalValueLoss (reduction 'sum')"
     return None
+
+
+def check_options(gamma: float, start: str, backend: str) -> None:
+    """Refuse a discount outside ``[0, 1]``, an unknown start level or backend.
+
+    Examples:
+        >>> check_options(0.9, "highest", "auto")
+        Traceback (most recent call last):
+        ...
+        ValueError: start_potential must be one of ['nonpositive', 'value', 'zero'], got 'highest'
+    """
+    if not 0.0 <= gamma <= 1.0:
+        raise ValueError(f"gamma must lie in [0, 1], got {gamma}")
+    if start not in START_MODES:
+        raise ValueError(f"start_potential must be one of {sorted(START_MODES)}, got {start!r}")
+    if backend not in ("auto", "compiled", "torch"):
+        raise ValueError(f"backend must be 'auto', 'compiled' or 'torch', got {backend!r}")
+
+
+def settings(
+    keys: SubgoalKeys,
+    potential: TensorDictModuleBase,
+    subgoals: Subgoals,
+    gamma: float,
+    update: ValueUpdate | None,
+    observation_key: NestedKey,
+    transitions_key: NestedKey | None,
+    *,
+    zero_terminal: bool,
+    start: StartPotential,
+) -> Settings:
+    """A transform's :class:`Settings`: ``γ_v`` is the online update's loss's (``γ`` without one).
+
+    Examples:
+        >>> from torchrl_subgoal import State
+        >>> s = settings(SubgoalKeys(), TabularPotential(2), Subgoals(SubgoalSeries([State(1)])), 0.9, None, "o", None,
+        ...              zero_terminal=True, start="value")
+        >>> s.value_gamma, s.kept
+        (0.9, ('subgoal_index', 'subgoal_return', 'subgoal_steps'))
+    """
+    value_gamma = float(gamma) if update is None or update.loss is None else update.loss.gamma
+    kept = kept_entries(keys, potential, subgoals, start)
+    return Settings(keys, kept, float(gamma), value_gamma, zero_terminal, start, observation_key,
+                    subgoals.reads_observation, transitions_key is not None, tuple(potential.in_keys))  # fmt: skip
+
+
+def check_table(potential: TensorDictModuleBase, n_learners: int, num_states: int) -> None:
+    """Refuse a tabular potential whose tables do not fit a batch of ``n_learners`` envs or an abstraction of
+    ``num_states`` abstract states.
+
+    Examples:
+        >>> check_table(TabularPotential(2), 4, 3)
+        Traceback (most recent call last):
+        ...
+        ValueError: TabularPotential has 2 states; the abstraction has 3
+    """
+    if not isinstance(potential, TabularPotential):
+        return
+    if potential.batch_shape and potential.learners != n_learners:
+        raise ValueError(
+            f"TabularPotential has batch_shape {tuple(potential.batch_shape)} but the env batch has "
+            f"{n_learners} envs: use one table per env or a shared one (batch_shape=())"
+        )
+    if potential.num_states < num_states:
+        raise ValueError(f"TabularPotential has {potential.num_states} states; the abstraction has {num_states}")
+
+
+def compiles(backend: str, potential: TensorDictModuleBase, update: ValueUpdate | None) -> bool:
+    """Whether the compiled step shapes with ``potential`` (trained online by ``update``) under ``backend``;
+    ``backend="compiled"`` where it cannot is a ``TypeError`` saying why.
+
+    Examples:
+        >>> compiles("auto", TabularPotential(3), None), compiles("torch", TabularPotential(3), None)
+        (True, False)
+    """
+    why = "backend='torch'" if backend == "torch" else compiled_potential(potential, update.loss if update else None)
+    if why is not None and backend == "compiled":
+        raise TypeError(f"SubgoalPotentialTransform(backend='compiled'): {why}; use backend='torch' or 'auto'")
+    return why is None
+
+
+def compiled_batch(
+    batch: BatchSetup | None, backend: str, potential: TensorDictModuleBase, update: ValueUpdate | None
+) -> BatchSetup:
+    """The env's batch set up for the compiled step, for a compiled loop; a ``TypeError`` saying why not.
+
+    Examples:
+        >>> compiled_batch(None, "auto", TabularPotential(3), None)
+        Traceback (most recent call last):
+        ...
+        TypeError: kernel_state needs the env reset through the transform first (env.reset())
+    """
+    if batch is None:
+        raise TypeError("kernel_state needs the env reset through the transform first (env.reset())")
+    if not batch.compiled:
+        why = compiled_potential(potential, update.loss if update else None) or f"backend={backend!r}"
+        raise TypeError(f"a compiled loop shapes as the compiled step does, which it cannot here: {why}")
+    return batch
 
 
 @dataclass

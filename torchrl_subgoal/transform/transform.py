@@ -13,15 +13,14 @@ from torchrl.data import Composite, TensorSpec
 from torchrl.envs.transforms import Transform
 
 from torchrl_subgoal.loss import ValueUpdate
-from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.subgoals import StateAggregation, SubgoalSeries, SubgoalTables
 from torchrl_subgoal.transform import compiled, keys, setup, stored
 from torchrl_subgoal.transform.cache import ValueCache
 from torchrl_subgoal.transform.compiled import ShapingKernelState, StepInputs, compiled_step
 from torchrl_subgoal.transform.eager import torch_step
 from torchrl_subgoal.transform.keys import EnvKeys, SubgoalKeys, at, read, write
-from torchrl_subgoal.transform.setup import BatchSetup, Settings, Subgoals
-from torchrl_subgoal.transform.shaping import START_MODES, StartPotential
+from torchrl_subgoal.transform.setup import BatchSetup, Subgoals
+from torchrl_subgoal.transform.shaping import StartPotential
 from torchrl_subgoal.transform.transitions import empty_transition, rebuild
 
 __all__ = ["SubgoalPotentialTransform"]
@@ -32,57 +31,51 @@ Backend = Literal["auto", "compiled", "torch"]
 class SubgoalPotentialTransform(Transform):
     """Adds the shaping reward ``F = γ Φ(z') − Φ(z)`` of a subgoal series to any TorchRL env.
 
-    Per env of the batch, the transform keeps the abstract state of dynamic trajectory aggregation
-    (Okudo & Yamada 2021) in the TensorDict, declared in the specs as observations and as carried
-    state (names with the default ``prefix``; see :class:`SubgoalKeys`): ``"subgoal_index"`` ``z`` (the
-    node of the series reached: 0 at reset, advanced when the next subgoal holds), ``"subgoal_return"``
-    ``r_h ← r_h + γ_v^k r`` and ``"subgoal_steps"`` ``k ← k + 1`` since ``z`` was entered, and, when the
-    potential reads them, ``"subgoal_achieved"``, ``"subgoal_anchor"`` (the observation at which ``z``
-    was entered) and ``"subgoal_learner"`` (the env's index in the batch).
+    Per env of the batch, the transform keeps the abstract state of dynamic trajectory aggregation (Okudo & Yamada
+    2021) in the TensorDict, declared in the specs as observations and as carried state (names with the default
+    ``prefix``; see :class:`SubgoalKeys`): ``"subgoal_index"`` ``z`` (the node of the series reached: 0 at reset,
+    advanced when the next subgoal holds), ``"subgoal_return"`` ``r_h ← r_h + γ_v^k r`` and ``"subgoal_steps"`` ``k ← k
+    + 1`` since ``z`` was entered, and, when the potential reads them, ``"subgoal_achieved"``, ``"subgoal_anchor"``
+    (the observation at which ``z`` was entered) and ``"subgoal_learner"`` (the env's index in the batch).
 
-    The reward, done and terminated entries are the parent env's, resolved as TorchRL's ``RewardSum``
-    and ``StepCounter`` resolve theirs (nested and multi-agent keys keep the abstract state in the
-    reward's group, one row per episode). Every step adds ``F`` to the reward; the env's reward stays
-    under ``"env_reward"``, a second reward entry. ``in_keys`` are the step's entries read, ``out_keys``
-    those written.
+    The reward, done and terminated entries are the parent env's, resolved as TorchRL's ``RewardSum`` and
+    ``StepCounter`` resolve theirs (nested and multi-agent keys keep the abstract state in the reward's group, one row
+    per episode). Every step adds ``F`` to the reward; the env's reward stays under ``"env_reward"``, a second reward
+    entry. ``in_keys`` are the step's entries read, ``out_keys`` those written.
 
-    A step that achieves a subgoal or ends the episode closes an SMDP transition ``(z, r_h, k, z',
-    terminated)``; :meth:`transitions` rebuilds those of collected data for
-    :class:`~torchrl_subgoal.SubgoalValueLoss`. Shaping uses the potential as it is now; with
-    ``value_update`` the step first trains it online (the paper's algorithm). ``transform(data)`` shapes
-    stored trajectories (a replay-buffer sample) without training. Policy invariance needs ``Φ`` to be a
-    function of the agent's state: give the agent ``z`` too. A NaN or infinite reward, or a NaN in the
+    A step that achieves a subgoal or ends the episode closes an SMDP transition ``(z, r_h, k, z', terminated)``;
+    :meth:`transitions` rebuilds those of collected data for :class:`~torchrl_subgoal.SubgoalValueLoss`. Shaping uses
+    the potential as it is now; with ``value_update`` the step first trains it online (the paper's algorithm).
+    ``transform(data)`` shapes stored trajectories (a replay-buffer sample) without training. Policy invariance needs
+    ``Φ`` to be a function of the agent's state: give the agent ``z`` too. A NaN or infinite reward, or a NaN in the
     observation, is a ``ValueError`` naming the entry. Append the transform to the *outer* env
-    (``TransformedEnv(ParallelEnv(...), t)``), so that the potential trained is the one shaping
-    (collector workers: :mod:`torchrl_subgoal.training`).
+    (``TransformedEnv(ParallelEnv(...), t)``), so that the potential trained is the one shaping (collector workers:
+    :mod:`torchrl_subgoal.training`).
 
     Args:
-        subgoals: a :class:`SubgoalSeries` shared by every env of the batch; a
-            sequence of series, one per env (flattened batch order; equal series
-            are compiled once); or a :class:`StateAggregation` ``z = g(s)``.
-        potential: ``Φ``: :class:`TabularPotential`, :class:`NeuralPotential`, :class:`NaivePotential`,
-            or any TensorDict module reading entries this transform keeps and writing one value.
+        subgoals: a :class:`SubgoalSeries` shared by every env of the batch; a sequence of series, one per env
+            (flattened batch order; equal series are compiled once); or a :class:`StateAggregation` ``z = g(s)``.
+        potential: ``Φ``: :class:`TabularPotential`, :class:`NeuralPotential`, :class:`NaivePotential`, or any
+            TensorDict module reading entries this transform keeps and writing one value.
 
     Keyword Args:
         gamma: the agent's discount ``γ`` in ``F = γ Φ(z') − Φ(z)``.
-        observation_key: the observation the region predicates and an
-            aggregation read, and the anchor snapshots.
-        value_update: train the potential online: a :class:`~torchrl_subgoal.ValueUpdate` (the learning
-            rate ``α_v`` and, optionally, the configured :class:`~torchrl_subgoal.SubgoalValueLoss` it
-            steps, whose ``γ_v`` discounts ``r_h``), or the learning rate alone. ``None``: none, ``γ_v = γ``.
-        zero_terminal_potential: ``Φ = 0`` at terminal states (strict policy invariance in episodic
-            tasks); ``False`` shapes with ``V(z')`` at the goal, as the authors' released code does.
-        start_potential: the level of ``Φ``, set by the potential of the state
-            the episode started in: ``"value"`` (``Φ = V``), ``"zero"``
-            (``Φ = V − V(z_0)``) or ``"nonpositive"`` (default, ``Φ = V − max(V(z_0), 0)``;
-            see docs/shaping_defaults.md).
-        transitions_key: if given, every step also writes its SMDP transition
-            under ``("next", transitions_key)`` (``"mask"`` tells the real ones).
-        prefix: the names of the kept entries; two transforms on one env need
-            different prefixes (the same one is refused).
-        backend: ``"compiled"``: numba kernels (a tabular or naive potential on
-            the CPU; anything else is a ``TypeError`` saying why); ``"torch"``:
-            torch operations only (any potential, any device); ``"auto"``
+        observation_key: the observation the region predicates and an aggregation read, and the anchor snapshots.
+        value_update: train the potential online: a :class:`~torchrl_subgoal.ValueUpdate` (the learning rate ``α_v``
+            and, optionally, the configured :class:`~torchrl_subgoal.SubgoalValueLoss` it steps, whose ``γ_v``
+            discounts ``r_h``; by default its optimistic target, docs/shaping_defaults.md), or the learning rate
+            alone. ``None``: none, ``γ_v = γ``.
+        zero_terminal_potential: ``Φ = 0`` at terminal states (strict policy invariance in episodic tasks); ``False``
+            shapes with ``V(z')`` at the goal, as the authors' released code does.
+        start_potential: the level of ``Φ``, set by the potential of the state the episode started in: ``"value"`` (``Φ
+            = V``), ``"zero"`` (``Φ = V − V(z_0)``) or ``"nonpositive"`` (default, ``Φ = V − max(V(z_0), 0)``; see
+            docs/shaping_defaults.md).
+        transitions_key: if given, every step also writes its SMDP transition under ``("next", transitions_key)``
+            (``"mask"`` tells the real ones).
+        prefix: the names of the kept entries; two transforms on one env need different prefixes (the same one is
+            refused).
+        backend: ``"compiled"``: numba kernels (a tabular or naive potential on the CPU; anything else is a
+            ``TypeError`` saying why); ``"torch"``: torch operations only (any potential, any device); ``"auto"``
             (default): compiled when possible. Both agree.
 
     Examples:
@@ -116,12 +109,7 @@ class SubgoalPotentialTransform(Transform):
         backend: Backend = "auto",
     ) -> None:
         super().__init__()
-        if not 0.0 <= gamma <= 1.0:
-            raise ValueError(f"gamma must lie in [0, 1], got {gamma}")
-        if start_potential not in START_MODES:
-            raise ValueError(f"start_potential must be one of {sorted(START_MODES)}, got {start_potential!r}")
-        if backend not in ("auto", "compiled", "torch"):
-            raise ValueError(f"backend must be 'auto', 'compiled' or 'torch', got {backend!r}")
+        setup.check_options(gamma, start_potential, backend)
         self.subgoals, self.keys = Subgoals(subgoals), SubgoalKeys(prefix)
         setup.check_potential(potential, self.keys)
         self.potential = potential
@@ -131,24 +119,10 @@ class SubgoalPotentialTransform(Transform):
             torch.optim.SGD(potential.parameters(), self.value_update.lr) if self.value_update else None
         )
         self._parameters_list = list(potential.parameters())
-        value_gamma = (
-            float(gamma)
-            if not isinstance(value_update, ValueUpdate) or value_update.loss is None
-            else value_update.loss.gamma
-        )
-        kept = setup.kept_entries(self.keys, potential, self.subgoals, start_potential)
-        self._settings = Settings(
-            self.keys,
-            kept,
-            float(gamma),
-            value_gamma,
-            zero_terminal_potential,
-            start_potential,
-            observation_key,
-            self.subgoals.reads_observation,
-            transitions_key is not None,
-            tuple(potential.in_keys),
-        )
+        self._settings = setup.settings(
+            self.keys, potential, self.subgoals, gamma, self.value_update, observation_key, transitions_key,
+            zero_terminal=zero_terminal_potential, start=start_potential,
+        )  # fmt: skip
         self._env = EnvKeys.resolve(None)
         self._online: BatchSetup | None = None
         self._layout: tuple[int, bool] | None = None
@@ -158,10 +132,7 @@ class SubgoalPotentialTransform(Transform):
 
     gamma = property(lambda self: self._settings.gamma, doc="The discount of the shaping term.")
     value_gamma = property(lambda self: self._settings.value_gamma, doc="The discount of the SMDP return.")
-    observation_key = property(
-        lambda self: self._settings.observation_key,
-        doc="The observation the region predicates read and the anchor snapshots.",
-    )
+    observation_key = property(lambda self: self._settings.observation_key, doc="What the subgoals and anchor read.")
     zero_terminal_potential = property(lambda self: self._settings.zero_terminal, doc="``Φ = 0`` at terminal states.")
     start_potential = property(lambda self: self._settings.start, doc="The level of ``Φ``.")
     state_keys = property(
@@ -170,9 +141,7 @@ class SubgoalPotentialTransform(Transform):
     )
     env_reward_key = property(lambda self: self._env.env_reward, doc="Where the unshaped reward is kept.")
     value_key = property(lambda self: self.potential.out_keys[-1], doc="The potential's value entry.")
-    num_abstract_states = property(
-        lambda self: self.subgoals.num_states, doc="Number of abstract states ``z`` (the terminal one excluded)."
-    )
+    num_abstract_states = property(lambda self: self.subgoals.num_states, doc="Number of abstract states ``z``.")
     aggregation = property(lambda self: self.subgoals.aggregation, doc="The hand-given aggregation, if any.")
 
     @property
@@ -225,16 +194,7 @@ class SubgoalPotentialTransform(Transform):
         self, batch_shape: torch.Size, learner: torch.Tensor, n_learners: int, obs: torch.Tensor | None, online: bool
     ) -> BatchSetup:
         """Set up a batch whose rows belong to ``learner`` (``online``: the env's batch, in order)."""
-        pot = self.potential
-        if isinstance(pot, TabularPotential) and pot.batch_shape and pot.learners != n_learners:
-            raise ValueError(
-                f"TabularPotential has batch_shape {tuple(pot.batch_shape)} but the env batch has "
-                f"{n_learners} envs: use one table per env or a shared one (batch_shape=())"
-            )
-        if isinstance(pot, TabularPotential) and pot.num_states < self.num_abstract_states:
-            raise ValueError(
-                f"TabularPotential has {pot.num_states} states; the abstraction has {self.num_abstract_states}"
-            )
+        setup.check_table(self.potential, n_learners, self.num_abstract_states)
         layout = self._layout  # the observation's entries and encoding: the env's spec's once known
         if layout is None:
             spec = None
@@ -245,15 +205,8 @@ class SubgoalPotentialTransform(Transform):
                 self._layout = layout
         abstraction = self.subgoals.compile(learner, batch_shape, n_learners, layout, self.observation_key)
         batch = BatchSetup(batch_shape, abstraction, learner, compiled_search=self.backend != "torch")
-        why = (
-            "backend='torch'"
-            if self.backend == "torch"
-            else setup.compiled_potential(pot, self.value_update.loss if self.value_update is not None else None)
-        )
-        if why is None:
-            batch.use_kernels(pot, self._settings, self.value_update, online)
-        elif self.backend == "compiled":
-            raise TypeError(f"SubgoalPotentialTransform(backend='compiled'): {why}; use backend='torch' or 'auto'")
+        if setup.compiles(self.backend, self.potential, self.value_update):
+            batch.use_kernels(self.potential, self._settings, self.value_update, online)
         return batch
 
     def _online_batch(self, batch_shape: torch.Size, obs: torch.Tensor | None) -> BatchSetup:
@@ -385,7 +338,7 @@ class SubgoalPotentialTransform(Transform):
         """The online update: one SGD step of ``value_update``'s loss on ``transitions`` (SMDP layout, masked).
 
         Examples:
-            >>> from torchrl_subgoal import State
+            >>> from torchrl_subgoal import State, TabularPotential
             >>> from torchrl_subgoal.transform.transitions import transition
             >>> series = SubgoalSeries([State(1)])
             >>> t = SubgoalPotentialTransform(series, TabularPotential(2), gamma=0.9, value_update=0.5)
@@ -436,28 +389,18 @@ class SubgoalPotentialTransform(Transform):
         order); otherwise any sample, shuffled or not, is shaped.
         """
 
-        def set_up(
-            batch_shape: torch.Size, learned: torch.Tensor | None, time: int, obs: torch.Tensor | None
-        ) -> BatchSetup:
+        def set_up(shape: torch.Size, learned: torch.Tensor | None, time: int, obs: torch.Tensor | None) -> BatchSetup:
+            rows = self._online.rows if self._online else None
             learner, n = stored.learners_of(
-                learned,
-                batch_shape,
-                time,
-                self.subgoals,
-                self.potential,
-                self._online.rows if self._online else None,
-                self.keys.learner,
+                learned, shape, time, self.subgoals, self.potential, rows, self.keys.learner
             )
-            return self._batch(batch_shape, learner, n, obs, online=False)
+            return self._batch(shape, learner, n, obs, online=False)
+
+        def advance(batch: BatchSetup, current: dict[str, torch.Tensor], step: StepInputs) -> Any:
+            return self._advance(batch, current, step, learn=False)
 
         return stored.shape_stored(
-            tensordict,
-            self._env,
-            self._settings,
-            self.in_keys,
-            self.transitions_key,
-            set_up,
-            lambda batch, current, step: self._advance(batch, current, step, learn=False),
+            tensordict, self._env, self._settings, self.in_keys, self.transitions_key, set_up, advance
         )
 
     def kernel_state(self, tensordict: TensorDictBase) -> ShapingKernelState:
@@ -478,15 +421,7 @@ class SubgoalPotentialTransform(Transform):
             >>> state.potential.table.shape, state.potential.value_lr
             ((2, 3), 0.1)
         """
-        batch = self._online
-        if batch is None or not batch.compiled:
-            why = setup.compiled_potential(self.potential, self.value_update.loss if self.value_update else None)
-            raise TypeError(
-                "kernel_state needs the env reset through the transform first (env.reset())"
-                if batch is None
-                else f"a compiled loop shapes as the compiled step does, which it cannot here: "
-                f"{why or 'backend=' + repr(self.backend)}"
-            )
+        batch = setup.compiled_batch(self._online, self.backend, self.potential, self.value_update)
         root = tensordict.get(self._env.group) if self._env.group else tensordict
         state = (root.get(self.keys.index), root.get(self.keys.ret), root.get(self.keys.steps))
         return compiled.kernel_state(batch, state, self.learning, (self._layout or (1, False))[0])
