@@ -34,11 +34,6 @@ import torch
 from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal import (
-    NaivePotential,
-    SubgoalPotentialTransform,
-    SubgoalValueLoss,
-    TabularPotential,
-    ValueUpdate,
     load_patterns,
 )
 from torchrl_subgoal.envs import FourRoomsEnv
@@ -55,7 +50,7 @@ from torchrl_subgoal.experiments.recipe import (
     recipe_main,
     sweep_entries,
 )
-from torchrl_subgoal.methods import Method
+from torchrl_subgoal.methods import Method, shaping_transform
 from torchrl_subgoal.training.qlearning import QLearningConfig, train_qlearning
 
 METHODS = {
@@ -124,31 +119,22 @@ def make_env(config: Mapping[str, Any], n: int) -> EnvBase:
 
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
     """One batch of learnings of one method: one Q table per env."""
-    method = METHODS[chunk.method]
     env = make_env(config, chunk.n_learners)
-    if method.shaping != "none":
-        patterns, index = chunk_patterns(chunk, config)
-        series = [patterns[i] for i in index.tolist()]
-        gamma = config["gamma"]
-        if method.shaping == "naive":
-            potential, update = NaivePotential(config["eta"]), None
-        else:
-            potential = TabularPotential(max(len(p) for p in patterns) + 1, (chunk.n_learners,))
-            target = MEAN_TARGET if chunk.method == "HRS-mean" else config["target"]
-            loss = SubgoalValueLoss(potential, **target).make_value_estimator(gamma=gamma)
-            update = ValueUpdate(config["value_lr"], loss)
-        env = TransformedEnv(
-            env,
-            SubgoalPotentialTransform(
-                series,
-                potential,
-                gamma=gamma,
-                value_update=update,
-                observation_key=TASKS[config["task"]]["subgoal_key"],
-                zero_terminal_potential=config["zero_terminal_potential"],
-                start_potential=config["start_potential"],
-            ),
-        )
+    patterns, index = chunk_patterns(chunk, config)
+    shaping = shaping_transform(
+        METHODS[chunk.method],
+        env.batch_size,
+        gamma=config["gamma"],
+        value_lr=config["value_lr"],
+        patterns=patterns,
+        pattern_index=index,
+        eta=config["eta"],
+        observation_key=TASKS[config["task"]]["subgoal_key"],
+        zero_terminal_potential=config["zero_terminal_potential"],
+        start_potential=config["start_potential"],
+        **(MEAN_TARGET if chunk.method == "HRS-mean" else config["target"]),
+    )
+    env = TransformedEnv(env, shaping) if shaping is not None else env
     settings = QLearningConfig(
         episodes=config["episodes"],
         lr=config["lr"],
