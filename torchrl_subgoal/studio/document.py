@@ -36,6 +36,7 @@ from torchrl_subgoal.studio.domains import Domain, FormError
 from torchrl_subgoal.subgoals import (
     FORMAT,
     MAX_FILE_BYTES,
+    Predicate,
     SubgoalFileError,
     SubgoalSeries,
     load_patterns,
@@ -334,6 +335,12 @@ def read_drawing(data: Any, domains: Mapping[str, Domain], *, source: str = "dra
                 if problem:
                     label = f"subgoals.{series.names[j]}" if series.names else f"subgoals[{j}]"
                     raise RequestError(f"{source}: pattern {name!r}: {label}.{predicate.kind}: {problem}")
+    for name in patterns:
+        _expect(
+            not domain.pattern_names or name in domain.pattern_names,
+            f"{source}: pattern {name!r}: {domain.title or domain.name} runs each pattern on the task it is "
+            f"named after; name it one of {', '.join(domain.pattern_names)}",
+        )
     return Drawing(domain, map_name, patterns, described.get("description"))
 
 
@@ -459,21 +466,43 @@ def read_file(folder: Path, name: str) -> tuple[Path, bytes]:
         return path, handle.read(MAX_FILE_BYTES + 1)
 
 
-def infer_domain(patterns: Mapping[str, SubgoalSeries], domains: Mapping[str, Domain], source: str) -> Domain:
-    """The first domain whose map check accepts every subgoal of ``patterns``.
+def infer_domain(
+    patterns: Mapping[str, SubgoalSeries], domains: Mapping[str, Domain], source: str, declared: str | None = None
+) -> Domain:
+    """The domain a file is for: the one it names (``declared``, its ``domain`` field) when the studio
+    has it, else the first whose map check accepts every subgoal of ``patterns`` and whose page can
+    edit them, else the first whose map check accepts them (opening it then says what the page cannot
+    edit: a pick-and-place box over part of a component).
 
     Examples:
         >>> from torchrl_subgoal.studio.domains import default_domains
-        >>> from torchrl_subgoal.subgoals import Cell
+        >>> from torchrl_subgoal.subgoals import Box, Cell
         >>> patterns = {"alice": SubgoalSeries([Cell(4, 9)], name="alice")}
         >>> infer_domain(patterns, default_domains(), "alice.yaml").name
         'four_rooms'
+        >>> infer_domain({"p": SubgoalSeries([Box((-1.0,), (0.2,), (0,))])}, default_domains(), "car.yaml").name
+        'mountain_car'
     """
+    if declared is not None and declared in domains:
+        return domains[declared]
     predicates = [p for series in patterns.values() for p in series.predicates]
-    for domain in domains.values():
-        check = domain.check_subgoal
-        if check is None or all(check(p) is None for p in predicates):
+
+    def accepts(domain: Domain, predicate: Predicate) -> bool:
+        return domain.check_subgoal is None or domain.check_subgoal(predicate) is None
+
+    def editable(domain: Domain, predicate: Predicate) -> bool:
+        try:
+            domain.to_page(predicate)
+        except FormError:
+            return False
+        return True
+
+    fitting = [domain for domain in domains.values() if all(accepts(domain, p) for p in predicates)]
+    for domain in fitting:
+        if all(editable(domain, p) for p in predicates):
             return domain
+    if fitting:
+        return fitting[0]
     kinds = sorted({p.kind for p in predicates})
     raise RequestError(
         f"{source}: its subgoals ({', '.join(kinds)}) fit none of the studio's domains {sorted(domains)}", status=422

@@ -69,6 +69,7 @@ from torchrl_subgoal.subgoals import (
     SubgoalFileError,
     file_description,
     load_patterns,
+    parse_text,
 )
 
 __all__ = ["create_app", "listen", "main", "serve", "served_hosts", "studio_url"]
@@ -317,9 +318,10 @@ def create_app(
             try:
                 patterns = load_patterns(copy)
                 description = file_description(copy)
+                declared = parse_text(data, path.name).get("domain")  # a mapping: the file loaded
             except SubgoalFileError as exc:
                 raise RequestError(str(exc).replace(str(copy), path.name), status=422) from None
-        domain = infer_domain(patterns, studio.domains, path.name)
+        domain = infer_domain(patterns, studio.domains, path.name, declared if isinstance(declared, str) else None)
         return jsonify(
             file=path.name,
             path=str(path),

@@ -73,8 +73,11 @@ const isForm = () => S.geometry && S.geometry.kind === "form";     // boxes over
 const isTable = () => S.geometry && S.geometry.kind === "table";
 const canTry = () => Object.keys(S.domains[S.domain].limits).length > 0;
 
-function newPattern(d) {
+// a new pattern's name: the first free one the domain asks for (PointMaze: its routes), else pattern_N
+function newPattern(d, domain) {
   const taken = new Set(d ? d.patterns.map((p) => p.name) : []);
+  const named = ((S.domains[domain] || {}).pattern_names || []).find((n) => !taken.has(n));
+  if (named) return { name: named, subgoals: [], partial: false, edges: [] };
   let i = 1;
   while (taken.has(`pattern_${i}`)) i += 1;
   return { name: `pattern_${i}`, subgoals: [], partial: false, edges: [] };
@@ -83,7 +86,7 @@ function newPattern(d) {
 function newDoc(domain) {
   // saved: the file as last saved or opened (for the download link); recipe: the command that trains with it
   const d = { file: `${domain}_subgoals.yaml`, patterns: [], current: 0, saved: null, recipe: "" };
-  d.patterns.push(newPattern(d));
+  d.patterns.push(newPattern(d, domain));
   return d;
 }
 
@@ -158,7 +161,8 @@ function looksInvalid(s) {
   }
   if (s.circle) {
     const [x, y] = s.circle.centre;
-    if (x < 0 || y < 0 || x > 1 || y > 1 || !(s.circle.radius > 0)) return true;
+    const { x0, y0, x1, y1 } = plane();
+    if (x < x0 || y < y0 || x > x1 || y > y1 || !(s.circle.radius > 0)) return true;
     return g.polygons.some((poly) => insidePolygon(x, y, poly));
   }
   return false;
@@ -186,6 +190,27 @@ function fill(node, attrs, parent, text) {
 const el = (name, attrs, parent, text) => fill(document.createElementNS(SVG_NS, name), attrs, parent, text);
 const html = (name, attrs, parent, text) => fill(document.createElement(name), attrs, parent, text);
 
+// A table's plane: world coordinates within geometry.bounds [xmin, ymin, xmax, ymax] (PinBall's unit
+// square by default), y down as drawn, or up with geometry.y_up (PointMaze). The one place that converts
+// world <-> SVG units: toSvg and toWorld.
+function plane() {
+  const g = S.geometry;
+  const [x0, y0, x1, y1] = g.bounds || [0, 0, 1, 1];
+  return { x0, y0, x1, y1, scale: VIEW / Math.max(x1 - x0, y1 - y0), yUp: Boolean(g.y_up) };
+}
+
+function toSvg(x, y) {
+  const { x0, y0, y1, scale, yUp } = plane();
+  return [(x - x0) * scale, (yUp ? y1 - y : y - y0) * scale];
+}
+
+// SVG units -> world coordinates, clamped to the plane and rounded to 4 decimals
+function toWorld(px, py) {
+  const { x0, y0, x1, y1, scale, yUp } = plane();
+  const round = (v, lo, hi) => Math.round(Math.min(hi, Math.max(lo, v)) * 10000) / 10000;
+  return [round(x0 + px / scale, x0, x1), round(yUp ? y1 - py / scale : y0 + py / scale, y0, y1)];
+}
+
 function cellSize() {
   const g = S.geometry;
   return VIEW / Math.max(g.rows.length, g.rows[0].length);
@@ -197,7 +222,8 @@ function place(s) {
     const k = cellSize();
     return { x: (s.cell[1] + 0.5) * k, y: (s.cell[0] + 0.5) * k, r: k * 0.42 };
   }
-  return { x: s.circle.centre[0] * VIEW, y: s.circle.centre[1] * VIEW, r: Math.max(3, s.circle.radius * VIEW) };
+  const [x, y] = toSvg(...s.circle.centre);
+  return { x, y, r: Math.max(3, s.circle.radius * plane().scale) };
 }
 
 function renderMap() {
@@ -228,13 +254,17 @@ function renderMap() {
       el("text", { x: (c + 0.5) * k, y: (r + 0.5) * k + 6, "text-anchor": "middle", class: "landmark" }, svg, label);
     }
   } else {
+    const { scale } = plane();
     el("rect", { x: 0, y: 0, width: VIEW, height: VIEW, fill: "#fff" }, svg);
     for (const poly of g.polygons) {
-      el("polygon", { points: poly.map(([x, y]) => `${x * VIEW},${y * VIEW}`).join(" "), class: "obstacle" }, svg);
+      el("polygon", { points: poly.map(([x, y]) => toSvg(x, y).join(",")).join(" "), class: "obstacle" }, svg);
     }
-    const [tx, ty, tr] = g.target;
-    el("circle", { cx: tx * VIEW, cy: ty * VIEW, r: tr * VIEW, class: "target" }, svg);
-    el("circle", { cx: g.start[0] * VIEW, cy: g.start[1] * VIEW, r: Math.max(4, g.ball_radius * VIEW), class: "start" }, svg);
+    // the start and target of the route the pattern is named after (PointMaze), else the map's
+    const ends = (g.routes || {})[pattern().name] || g;
+    const [tx, ty] = toSvg(ends.target[0], ends.target[1]);
+    el("circle", { cx: tx, cy: ty, r: ends.target[2] * scale, class: "target" }, svg);
+    const [sx, sy] = toSvg(ends.start[0], ends.start[1]);
+    el("circle", { cx: sx, cy: sy, r: Math.max(4, g.ball_radius * scale), class: "start" }, svg);
   }
 
   // the file's other patterns, faintly
@@ -306,8 +336,7 @@ function toModel(event) {
     const k = cellSize();
     return { cell: [Math.floor(p.y / k), Math.floor(p.x / k)], px: p.x, py: p.y };
   }
-  const round = (v) => Math.round(Math.min(1, Math.max(0, v / VIEW)) * 10000) / 10000;
-  return { centre: [round(p.x), round(p.y)], px: p.x, py: p.y };
+  return { centre: toWorld(p.x, p.y), px: p.x, py: p.y };
 }
 
 function moveTo(s, at) {
@@ -350,7 +379,7 @@ function renderForm() {
   const form = $("box-form");
   form.replaceChildren();
   const g = S.geometry;
-  if (S.newComponents === null) S.newComponents = g.components.length > 2 ? [g.components[2].name] : [];
+  if (S.newComponents === null) S.newComponents = (g.ticked || []).slice();
   const add = html("fieldset", { class: "new-box" }, form);
   html("legend", {}, add, "New subgoal: a box over these observation components");
   const boxes = document.createElement("div");
@@ -367,7 +396,8 @@ function renderForm() {
     });
     label.append(check, ` ${c.name} `);
     const dims = document.createElement("small");
-    dims.textContent = c.size > 1 ? `[${c.start}–${c.start + c.size - 1}]` : `[${c.start}]`;
+    dims.textContent = (c.size > 1 ? `[${c.start}–${c.start + c.size - 1}]` : `[${c.start}]`) +
+      (c.range ? ` in [${c.range.join(", ")}]` : "");
     label.append(dims);
     boxes.appendChild(label);
   }
@@ -668,7 +698,11 @@ async function openFile(name) {
 async function loadGeometry() {
   const query = new URLSearchParams({ domain: S.domain, map: S.map });
   S.geometry = await api("GET", `/api/geometry?${query}`);
-  if (isTable()) $("radius").value = S.geometry.default_radius;
+  if (isTable()) {
+    const { x0, y0, x1, y1 } = plane();
+    $("radius").max = Math.max(x1 - x0, y1 - y0) / 2;  // PinBall: 0.5
+    $("radius").value = S.geometry.default_radius;
+  }
 }
 
 async function setDomain(name) {
@@ -679,6 +713,7 @@ async function setDomain(name) {
   $("map-label").hidden = info.maps.length === 0;
   S.map = info.maps.length ? info.maps[0] : "";
   if (!S.docs[name]) S.docs[name] = newDoc(name);
+  S.newComponents = null;  // the form's ticks are the new domain's
   for (const key of ["episodes", "learners"]) {
     const input = $(key);
     const limit = info.limits[key];
@@ -919,7 +954,7 @@ function wire() {
   });
   $("add-pattern").addEventListener("click", () => {
     const d = doc();
-    d.patterns.push(newPattern(d));
+    d.patterns.push(newPattern(d, S.domain));
     d.current = d.patterns.length - 1;
     S.selected = null;
     changed();
