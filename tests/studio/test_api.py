@@ -39,7 +39,16 @@ def test_domains_and_geometry_come_from_the_envs(client: FlaskClient) -> None:
     from torchrl_subgoal.envs import four_rooms as fr
     from torchrl_subgoal.envs.pinball import PinBallConfig
 
-    domains = {d["name"]: d for d in client.get("/api/domains").json}
+    listed = client.get("/api/domains").json
+    assert [d["name"] for d in listed] == [
+        "four_rooms",
+        "pinball",
+        "pick_and_place",
+        "point_maze_umaze",
+        "point_maze_medium",
+        "mountain_car",
+    ]
+    domains = {d["name"]: d for d in listed}
     assert domains["pinball"]["maps"] == ["simple", "hard"]
     assert domains["four_rooms"]["limits"]["episodes"]["max"] >= domains["four_rooms"]["limits"]["episodes"]["default"]
     grid = client.get("/api/geometry?domain=four_rooms").json
@@ -47,6 +56,7 @@ def test_domains_and_geometry_come_from_the_envs(client: FlaskClient) -> None:
     hard = client.get("/api/geometry?domain=pinball&map=hard").json
     cfg = PinBallConfig.load("hard")
     assert hard["target"] == list(cfg.target) and len(hard["polygons"]) == len(cfg.polygons)
+    assert "bounds" not in hard and "y_up" not in hard  # the page's default: the unit square, y down
 
 
 def test_extra_pinball_map_file(tmp_path: Path) -> None:
@@ -189,7 +199,8 @@ def test_state_subgoals_open_as_cells(client: FlaskClient, app: Flask) -> None:
         ),
         (
             {"domain": "chess", "patterns": []},
-            "request: domain: expected one of ['four_rooms', 'pick_and_place', 'pinball'], got 'chess'",
+            "request: domain: expected one of ['four_rooms', 'mountain_car', 'pick_and_place', 'pinball', "
+            "'point_maze_medium', 'point_maze_umaze'], got 'chess'",
         ),
         (pinball((0.5, 0.5, 0.04), map_="moon"), "request: map: expected one of ['simple', 'hard'], got 'moon'"),
         ({"domain": "four_rooms", "patterns": []}, "request: patterns: expected a non-empty list"),

@@ -88,7 +88,9 @@ CIRCLE = st.fixed_dictionaries(
 )
 BOX = st.fixed_dictionaries(
     {
-        "components": st.lists(st.sampled_from(["finger_joints", "object_position", "x"]), min_size=0, max_size=2),
+        "components": st.lists(
+            st.sampled_from(["finger_joints", "object_position", "position", "x"]), min_size=0, max_size=2
+        ),
         "centre": st.lists(st.floats(-2, 2), max_size=6),
         "margin": st.floats(-0.1, 0.1) | st.lists(st.floats(0, 0.1), max_size=6),
     }
@@ -103,11 +105,14 @@ SUBGOAL = st.one_of(
 # drawings that are nearly right: valid structure, random values and now and then a random subtree
 DRAWING = st.fixed_dictionaries(
     {
-        "domain": st.sampled_from(["four_rooms", "pinball", "pick_and_place"]) | JSON,
+        "domain": st.sampled_from(
+            ["four_rooms", "pinball", "pick_and_place", "point_maze_umaze", "point_maze_medium", "mountain_car"]
+        )
+        | JSON,
         "patterns": st.lists(
             st.fixed_dictionaries(
                 {
-                    "name": st.sampled_from(["p", "q"]) | st.text(max_size=4) | JSON,
+                    "name": st.sampled_from(["p", "q", "bottom_to_top"]) | st.text(max_size=4) | JSON,
                     "subgoals": st.lists(SUBGOAL, max_size=4) | JSON,
                 },
                 optional={

@@ -18,7 +18,7 @@ from tests.recipes.test_recipes import recipe
 from tests.studio.browser import TIMEOUT_MS, click_cell, click_map, open_page
 from torchrl_subgoal import load_patterns
 from torchrl_subgoal.envs import fetch
-from torchrl_subgoal.subgoals import Cell, Circle
+from torchrl_subgoal.subgoals import Box, Cell, Circle
 
 Studio = tuple[str, Flask, Path]
 
@@ -247,3 +247,54 @@ def test_pick_and_place_form_two_boxes_save_reload(browser: Any, studio: Studio)
     patterns = fetch.human_patterns(str(folder / "grasp.yaml"))  # what the recipe reads
     assert patterns["grasp"].predicates == load_patterns(fetch.PARTICIPANTS_FILE)["participants"].predicates
     assert len(fetch.random_patterns(patterns["grasp"], 2, seed=0)) == 2  # and its RRS patterns from it
+
+
+def test_point_maze_circles_in_maze_coordinates_y_up(browser: Any, studio: Studio) -> None:
+    """The UMaze table is [-2.5, 2.5]² with y up: a click lands where the maze has that point."""
+    url, _, folder = studio
+    page = open_page(browser, url)
+    page.select_option("#domain", "point_maze_umaze")
+    expect(page.locator("#map-label")).to_be_hidden()
+    expect(page.locator("#try")).to_be_hidden()
+    expect(page.locator("#try-note")).to_contain_text("--domain point_maze_umaze --subgoals FILE")
+    expect(page.locator("#map-view polygon.obstacle")).to_have_count(18)
+    assert page.input_value("#pattern-name") == "bottom_to_top"  # named after the first route
+    assert page.input_value("#radius") == "0.65"
+
+    def click_maze(x: float, y: float) -> None:
+        click_map(page, (x + 2.5) / 5, (2.5 - y) / 5)
+
+    click_maze(0.0, 0.0)  # wall cell (2, 2), the middle of the U
+    expect(page.locator("#message")).to_contain_text("lies in a wall cell (2, 2)", timeout=TIMEOUT_MS)
+    assert page.locator("#map-view g.subgoal.invalid").count() == 1
+    page.locator("#map-view g.subgoal").click(button="right")
+    click_maze(1.0, -1.0)  # the lower right-hand corner, cell (3, 3)
+    click_maze(1.0, 1.0)  # the upper one, cell (1, 3)
+    expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
+    assert page.locator("#map-view g.subgoal.invalid").count() == 0
+    save_as(page, "corners")
+    expect(page.locator("#recipe")).to_contain_text("recipes/train.py --algo ppo --domain point_maze_umaze --subgoals")
+    series = load_patterns(folder / "corners.yaml", domain="point_maze_umaze")["bottom_to_top"]
+    circles = [p for p in series.predicates if isinstance(p, Circle)]
+    assert [p.radius for p in circles] == [0.65, 0.65]
+    for circle, (x, y) in zip(circles, [(1.0, -1.0), (1.0, 1.0)], strict=True):
+        assert abs(circle.centre[0] - x) < 0.02 and abs(circle.centre[1] - y) < 0.02, circle.centre
+
+
+def test_mountain_car_form_after_pick_and_place(browser: Any, studio: Studio) -> None:
+    """The form's ticks are each domain's: MountainCar's new box covers position, not pick-and-place's component."""
+    url, _, folder = studio
+    page = open_page(browser, url)
+    page.select_option("#domain", "pick_and_place")
+    expect(page.locator("#box-form")).to_be_visible()
+    page.select_option("#domain", "mountain_car")
+    expect(page.locator('#box-form .components input[value="velocity"]')).to_be_visible()
+    expect(page.locator("#box-form .components")).to_contain_text("in [-1.2, 0.6]")
+    page.click("#add-box")
+    page.fill('[aria-label="position[0] of subgoal 1"]', "-1")
+    page.locator('[aria-label="position[0] of subgoal 1"]').press("Tab")
+    expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
+    save_as(page, "car")
+    expect(page.locator("#recipe")).to_contain_text("recipes/train.py --algo dqn --domain mountain_car --subgoals")
+    series = load_patterns(folder / "car.yaml", domain="mountain_car")["pattern_1"]
+    assert series.predicates == (Box((-1.0,), (0.05,), (0,)),)

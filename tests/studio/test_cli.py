@@ -37,7 +37,14 @@ def test_serves_on_loopback_and_stops_on_ctrl_c(tmp_path: Path) -> None:
         assert query.startswith("token=") and len(token) >= 32  # a per-launch token, printed with the address
         api = urllib.request.Request(f"{base}api/domains", headers={"X-Studio-Token": token})
         with urllib.request.urlopen(api, timeout=60) as response:
-            assert [d["name"] for d in json.load(response)] == ["four_rooms", "pinball", "pick_and_place"]
+            assert [d["name"] for d in json.load(response)] == [
+                "four_rooms",
+                "pinball",
+                "pick_and_place",
+                "point_maze_umaze",
+                "point_maze_medium",
+                "mountain_car",
+            ]
         with urllib.request.urlopen(url, timeout=60) as response:
             assert "<title>Subgoal studio" in response.read().decode()
         for without in (f"{base}api/domains", base, f"{base}api/files?token=wrong"):

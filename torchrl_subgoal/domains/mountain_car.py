@@ -1,11 +1,12 @@
-"""The MountainCar domain plugin: env, subgoal check, and each layer's part (the learners' set-up, report map).
+"""The MountainCar domain plugin: env, subgoal check, and each layer's part (the learners' set-up, report map,
+studio form).
 
 Everything the package knows about MountainCar beyond the env itself, in one
 place; :mod:`torchrl_subgoal.domains` imports this module the first time
 ``"mountain_car"`` is looked up. Needs ``gymnasium`` only when an env is made.
-The report map draws the subgoals as boxes over ``(position, velocity)``. Not
-in the studio yet: its box form is pick-and-place's, built from that domain's
-named observation components.
+The report map draws the subgoals as boxes over ``(position, velocity)``; the
+studio edits them in a form of two components, ``position`` and ``velocity``
+(the form pick-and-place uses), with "Try it" off (deep learners only).
 """
 
 from __future__ import annotations
@@ -16,10 +17,11 @@ from typing import Any
 from torchrl_subgoal import domains
 from torchrl_subgoal.envs import mountain_car
 from torchrl_subgoal.experiments.plots import ReportMap, numbered_subgoals
+from torchrl_subgoal.studio.domains import BoxForm, StudioDomain
 from torchrl_subgoal.subgoals import Box, Predicate
 from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig
 
-__all__ = ["DOMAIN", "LEARNERS", "check_subgoal"]
+__all__ = ["DOMAIN", "FORM", "LEARNERS", "STUDIO", "check_subgoal"]
 
 #: The observation's bounds: position, velocity.
 BOUNDS = ((-1.2, 0.6), (-0.07, 0.07))
@@ -81,12 +83,34 @@ LEARNERS = LearnerDomain(
     },
 )
 
+#: The studio's form: a box over position (entry 0), velocity (entry 1) or both.
+FORM = BoxForm(
+    {"position": slice(0, 1), "velocity": slice(1, 2)},
+    2,
+    0.05,
+    ticked=("position",),
+    ranges={"position": BOUNDS[0], "velocity": BOUNDS[1]},
+)
+
+STUDIO = StudioDomain(
+    FORM.geometry,
+    recipe="recipes/train.py --algo dqn --domain mountain_car",
+    to_page=FORM.to_page,
+    from_page=FORM.from_page,
+    try_note=(
+        "Not offered for MountainCar: it is learned by deep learners only (DQN, PPO, A2C; 120,000 frames "
+        "or more), not by the quick learners Try it runs. Save the file and run the command shown "
+        "under File: python recipes/train.py --algo dqn --domain mountain_car --subgoals FILE"
+    ),
+    position=5,
+)
+
 DOMAIN = domains.register(
     domains.Domain(
         "mountain_car",
         "MountainCar",
         make_env=mountain_car.make_mountain_car,
         check_subgoal=check_subgoal,
-        parts=(LEARNERS, ReportMap(_draw_map)),
+        parts=(LEARNERS, ReportMap(_draw_map), STUDIO),
     )
 )

@@ -1,5 +1,5 @@
 """The PointMaze domain plugins (UMaze, Medium): env, subgoal check, and each layer's part (the learners'
-set-up, report map).
+set-up, report map, studio table).
 
 Everything the package knows about the two PointMaze domains beyond the env
 itself, in one place; :mod:`torchrl_subgoal.domains` imports this module the
@@ -11,8 +11,9 @@ names are the routes'): a learner following a pattern runs that direction
 (:meth:`~torchrl_subgoal.training.LearnerDomain.env_for`), its start and goal
 points drawn from its seed; an unshaped learner runs the direction its
 learning number picks, so the two directions are balanced in every method.
-Not in the studio: its maps are grids of cells or PinBall's unit square, and a
-maze's continuous coordinates fit neither without a new kind of map.
+In the studio, a maze is a table in its own coordinates (``y`` up): its wall
+cells are the obstacles, a pattern's start and target are those of the route
+it is named after, and "Try it" is off (deep learners only).
 """
 
 from __future__ import annotations
@@ -26,10 +27,11 @@ from torchrl.envs import EnvBase
 from torchrl_subgoal import domains
 from torchrl_subgoal.envs import point_maze
 from torchrl_subgoal.experiments.plots import ReportMap, numbered_subgoals
+from torchrl_subgoal.studio.domains import StudioDomain
 from torchrl_subgoal.subgoals import Circle, Predicate
 from torchrl_subgoal.training import DDPGTrainConfig, LearnerDomain, PPOConfig
 
-__all__ = ["DOMAINS", "LEARNERS", "check_subgoal", "maze_env", "route_env"]
+__all__ = ["DOMAINS", "LEARNERS", "STUDIO", "check_subgoal", "maze_env", "route_env"]
 
 
 def maze_env(maze: str, num_envs: int) -> EnvBase:
@@ -147,6 +149,55 @@ def _learners(maze: str) -> LearnerDomain:
     )
 
 
+def _geometry(maze: str, config: str) -> dict[str, Any]:
+    """The maze as a studio table: its plane (``y`` up), one square per wall cell, each route's ends."""
+    layout = point_maze.MAZES[maze]
+    rows, cols = len(layout), len(layout[0])
+
+    def square(r: int, c: int) -> list[list[float]]:
+        x, y = c - cols / 2, rows / 2 - r  # the cell's top-left corner
+        return [[x, y], [x + 1, y], [x + 1, y - 1], [x, y - 1]]
+
+    walls = [square(r, c) for r, line in enumerate(layout) for c, wall in enumerate(line) if wall]
+    ends = {
+        route.name: {
+            "start": list(point_maze.cell_centre(maze, route.start)),
+            "target": [*point_maze.cell_centre(maze, route.goal), point_maze.GOAL_RADIUS],
+        }
+        for route in point_maze.ROUTES[maze]
+    }
+    first = ends[point_maze.ROUTES[maze][0].name]
+    return {
+        "kind": "table",
+        "bounds": [-cols / 2, -rows / 2, cols / 2, rows / 2],
+        "y_up": True,
+        "ball_radius": point_maze.BALL_RADIUS,
+        "start": first["start"],
+        "target": first["target"],
+        "routes": ends,  # a pattern named after a route is drawn with that route's start and target
+        "polygons": walls,
+        "default_radius": point_maze.WAYPOINT_RADIUS,
+    }
+
+
+def _studio(maze: str) -> StudioDomain:
+    name = f"point_maze_{maze}"
+    return StudioDomain(
+        functools.partial(_geometry, maze),
+        recipe=f"recipes/train.py --algo ppo --domain {name}",
+        try_note=(
+            "Not offered for PointMaze: it is learned by deep learners only (PPO, DDPG; 100,000 frames or more), "
+            "not by the quick learners Try it runs. Save the file and run the command shown under "
+            f"File: python recipes/train.py --algo ppo --domain {name} --subgoals FILE"
+        ),
+        pattern_names=tuple(route.name for route in point_maze.ROUTES[maze]),
+        position=3 if maze == "umaze" else 4,
+    )
+
+
+#: Each maze's studio table.
+STUDIO = {maze: _studio(maze) for maze in point_maze.MAZES}
+
 #: Each maze's learner set-up.
 LEARNERS = {maze: _learners(maze) for maze in point_maze.MAZES}
 
@@ -157,7 +208,7 @@ DOMAINS = {
             f"PointMaze {maze.capitalize()}",
             make_env=functools.partial(maze_env, maze),
             check_subgoal=functools.partial(check_subgoal, maze),
-            parts=(LEARNERS[maze], ReportMap(functools.partial(_draw_map, maze))),
+            parts=(LEARNERS[maze], ReportMap(functools.partial(_draw_map, maze)), STUDIO[maze]),
         )
     )
     for maze in point_maze.MAZES

@@ -47,6 +47,8 @@ from torchrl_subgoal.envs.gym_batch import gym_batch, require_gymnasium
 from torchrl_subgoal.subgoals import SubgoalSeries, load_patterns
 
 __all__ = [
+    "BALL_RADIUS",
+    "GOAL_RADIUS",
     "MAX_EPISODE_STEPS",
     "MAZES",
     "ROUTES",
@@ -85,6 +87,10 @@ MAZES: dict[str, tuple[tuple[int, ...], ...]] = {
 _ENV_IDS = {"umaze": "PointMaze_UMaze-v3", "medium": "PointMaze_Medium-v3"}
 #: gymnasium's time limits of the two mazes.
 MAX_EPISODE_STEPS = {"umaze": 300, "medium": 600}
+#: gymnasium-robotics' success distance: the ball's centre within this of the goal point.
+GOAL_RADIUS = 0.45
+#: The ball's radius (gymnasium-robotics' point mass).
+BALL_RADIUS = 0.1
 #: Radius of the waypoint circles: a ball (radius 0.1) turning through a corner cell comes within
 #: ``√2 · 0.5 − 0.1 ≈ 0.61`` of the cell's centre (its centre stays 0.1 from the wall's corner).
 WAYPOINT_RADIUS = 0.65
