@@ -1,0 +1,54 @@
+"""tools/four_rooms_optimal_potential.py: the optimal values it freezes, and a tiny run end to end."""
+
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from torchrl_subgoal import SubgoalSeries
+from torchrl_subgoal.envs import four_rooms
+from torchrl_subgoal.subgoals import Cell
+
+TOOL = Path(__file__).resolve().parents[2] / "tools" / "four_rooms_optimal_potential.py"
+
+
+def _tool():  # type: ignore[no-untyped-def]
+    spec = importlib.util.spec_from_file_location("four_rooms_optimal_potential", TOOL)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_distances_agree_with_the_env() -> None:
+    distance = _tool().goal_distances()
+    assert distance[four_rooms.START] == four_rooms.FourRoomsEnv(1).shortest_path_length()
+    assert distance[four_rooms.GOAL] == 0
+    assert set(distance) == set(four_rooms.free_cells())
+
+
+def test_optimal_values_under_either_reward() -> None:
+    tool = _tool()
+    series = SubgoalSeries([Cell(4, 9), Cell(11, 10)])  # the hallway, then next to the goal
+    goal = tool.optimal_values(series, "goal", 0.99)
+    step = tool.optimal_values(series, "step", 0.99)
+    assert goal[0] == pytest.approx(0.99**19) and goal[2] == pytest.approx(1.0)  # one step from the goal: +1 next
+    assert step[2] == pytest.approx(0.0) and step[0] == pytest.approx(-(1 - 0.99**19) / 0.01)
+    assert goal == sorted(goal) and step == sorted(step)  # closer to the goal along the series, higher
+
+
+@pytest.mark.slow
+def test_a_tiny_run_prints_every_condition() -> None:
+    done = subprocess.run(
+        [sys.executable, str(TOOL), "--task", "step", "--learners", "2", "--total-frames", "512"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    for condition in ("| unshaped |", "| HRS, learned |", "| HRS, optimal |", "unshaped / HRS, optimal"):
+        assert condition in done.stdout

@@ -1,0 +1,181 @@
+"""Four-rooms A2C or PPO with the learned potential against the optimal one: is the potential the limit?
+
+Trains the ``recipes/train.py`` set-up of A2C or PPO on four-rooms (the domain's defaults for
+the learner; one learner per shipped participant pattern) three ways:
+
+* **unshaped**;
+* **HRS, learned**: the library's shaping, ``V(z)`` learned from each batch's SMDP transitions
+  (as ``recipes/train.py`` does);
+* **HRS, optimal**: the same transform over a frozen table holding the optimal values
+  ``V*(z)``: the value of the state where the agent enters ``z`` (the start for ``z = 0``,
+  subgoal ``z``'s cell after it), from shortest paths to the goal (moves are deterministic).
+
+Under ``--task goal`` (the paper's +1 at the goal, 0 otherwise) ``V*(c) = γ^(d(c) − 1)``; under
+``--task step`` (−1 per step, 0 at the goal) ``V*(c) = −(1 − γ^(d(c) − 1)) / (1 − γ)``, with
+``d(c)`` the shortest number of steps from cell ``c`` to the goal. Prints frames until the mean
+episode length first falls below 100 and 50 steps (mean and s.d. over learners; a learner that
+never does counts as the budget), how many never did, Holm-corrected Welch tests against the
+unshaped learner, the final episode length, and the learned tables beside the optimal ones.
+
+    python tools/four_rooms_optimal_potential.py --algo a2c --task goal     # 30 learnings, ~5 CPU-minutes
+    python tools/four_rooms_optimal_potential.py --algo a2c --task step
+    python tools/four_rooms_optimal_potential.py --algo ppo --task step --learners 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import dataclasses
+import functools
+import sys
+
+import numpy as np
+import torch
+from scipy import stats
+from statsmodels.stats.multitest import multipletests
+from torchrl.envs import EnvBase
+
+from torchrl_subgoal import SubgoalSeries, domains, load_patterns
+from torchrl_subgoal.envs import four_rooms
+from torchrl_subgoal.methods import Method, shaping_parts
+from torchrl_subgoal.training import LEARNERS, LearnerDomain, Shaping
+
+CONDITIONS = ("unshaped", "HRS, learned", "HRS, optimal")
+THRESHOLDS = (100.0, 50.0)
+
+
+def goal_distances() -> dict[tuple[int, int], int]:
+    """Shortest number of steps from every free cell to the goal."""
+    free = set(four_rooms.free_cells())
+    distance = {four_rooms.GOAL: 0}
+    queue = collections.deque([four_rooms.GOAL])
+    while queue:
+        r, c = queue.popleft()
+        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            cell = (r + dr, c + dc)
+            if cell in free and cell not in distance:
+                distance[cell] = distance[(r, c)] + 1
+                queue.append(cell)
+    return distance
+
+
+def optimal_values(series: SubgoalSeries, task: str, gamma: float) -> list[float]:
+    """``V*(z)`` for z = 0 (the start) and each subgoal's cell, under ``task`` (``"goal"`` or ``"step"``)."""
+    distance = goal_distances()
+    cells = [four_rooms.START] + [(int(p.row), int(p.col)) for p in series.predicates]  # type: ignore[attr-defined]
+    if task == "goal":
+        return [gamma ** (distance[c] - 1) for c in cells]
+    return [-(1 - gamma ** (distance[c] - 1)) / (1 - gamma) for c in cells]
+
+
+def make_env(task: str, num_envs: int) -> EnvBase:
+    """Four-rooms with the paper's goal reward or with a step cost, the 1,000-step cap."""
+    if task == "goal":
+        return four_rooms.FourRoomsEnv(num_envs)
+    return four_rooms.FourRoomsEnv(num_envs, goal_reward=0.0, step_reward=-1.0)
+
+
+def run(algo: str, task: str, learners: int, total_frames: int) -> dict[str, list[dict]]:
+    """Every condition's learners: frames to each threshold, final length, learned table."""
+    domain = domains.part("four_rooms", LearnerDomain)
+    learner = LEARNERS[algo]
+    config = domain.defaults[algo]
+    if total_frames:
+        config = dataclasses.replace(config, total_frames=total_frames)
+    patterns = list(load_patterns(domain.participants, domain="four_rooms").values())
+    results: dict[str, list[dict]] = {name: [] for name in CONDITIONS}
+    for condition in CONDITIONS:
+        for i in range(learners):
+            series = patterns[i % len(patterns)]
+            optimal = optimal_values(series, task, config.gamma)
+            shaping = None
+            if condition != "unshaped":
+                parts = shaping_parts(
+                    Method("HRS", "subgoals", "human"), (), patterns=[series], observation_key=domain.subgoal_key
+                )
+                assert parts is not None
+                _, potential, options = parts
+                if condition == "HRS, optimal":
+                    with torch.no_grad():
+                        potential.table.copy_(torch.tensor(optimal).view_as(potential.table))
+                    potential.table.requires_grad_(False)
+                shaping = Shaping(series, potential, options)
+            curve = learner.train(
+                functools.partial(make_env, task),
+                config,
+                shaping=shaping,
+                observation_key=domain.observation_key,
+                seed=1000 + i,
+            )
+            final = max(1, len(curve.frames) // 20)
+            results[condition].append(
+                {
+                    "frames": [curve.frames_to(t) for t in THRESHOLDS],
+                    "final": float(np.mean(curve.episode_length[-final:])),
+                    "table": shaping.potential.table.detach().view(-1).tolist() if shaping else None,
+                    "optimal": optimal,
+                }
+            )
+            print(f"{condition} {i}: {results[condition][-1]}", file=sys.stderr, flush=True)
+    return results
+
+
+def report(results: dict[str, list[dict]], budget: int) -> None:
+    """The comparison as markdown tables on stdout."""
+    print("| condition | " + " | ".join(f"frames to < {t:g} (never)" for t in THRESHOLDS) + " | final length |")
+    print("|---|" + "---|" * (len(THRESHOLDS) + 1))
+    frames = {
+        name: np.array([[f if f is not None else budget for f in r["frames"]] for r in rows])
+        for name, rows in results.items()
+    }
+    for name, rows in results.items():
+        cells = []
+        for k in range(len(THRESHOLDS)):
+            never = sum(r["frames"][k] is None for r in rows)
+            cells.append(f"{frames[name][:, k].mean():,.0f} ({frames[name][:, k].std(ddof=1):,.0f}; {never})")
+        final = [r["final"] for r in rows]
+        print(f"| {name} | " + " | ".join(cells) + f" | {np.mean(final):.1f} ({np.std(final, ddof=1):.1f}) |")
+    print()
+    shaped = [name for name in results if name != "unshaped"]
+    raw = [
+        stats.ttest_ind(frames["unshaped"][:, k], frames[name][:, k], equal_var=False).pvalue
+        for name in shaped
+        for k in range(len(THRESHOLDS))
+    ]
+    holm = multipletests(np.nan_to_num(raw, nan=1.0), method="holm")[1]
+    for j, name in enumerate(shaped):
+        ratios = [frames["unshaped"][:, k].mean() / frames[name][:, k].mean() for k in range(len(THRESHOLDS))]
+        line = ", ".join(
+            f"< {t:g}: {ratio:.2f}x (Holm p = {holm[j * len(THRESHOLDS) + k]:.2g})"
+            for k, (t, ratio) in enumerate(zip(THRESHOLDS, ratios, strict=True))
+        )
+        print(f"* unshaped / {name}: {line}")
+    learned = np.array([r["table"] for r in results["HRS, learned"]])
+    optimal = np.array([r["optimal"] for r in results["HRS, learned"]])
+    print("\n| z | optimal V*(z), mean | learned V(z) at the end, mean (s.d.) |\n|---|---|---|")
+    for z in range(learned.shape[1]):
+        print(f"| {z} | {optimal[:, z].mean():.3f} | {learned[:, z].mean():.3f} ({learned[:, z].std(ddof=1):.3f}) |")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser.add_argument("--algo", choices=("a2c", "ppo"), default="a2c")
+    parser.add_argument("--task", choices=("goal", "step"), default="goal")
+    parser.add_argument("--learners", type=int, default=10, help="learners per condition (one per pattern, cycled)")
+    parser.add_argument("--total-frames", type=int, default=0, help="frames per learner (0: the domain's default)")
+    opts = parser.parse_args(argv)
+    if opts.learners < 2:
+        parser.error(f"--learners: at least 2 (the tests need a spread), got {opts.learners}")
+    torch.set_num_threads(1)
+    budget = opts.total_frames or domains.part("four_rooms", LearnerDomain).defaults[opts.algo].total_frames
+    print(
+        f"four-rooms ({opts.task} reward), {opts.algo.upper()}, {opts.learners} learners per condition, "
+        f"{budget:,} frames each\n"
+    )
+    report(run(opts.algo, opts.task, opts.learners, opts.total_frames), budget)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
