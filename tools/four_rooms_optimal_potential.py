@@ -20,6 +20,7 @@ unshaped learner, the final episode length, and the learned tables beside the op
     python tools/four_rooms_optimal_potential.py --algo a2c --task goal     # 30 learnings, ~5 CPU-minutes
     python tools/four_rooms_optimal_potential.py --algo a2c --task step
     python tools/four_rooms_optimal_potential.py --algo ppo --task step --learners 5
+    python tools/four_rooms_optimal_potential.py --task step --conditions learned --sees-subgoal
 """
 
 from __future__ import annotations
@@ -42,6 +43,8 @@ from torchrl_subgoal.methods import Method, shaping_parts
 from torchrl_subgoal.training import LEARNERS, LearnerDomain, Shaping
 
 CONDITIONS = ("unshaped", "HRS, learned", "HRS, optimal")
+#: the ``--conditions`` names
+SHORT = {"unshaped": "unshaped", "learned": "HRS, learned", "optimal": "HRS, optimal"}
 THRESHOLDS = (100.0, 50.0)
 
 
@@ -76,16 +79,19 @@ def make_env(task: str, num_envs: int) -> EnvBase:
     return four_rooms.FourRoomsEnv(num_envs, goal_reward=0.0, step_reward=-1.0)
 
 
-def run(algo: str, task: str, learners: int, total_frames: int) -> dict[str, list[dict]]:
-    """Every condition's learners: frames to each threshold, final length, learned table."""
+def run(
+    algo: str, task: str, learners: int, total_frames: int, conditions: tuple[str, ...] = CONDITIONS, sees: bool = False
+) -> dict[str, list[dict]]:
+    """Every condition's learners: frames to each threshold, final length, learned table (``sees``: the shaped
+    learners' networks also read ``z``)."""
     domain = domains.part("four_rooms", LearnerDomain)
     learner = LEARNERS[algo]
     config = domain.defaults[algo]
     if total_frames:
         config = dataclasses.replace(config, total_frames=total_frames)
     patterns = list(load_patterns(domain.participants, domain="four_rooms").values())
-    results: dict[str, list[dict]] = {name: [] for name in CONDITIONS}
-    for condition in CONDITIONS:
+    results: dict[str, list[dict]] = {name: [] for name in conditions}
+    for condition in conditions:
         for i in range(learners):
             series = patterns[i % len(patterns)]
             optimal = optimal_values(series, task, config.gamma)
@@ -103,7 +109,7 @@ def run(algo: str, task: str, learners: int, total_frames: int) -> dict[str, lis
                 shaping = Shaping(series, potential, options)
             curve = learner.train(
                 functools.partial(make_env, task),
-                config,
+                dataclasses.replace(config, sees_subgoal=sees and shaping is not None),
                 shaping=shaping,
                 observation_key=domain.observation_key,
                 seed=1000 + i,
@@ -137,13 +143,13 @@ def report(results: dict[str, list[dict]], budget: int) -> None:
         final = [r["final"] for r in rows]
         print(f"| {name} | " + " | ".join(cells) + f" | {np.mean(final):.1f} ({np.std(final, ddof=1):.1f}) |")
     print()
-    shaped = [name for name in results if name != "unshaped"]
+    shaped = [name for name in results if name != "unshaped"] if "unshaped" in results else []
     raw = [
         stats.ttest_ind(frames["unshaped"][:, k], frames[name][:, k], equal_var=False).pvalue
         for name in shaped
         for k in range(len(THRESHOLDS))
     ]
-    holm = multipletests(np.nan_to_num(raw, nan=1.0), method="holm")[1]
+    holm = multipletests(np.nan_to_num(raw, nan=1.0), method="holm")[1] if raw else []
     for j, name in enumerate(shaped):
         ratios = [frames["unshaped"][:, k].mean() / frames[name][:, k].mean() for k in range(len(THRESHOLDS))]
         line = ", ".join(
@@ -151,6 +157,8 @@ def report(results: dict[str, list[dict]], budget: int) -> None:
             for k, (t, ratio) in enumerate(zip(THRESHOLDS, ratios, strict=True))
         )
         print(f"* unshaped / {name}: {line}")
+    if "HRS, learned" not in results:
+        return
     learned = np.array([r["table"] for r in results["HRS, learned"]])
     optimal = np.array([r["optimal"] for r in results["HRS, learned"]])
     print("\n| z | optimal V*(z), mean | learned V(z) at the end, mean (s.d.) |\n|---|---|---|")
@@ -164,16 +172,24 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--task", choices=("goal", "step"), default="goal")
     parser.add_argument("--learners", type=int, default=10, help="learners per condition (one per pattern, cycled)")
     parser.add_argument("--total-frames", type=int, default=0, help="frames per learner (0: the domain's default)")
+    parser.add_argument("--conditions", default="unshaped,learned,optimal", help="any of unshaped, learned, optimal")
+    parser.add_argument("--sees-subgoal", action="store_true", help="the shaped learners' networks also read z")
     opts = parser.parse_args(argv)
+    names = [name.strip() for name in opts.conditions.split(",") if name.strip()]
+    unknown = [name for name in names if name not in SHORT]
+    if unknown or not names:
+        parser.error(f"--conditions: expected some of {', '.join(SHORT)}, got {opts.conditions!r}")
     if opts.learners < 2:
         parser.error(f"--learners: at least 2 (the tests need a spread), got {opts.learners}")
     torch.set_num_threads(1)
     budget = opts.total_frames or domains.part("four_rooms", LearnerDomain).defaults[opts.algo].total_frames
+    sees = ", the shaped learners see z" if opts.sees_subgoal else ""
     print(
         f"four-rooms ({opts.task} reward), {opts.algo.upper()}, {opts.learners} learners per condition, "
-        f"{budget:,} frames each\n"
+        f"{budget:,} frames each{sees}\n"
     )
-    report(run(opts.algo, opts.task, opts.learners, opts.total_frames), budget)
+    conditions = tuple(SHORT[name] for name in names)
+    report(run(opts.algo, opts.task, opts.learners, opts.total_frames, conditions, opts.sees_subgoal), budget)
     return 0
 
 
