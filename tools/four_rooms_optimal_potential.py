@@ -21,6 +21,7 @@ unshaped learner, the final episode length, and the learned tables beside the op
     python tools/four_rooms_optimal_potential.py --algo a2c --task step
     python tools/four_rooms_optimal_potential.py --algo ppo --task step --learners 5
     python tools/four_rooms_optimal_potential.py --task step --conditions learned --sees-subgoal
+    python tools/four_rooms_optimal_potential.py --algo ppo --task step --conditions learned --value-lr 0.5
 """
 
 from __future__ import annotations
@@ -80,7 +81,13 @@ def make_env(task: str, num_envs: int) -> EnvBase:
 
 
 def run(
-    algo: str, task: str, learners: int, total_frames: int, conditions: tuple[str, ...] = CONDITIONS, sees: bool = False
+    algo: str,
+    task: str,
+    learners: int,
+    total_frames: int,
+    conditions: tuple[str, ...] = CONDITIONS,
+    sees: bool = False,
+    value_lr: float = 0.0,
 ) -> dict[str, list[dict]]:
     """Every condition's learners: frames to each threshold, final length, learned table (``sees``: the shaped
     learners' networks also read ``z``)."""
@@ -89,6 +96,8 @@ def run(
     config = domain.defaults[algo]
     if total_frames:
         config = dataclasses.replace(config, total_frames=total_frames)
+    if value_lr:
+        config = dataclasses.replace(config, value_lr=value_lr)
     patterns = list(load_patterns(domain.participants, domain="four_rooms").values())
     results: dict[str, list[dict]] = {name: [] for name in conditions}
     for condition in conditions:
@@ -174,6 +183,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--total-frames", type=int, default=0, help="frames per learner (0: the domain's default)")
     parser.add_argument("--conditions", default="unshaped,learned,optimal", help="any of unshaped, learned, optimal")
     parser.add_argument("--sees-subgoal", action="store_true", help="the shaped learners' networks also read z")
+    parser.add_argument(
+        "--value-lr", type=float, default=0.0, help="the potential's Adam step (0: the learner's default)"
+    )
     opts = parser.parse_args(argv)
     names = [name.strip() for name in opts.conditions.split(",") if name.strip()]
     unknown = [name for name in names if name not in SHORT]
@@ -189,7 +201,10 @@ def main(argv: list[str] | None = None) -> int:
         f"{budget:,} frames each{sees}\n"
     )
     conditions = tuple(SHORT[name] for name in names)
-    report(run(opts.algo, opts.task, opts.learners, opts.total_frames, conditions, opts.sees_subgoal), budget)
+    if opts.value_lr < 0:
+        parser.error(f"--value-lr: must be >= 0, got {opts.value_lr}")
+    results = run(opts.algo, opts.task, opts.learners, opts.total_frames, conditions, opts.sees_subgoal, opts.value_lr)
+    report(results, budget)
     return 0
 
 
