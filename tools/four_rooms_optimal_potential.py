@@ -30,6 +30,7 @@ import argparse
 import collections
 import dataclasses
 import functools
+import logging
 import sys
 
 import numpy as np
@@ -194,6 +195,7 @@ def main(argv: list[str] | None = None) -> int:
     if opts.learners < 2:
         parser.error(f"--learners: at least 2 (the tests need a spread), got {opts.learners}")
     torch.set_num_threads(1)
+    logging.getLogger("torchrl").setLevel(logging.WARNING)  # its buffers' set-up notes would mix into the tables
     budget = opts.total_frames or domains.part("four_rooms", LearnerDomain).defaults[opts.algo].total_frames
     sees = ", the shaped learners see z" if opts.sees_subgoal else ""
     print(
