@@ -27,7 +27,6 @@ unshaped learner, the final episode length, and the learned tables beside the op
 from __future__ import annotations
 
 import argparse
-import collections
 import dataclasses
 import functools
 import logging
@@ -50,24 +49,9 @@ SHORT = {"unshaped": "unshaped", "learned": "HRS, learned", "optimal": "HRS, opt
 THRESHOLDS = (100.0, 50.0)
 
 
-def goal_distances() -> dict[tuple[int, int], int]:
-    """Shortest number of steps from every free cell to the goal."""
-    free = set(four_rooms.free_cells())
-    distance = {four_rooms.GOAL: 0}
-    queue = collections.deque([four_rooms.GOAL])
-    while queue:
-        r, c = queue.popleft()
-        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-            cell = (r + dr, c + dc)
-            if cell in free and cell not in distance:
-                distance[cell] = distance[(r, c)] + 1
-                queue.append(cell)
-    return distance
-
-
 def optimal_values(series: SubgoalSeries, task: str, gamma: float) -> list[float]:
     """``V*(z)`` for z = 0 (the start) and each subgoal's cell, under ``task`` (``"goal"`` or ``"step"``)."""
-    distance = goal_distances()
+    distance = four_rooms.goal_distances()
     cells = [four_rooms.START] + [(int(p.row), int(p.col)) for p in series.predicates]  # type: ignore[attr-defined]
     if task == "goal":
         return [gamma ** (distance[c] - 1) for c in cells]
@@ -89,6 +73,7 @@ def run(
     conditions: tuple[str, ...] = CONDITIONS,
     sees: bool = False,
     value_lr: float = 0.0,
+    online: bool = False,
 ) -> dict[str, list[dict]]:
     """Every condition's learners: frames to each threshold, final length, learned table (``sees``: the shaped
     learners' networks also read ``z``)."""
@@ -99,6 +84,8 @@ def run(
         config = dataclasses.replace(config, total_frames=total_frames)
     if value_lr:
         config = dataclasses.replace(config, value_lr=value_lr)
+    if online:
+        config = dataclasses.replace(config, online_potential=True)
     patterns = list(load_patterns(domain.participants, domain="four_rooms").values())
     results: dict[str, list[dict]] = {name: [] for name in conditions}
     for condition in conditions:
@@ -187,6 +174,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--value-lr", type=float, default=0.0, help="the potential's Adam step (0: the learner's default)"
     )
+    parser.add_argument(
+        "--online-potential",
+        action="store_true",
+        help="train V(z) in the transform at every closed SMDP transition (step value_lr x the TD error)",
+    )
     opts = parser.parse_args(argv)
     names = [name.strip() for name in opts.conditions.split(",") if name.strip()]
     unknown = [name for name in names if name not in SHORT]
@@ -205,7 +197,16 @@ def main(argv: list[str] | None = None) -> int:
     conditions = tuple(SHORT[name] for name in names)
     if opts.value_lr < 0:
         parser.error(f"--value-lr: must be >= 0, got {opts.value_lr}")
-    results = run(opts.algo, opts.task, opts.learners, opts.total_frames, conditions, opts.sees_subgoal, opts.value_lr)
+    results = run(
+        opts.algo,
+        opts.task,
+        opts.learners,
+        opts.total_frames,
+        conditions,
+        opts.sees_subgoal,
+        opts.value_lr,
+        opts.online_potential,
+    )
     report(results, budget)
     return 0
 

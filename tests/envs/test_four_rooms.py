@@ -14,6 +14,7 @@ from torchrl_subgoal.envs.four_rooms import (
     START,
     check_subgoal,
     free_cells,
+    goal_distances,
     room_aggregation,
     state_of,
 )
@@ -103,3 +104,17 @@ def test_bad_arguments() -> None:
         FourRoomsEnv(0)
     with pytest.raises(ValueError, match="max_steps"):
         FourRoomsEnv(2, max_steps=0)
+
+
+def test_goal_distances_follow_the_env_moves() -> None:
+    """Every cell's distance is one more than its best move's (Bellman's equation over the env's own moves)."""
+    env = FourRoomsEnv()
+    distance = goal_distances()
+    assert set(distance) == set(free_cells())
+    cells = free_cells()
+    for state, cell in enumerate(cells):
+        if cell == GOAL:
+            assert distance[cell] == 0
+            continue
+        best = min(distance[cells[s2]] for s2 in env.transitions[state].tolist())
+        assert distance[cell] == best + 1, cell

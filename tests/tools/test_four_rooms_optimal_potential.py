@@ -25,13 +25,6 @@ def _tool() -> ModuleType:
     return module
 
 
-def test_distances_agree_with_the_env() -> None:
-    distance = _tool().goal_distances()
-    assert distance[four_rooms.START] == four_rooms.FourRoomsEnv(1).shortest_path_length()
-    assert distance[four_rooms.GOAL] == 0
-    assert set(distance) == set(four_rooms.free_cells())
-
-
 def test_optimal_values_under_either_reward() -> None:
     tool = _tool()
     series = SubgoalSeries([Cell(4, 9), Cell(11, 10)])  # the hallway, then next to the goal

@@ -16,7 +16,12 @@ from torchrl_subgoal._kernels import steps
 from torchrl_subgoal._kernels.grid import grid_reset, grid_reset_one, grid_step, grid_step_one
 from torchrl_subgoal.subgoals import Cell, Predicate, State, StateAggregation, SubgoalSeries
 
-__all__ = ["ACTIONS", "LAYOUT", "FourRoomsEnv", "check_subgoal", "draw_map", "free_cells", "room_aggregation"]
+# fmt: off
+__all__ = [
+    "ACTIONS", "LAYOUT", "FourRoomsEnv", "check_subgoal", "draw_map", "free_cells", "goal_distances",
+    "room_aggregation",
+]
+# fmt: on
 
 LAYOUT = """\
 wwwwwwwwwwwww
@@ -55,6 +60,29 @@ def free_cells() -> list[tuple[int, int]]:
 
 _CELLS = free_cells()
 _STATE = {cell: i for i, cell in enumerate(_CELLS)}
+
+
+def goal_distances() -> dict[tuple[int, int], int]:
+    """Fewest moves from every free cell to the goal (breadth-first search; moves are deterministic).
+
+    Examples:
+        >>> distance = goal_distances()
+        >>> distance[START], distance[GOAL], len(distance)
+        (20, 0, 104)
+    """
+    free = set(_CELLS)
+    distance = {GOAL: 0}
+    frontier = [GOAL]
+    while frontier:
+        nxt = []
+        for r, c in frontier:
+            for dr, dc in ACTIONS:
+                cell = (r + dr, c + dc)
+                if cell in free and cell not in distance:
+                    distance[cell] = distance[(r, c)] + 1
+                    nxt.append(cell)
+        frontier = nxt
+    return distance
 
 
 def _room(cell: tuple[int, int]) -> int:
@@ -314,18 +342,8 @@ class FourRoomsEnv(EnvBase):
         )
 
     def shortest_path_length(self) -> int:
-        """Steps of the shortest start-to-goal path (breadth-first search; 20)."""
-        dist = {self.start_state: 0}
-        frontier = [self.start_state]
-        while frontier:
-            nxt = []
-            for s in frontier:
-                for s2 in self.transitions[s].tolist():
-                    if s2 not in dist:
-                        dist[s2] = dist[s] + 1
-                        nxt.append(s2)
-            frontier = nxt
-        return dist[self.goal_state]
+        """Steps of the shortest start-to-goal path (20)."""
+        return goal_distances()[START]
 
 
 def state_of(cell: tuple[int, int]) -> int:
