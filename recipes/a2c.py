@@ -47,6 +47,9 @@ class Config(LearnerRecipeConfig):
     frames_per_batch: int = setting(256, "frames per A2C update")
     lr: float = setting(0.0, "A2C learning rate (0: the domain's default)")
     normalize_advantage: bool = setting(False, "standardise GAE advantages per batch")
+    online_potential: bool = setting(
+        False, "train the potential in the transform at every step (the library default) instead of per batch"
+    )
     start_potential: str = setting(
         "value",
         "level of Φ: value (Φ = V; docs/torchrl.md's figures), zero or "

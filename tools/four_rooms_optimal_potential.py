@@ -4,8 +4,8 @@ Trains the ``recipes/train.py`` set-up of A2C or PPO on four-rooms (the domain's
 the learner; one learner per shipped participant pattern) three ways:
 
 * **unshaped**;
-* **HRS, learned**: the library's shaping, ``V(z)`` learned from each batch's SMDP transitions
-  (as ``recipes/train.py`` does);
+* **HRS, learned**: the library's shaping, ``V(z)`` learned online in the transform (as
+  ``recipes/train.py`` does; ``--per-batch-potential``: one Adam step per batch instead);
 * **HRS, optimal**: the same transform over a frozen table holding the optimal values
   ``V*(z)``: the value of the state where the agent enters ``z`` (the start for ``z = 0``,
   subgoal ``z``'s cell after it), from shortest paths to the goal (moves are deterministic).
@@ -21,7 +21,7 @@ unshaped learner, the final episode length, and the learned tables beside the op
     python tools/four_rooms_optimal_potential.py --algo a2c --task step
     python tools/four_rooms_optimal_potential.py --algo ppo --task step --learners 5
     python tools/four_rooms_optimal_potential.py --task step --conditions learned --sees-subgoal
-    python tools/four_rooms_optimal_potential.py --algo ppo --task step --conditions learned --value-lr 0.5
+    python tools/four_rooms_optimal_potential.py --algo ppo --task step --conditions learned --per-batch-potential
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ def run(
     conditions: tuple[str, ...] = CONDITIONS,
     sees: bool = False,
     value_lr: float = 0.0,
-    online: bool = False,
+    per_batch: bool = False,
 ) -> dict[str, list[dict]]:
     """Every condition's learners: frames to each threshold, final length, learned table (``sees``: the shaped
     learners' networks also read ``z``)."""
@@ -84,8 +84,8 @@ def run(
         config = dataclasses.replace(config, total_frames=total_frames)
     if value_lr:
         config = dataclasses.replace(config, value_lr=value_lr)
-    if online:
-        config = dataclasses.replace(config, online_potential=True)
+    if per_batch:
+        config = dataclasses.replace(config, online_potential=False)
     patterns = list(load_patterns(domain.participants, domain="four_rooms").values())
     results: dict[str, list[dict]] = {name: [] for name in conditions}
     for condition in conditions:
@@ -172,12 +172,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--conditions", default="unshaped,learned,optimal", help="any of unshaped, learned, optimal")
     parser.add_argument("--sees-subgoal", action="store_true", help="the shaped learners' networks also read z")
     parser.add_argument(
-        "--value-lr", type=float, default=0.0, help="the potential's Adam step (0: the learner's default)"
+        "--value-lr", type=float, default=0.0, help="the potential's step size (0: the learner's default)"
     )
     parser.add_argument(
-        "--online-potential",
+        "--per-batch-potential",
         action="store_true",
-        help="train V(z) in the transform at every closed SMDP transition (step value_lr x the TD error)",
+        help="train V(z) by one Adam step of value_lr per batch (default: online, value_lr x the error per transition)",
     )
     opts = parser.parse_args(argv)
     names = [name.strip() for name in opts.conditions.split(",") if name.strip()]
@@ -205,7 +205,7 @@ def main(argv: list[str] | None = None) -> int:
         conditions,
         opts.sees_subgoal,
         opts.value_lr,
-        opts.online_potential,
+        opts.per_batch_potential,
     )
     report(results, budget)
     return 0

@@ -80,7 +80,7 @@ def test_a2c_learns_four_rooms_and_trains_the_potential(tmp_path: Path) -> None:
     torch.set_num_threads(1)
     potential = TabularPotential(3)
     shaping = Shaping(HALLWAYS, potential, {"observation_key": "cell"})
-    config = A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=40_960)
+    config = A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=40_960, online_potential=False)
     logger = experiment_logger(tmp_path, "HRS_test")
     curve = train_a2c(four_rooms_env, config, shaping=shaping, seed=0, logger=logger)
     assert len(curve.frames) == config.iterations == 160 and curve.frames[-1] == 40_960

@@ -86,8 +86,12 @@ class LearnerRecipeConfig(RecipeConfig):
     collector_workers: int = setting(0, "0: Collector; k: MultiSyncCollector of k processes")
     lr: float = setting(0.0, "the learner's learning rate (0: the domain's default)")
     reward_scale: float = setting(0.0, "env reward x this, before shaping and learning (0: the domain's default)")
-    value_lr: float = setting(0.05, "learning rate of the potential's optimiser (Adam)")
-    online_potential: bool = setting(False, "train the potential in the transform every step instead")
+    value_lr: float = setting(
+        0.05, "α_v of the potential's online update (with --no-online-potential: its Adam learning rate)"
+    )
+    online_potential: bool = setting(
+        True, "train the potential in the transform at every step (else one Adam step per batch)"
+    )
     sees_subgoal: bool = setting(False, "the shaped learners' networks also read the subgoal index z (one-hot)")
     reshape_samples: bool = setting(
         False, "the shaped learners re-shape replay samples with the potential as it is now (DQN, DDPG)"

@@ -100,10 +100,13 @@ class A2CConfig:
         fourier_order: order of the Fourier basis.
         reward_scale: the env reward is multiplied by this before shaping and learning
             (records keep the env's units).
-        value_lr: learning rate of the potential's optimiser (or ``α_v`` online).
-        value_optimizer: ``"adam"`` (reduction mean) or ``"sgd"`` (reduction sum: the tabular update).
+        value_lr: ``α_v`` of the transform's online update, ``V(z) += α_v · δ`` per SMDP
+            transition (with ``online_potential=False``: the potential's optimiser's learning rate).
+        value_optimizer: with ``online_potential=False``: ``"adam"`` (reduction mean) or ``"sgd"``
+            (reduction sum: the tabular update).
         online_potential: train the potential in the transform at every step (the paper's
-            update) instead of from each batch's transitions.
+            update; the default: its step scales with the TD error, so it suits any reward scale)
+            instead of one optimiser step per batch on the batch's transitions.
         record_window: batches the recorded mean episode length is estimated over (frames per
             finished episode in the window).
         sees_subgoal: the policy and the value network also read the subgoal index ``z`` (one-hot),
@@ -138,7 +141,7 @@ class A2CConfig:
     reward_scale: float = 1.0
     value_lr: float = 0.05
     value_optimizer: Literal["adam", "sgd"] = "adam"
-    online_potential: bool = False
+    online_potential: bool = True
     record_window: int = 8
     sees_subgoal: bool = False
 

@@ -754,8 +754,11 @@ def learner_env(
         >>> from torchrl_subgoal.training import DQNConfig
         >>> shaping = Shaping(SubgoalSeries([Cell(1, 2)]), TabularPotential(2), {"observation_key": "cell"})
         >>> factory, trainer = learner_env(FourRoomsEnv, DQNConfig(num_envs=2, frames_per_batch=2), shaping)
-        >>> factory().batch_size, type(trainer).__name__
-        (torch.Size([2]), 'PotentialTrainer')
+        >>> factory().batch_size, trainer  # the default: the transform trains the potential online
+        (torch.Size([2]), None)
+        >>> per_batch = DQNConfig(num_envs=2, frames_per_batch=2, online_potential=False)
+        >>> type(learner_env(FourRoomsEnv, per_batch, shaping)[1]).__name__
+        'PotentialTrainer'
     """
     online = shaping is not None and config.online_potential and shaping.trained
     factory: EnvFactory[EnvBase] = EnvFactory(

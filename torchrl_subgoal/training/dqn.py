@@ -157,11 +157,15 @@ class DQNConfig:
     reward_scale: float = 1.0
     """the env reward is multiplied by this before shaping and learning (records keep the env's units)"""
     value_lr: float = 0.05
-    """learning rate of the potential's optimiser (or of the transform's online update)"""
+    """``α_v`` of the transform's online update, ``V(z) += α_v · δ`` per SMDP transition (with
+    ``online_potential=False``: the learning rate of the potential's optimiser)"""
     value_optimizer: Literal["adam", "sgd"] = "adam"
-    """the potential's optimiser: ``"adam"`` (loss reduction mean) or ``"sgd"`` (sum: the tabular update)"""
-    online_potential: bool = False
-    """train the potential in the transform at every step instead of from each batch's transitions"""
+    """with ``online_potential=False``, the potential's optimiser: ``"adam"`` (loss reduction mean) or
+    ``"sgd"`` (sum: the tabular update)"""
+    online_potential: bool = True
+    """train the potential in the transform at every step (the default: its step scales with the
+    TD error, so it suits any reward scale; docs/does_it_help.md) instead of one optimiser step
+    per batch on the batch's transitions"""
     record_window: int = 8
     """batches the recorded mean episode length is estimated over"""
     sees_subgoal: bool = False
