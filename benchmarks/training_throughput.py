@@ -7,7 +7,7 @@ learning at the block's default settings (the domain's input features and
 reward scale; one collector in this process, no worker process, one torch
 thread), from the same seed, without shaping ("plain") and with HRS: the
 transform over the domain's first shipped subgoal pattern, a tabular potential
-trained from each batch's SMDP transitions. DQN and DDPG take their first
+trained online in the transform (the learners' default). DQN and DDPG take their first
 gradient steps after the first batch (``learning_starts`` = one batch), so
 that every measured batch includes the learner's updates.
 
