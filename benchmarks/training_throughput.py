@@ -22,20 +22,31 @@ changes the rewards, so over the measured batches the two learnings may end
 episodes (and reset envs) at different rates; the learnings are short so that
 their policies stay close to the initial ones.
 
+``--against DIR`` runs every cell in a fresh interpreter, once with the package of
+this checkout and once with that of another (e.g. the commit before a change:
+``git worktree add /tmp/before <commit>``), the two in turn within every round, and
+adds each side's rates and "this / against", the median over rounds of the paired
+ratios of the rates.
+
     python benchmarks/training_throughput.py               # 3 rounds of 4 batches
     python benchmarks/training_throughput.py --quick       # 1 round of 3 batches
     python benchmarks/training_throughput.py --blocks ppo,ddpg --repeats 5
+    python benchmarks/training_throughput.py --blocks ddpg --repeats 5 --against /tmp/before
 """
 
 from __future__ import annotations
 
 import argparse
 import functools
+import json
 import os
 import statistics
+import subprocess
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import torch
@@ -155,13 +166,37 @@ def run_cell(block: str, domain: Domain, shaped: bool, batches: int) -> tuple[fl
     return frames / (stamps[-1] - stamps[0]), config.frames_per_batch
 
 
+def _child(cell: str, pythonpath: str | None) -> tuple[float, int]:
+    """:func:`run_cell` of ``cell`` (``block,domain,plain|hrs,batches``) in a fresh interpreter, with
+    ``pythonpath`` first on the path if given."""
+    env = dict(os.environ)
+    if pythonpath is not None:
+        env["PYTHONPATH"] = os.pathsep.join([pythonpath, *filter(None, [env.get("PYTHONPATH")])])
+    command = [sys.executable, __file__, "--cell", cell]
+    out = subprocess.run(command, env=env, capture_output=True, text=True, check=False)
+    if out.returncode != 0:
+        raise SystemExit(f"error: {' '.join(command)} failed:\n{out.stderr[-2000:]}")
+    figures = json.loads(out.stdout.strip().splitlines()[-1])
+    return float(figures["rate"]), int(figures["frames_per_batch"])
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("--repeats", type=int, default=3, help="rounds over every cell")
     parser.add_argument("--batches", type=int, default=4, help="batches per learning (the first is not timed)")
     parser.add_argument("--blocks", default=",".join(BLOCKS), help="comma-separated among " + ", ".join(BLOCKS))
     parser.add_argument("--quick", action="store_true", help="1 round of 3 batches")
+    parser.add_argument("--against", metavar="DIR", help="also run the package of the checkout DIR, in turn")
+    parser.add_argument("--cell", help=argparse.SUPPRESS)  # one cell, JSON out (internal)
     args = parser.parse_args(argv)
+    if args.cell:
+        torch.set_num_threads(1)
+        block, name, shaped, n = args.cell.split(",")
+        rate, fpb = run_cell(block, domains()[name], shaped == "hrs", int(n))
+        print(json.dumps({"rate": rate, "frames_per_batch": fpb}))
+        return
+    if args.against is not None and not (Path(args.against) / "torchrl_subgoal").is_dir():
+        parser.error(f"--against: {args.against} holds no torchrl_subgoal package")
     repeats, batches = (1, 3) if args.quick else (args.repeats, args.batches)
     if repeats < 1 or batches < 2:
         parser.error("--repeats must be >= 1 and --batches >= 2")
@@ -172,26 +207,46 @@ def main(argv: list[str] | None = None) -> None:
     torch.set_num_threads(1)
     known = domains()
     cells = [(b, d) for b, d in CELLS if b in blocks]
-    rates: dict[tuple[str, str, bool], list[float]] = {}
+    sides: dict[str, str | None] = {"": None} if args.against is None else {"against": args.against, "this": None}
+    rates: dict[tuple[str, str, bool, str], list[float]] = {}
     batch_frames: dict[tuple[str, str], int] = {}
     load = os.getloadavg()
     start = time.perf_counter()
-    for _ in range(repeats):  # interleaved: every cell and both variants in each round
+    for _ in range(repeats):  # interleaved: every cell, both variants and both sides in each round
         for block, name in cells:
             for shaped in (False, True):
-                rate, fpb = run_cell(block, known[name], shaped, batches)
-                rates.setdefault((block, name, shaped), []).append(rate)
-                batch_frames[block, name] = fpb
+                for side, path in sides.items():
+                    if args.against is None:
+                        rate, fpb = run_cell(block, known[name], shaped, batches)
+                    else:
+                        rate, fpb = _child(f"{block},{name},{'hrs' if shaped else 'plain'},{batches}", path)
+                    rates.setdefault((block, name, shaped, side), []).append(rate)
+                    batch_frames[block, name] = fpb
     wall = time.perf_counter() - start
     print(
         f"Learner frames per CPU second (one core), best of {repeats} round(s) of {batches} batches "
         f"(the first untimed); load average {load[0]:.1f} / {os.getloadavg()[0]:.1f} (before / after), "
         f"wall time {wall:.0f} s.\n"
     )
+    if args.against is not None:
+        print(f"against: {args.against}\n")
+        print(
+            "| learner | domain | frames per batch | plain (against) | plain (this) | this / against | "
+            "HRS (against) | HRS (this) | this / against |"
+        )
+        print("|---|---|---|---|---|---|---|---|---|")
+        for block, name in cells:
+            row = f"| {block.upper()} | {name} | {batch_frames[block, name]} |"
+            for shaped in (False, True):
+                old, new = rates[block, name, shaped, "against"], rates[block, name, shaped, "this"]
+                ratio = statistics.median(n / o for n, o in zip(new, old, strict=True))
+                row += f" {max(old):,.0f} | {max(new):,.0f} | {ratio:.2f} |"
+            print(row)
+        return
     print("| learner | domain | frames per batch | plain | HRS | HRS / plain (median of rounds) |")
     print("|---|---|---|---|---|---|")
     for block, name in cells:
-        plain, hrs = rates[block, name, False], rates[block, name, True]
+        plain, hrs = rates[block, name, False, ""], rates[block, name, True, ""]
         ratio = statistics.median(h / p for h, p in zip(hrs, plain, strict=True))
         print(
             f"| {block.upper()} | {name} | {batch_frames[block, name]} | {max(plain):,.0f} | {max(hrs):,.0f} | "

@@ -9,7 +9,7 @@ from tensordict import TensorDict
 from torchrl.data import Bounded
 from torchrl.envs import ExplorationType, set_exploration_type
 
-from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, RunningNorm
+from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, RunningNorm, TD3Settings
 
 SPEC = Bounded(-1.0, 1.0, shape=(4,))
 
@@ -93,6 +93,23 @@ def test_update_and_soft_update() -> None:
     for key, old in before.items():
         expected = 0.95 * old + 0.05 * a.loss.value_network_params[key]
         assert torch.allclose(a.loss.target_value_network_params[key], expected, atol=1e-6)
+
+
+@pytest.mark.parametrize("td3", [False, True])
+def test_soft_update_is_torchrl_soft_update_bit_for_bit(td3: bool) -> None:
+    torch.manual_seed(0)
+    config = DDPGConfig(hidden=(16, 16), batch_size=8, action_l2=0.0)
+    a = DDPGAgent(6, SPEC, config, td3=TD3Settings(policy_delay=1) if td3 else None)
+    a.extend(batch(64))
+    a.update()
+    before = {k: v.clone() for k, v in a.loss.state_dict().items()}
+    a.target_updater.step()  # TorchRL's SoftUpdate
+    expected = {k: v.clone() for k, v in a.loss.state_dict().items()}
+    a.loss.load_state_dict(before)
+    a.soft_update()
+    after = a.loss.state_dict()
+    assert any(not torch.equal(expected[k], before[k]) for k in expected)
+    assert all(torch.equal(after[k], expected[k]) for k in expected)
 
 
 def test_training_state_round_trip() -> None:
