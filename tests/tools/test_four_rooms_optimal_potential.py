@@ -11,7 +11,6 @@ from types import ModuleType
 import pytest
 
 from torchrl_subgoal import SubgoalSeries
-from torchrl_subgoal.envs import four_rooms
 from torchrl_subgoal.subgoals import Cell
 
 TOOL = Path(__file__).resolve().parents[2] / "tools" / "four_rooms_optimal_potential.py"

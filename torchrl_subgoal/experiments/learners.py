@@ -87,7 +87,7 @@ class LearnerRecipeConfig(RecipeConfig):
     lr: float = setting(0.0, "the learner's learning rate (0: the domain's default)")
     reward_scale: float = setting(0.0, "env reward x this, before shaping and learning (0: the domain's default)")
     value_lr: float = setting(
-        0.05, "α_v of the potential's online update (with --no-online-potential: its Adam learning rate)"
+        0.05, "step size of the potential's online update (with --no-online-potential: its Adam learning rate)"
     )
     online_potential: bool = setting(
         True, "train the potential in the transform at every step (else one Adam step per batch)"

@@ -124,8 +124,8 @@ class PPOConfig:
     reward_scale: float = 1.0
     """the env reward is multiplied by this before shaping and learning (records keep the env's units)"""
     value_lr: float = 0.05
-    """``α_v`` of the transform's online update, ``V(z) += α_v · δ`` per SMDP transition (with
-    ``online_potential=False``: the learning rate of the potential's optimiser)"""
+    """step size of the transform's online update, ``V(z) += value_lr * w * delta`` per closed SMDP
+    transition (with ``online_potential=False``: the learning rate of the potential's optimiser)"""
     value_optimizer: Literal["adam", "sgd"] = "adam"
     """with ``online_potential=False``, the potential's optimiser: ``"adam"`` (loss reduction mean) or
     ``"sgd"`` (sum: the tabular update)"""
