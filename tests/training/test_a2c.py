@@ -92,6 +92,21 @@ def test_a2c_learns_four_rooms_and_trains_the_potential(tmp_path: Path) -> None:
     assert any(p.name.startswith("loss_potential") for p in logged)
 
 
+def test_the_default_trains_the_potential_online_and_logs_its_table(tmp_path: Path) -> None:
+    """By default the transform trains ``V(z)`` (no per-batch loss); the logger gets the table after every batch."""
+    torch.set_num_threads(1)
+    potential = TabularPotential(3)
+    shaping = Shaping(HALLWAYS, potential, {"observation_key": "cell"})
+    config = A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=20_480)
+    assert config.online_potential
+    train_a2c(four_rooms_env, config, shaping=shaping, seed=0, logger=experiment_logger(tmp_path, "HRS_online"))
+    logged = {p.stem: p for p in tmp_path.rglob("*.csv")}
+    assert "loss_potential" not in logged
+    last = [float(logged[f"potential_z{z}"].read_text().split()[-1].split(",")[-1]) for z in range(3)]
+    assert last == pytest.approx(potential.table.detach().tolist())
+    assert any(v != 0.0 for v in last)  # the goal was reached: a closed transition moved the table
+
+
 @pytest.mark.parametrize("online", [False, True])
 def test_a2c_with_a_multisync_collector(online: bool) -> None:
     """Envs in a worker process; the potential trained in the main process (or online in the worker)."""

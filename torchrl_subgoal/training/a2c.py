@@ -294,7 +294,9 @@ def train_a2c(
     optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
     collector = make_collector(factory, actor, config)
     _seed_collector(collector, seed)
-    recorder = CurveRecorder(config.record_window, cap, config.reward_scale, logger, progress)
+    recorder = CurveRecorder(
+        config.record_window, cap, config.reward_scale, logger, progress, shaping.potential if shaping else None
+    )
     frames = 0
     try:
         for data in collector:

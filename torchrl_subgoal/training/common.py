@@ -572,6 +572,9 @@ class CurveRecorder:
         reward_scale: the env reward's scale in the learner (records are in env units).
         logger: a TorchRL logger (``None``: none).
         progress: called with 1 after every batch (``None``: none).
+        potential: the shaping potential; a table of at most :attr:`LOGGED_ENTRIES` values
+            (a :class:`~torchrl_subgoal.TabularPotential`) is logged after every batch, one
+            scalar ``potential_z{i}`` per entry, so a run shows what ``V(z)`` learned.
 
     Examples:
         >>> from tensordict import TensorDict
@@ -582,6 +585,9 @@ class CurveRecorder:
         ([4], [50.0])
     """
 
+    #: the most table entries logged (a larger table is not logged)
+    LOGGED_ENTRIES = 32
+
     def __init__(
         self,
         window: int,
@@ -589,10 +595,13 @@ class CurveRecorder:
         reward_scale: float,
         logger: Logger | None = None,
         progress: Callable[[int], None] | None = None,
+        potential: nn.Module | None = None,
     ) -> None:
         self.episodes = EpisodeWindow(window, cap, reward_scale)
         self.curve = LearningCurve()
         self.logger, self.progress = logger, progress
+        table = getattr(potential, "table", None)
+        self.table = table if isinstance(table, torch.Tensor) and table.numel() <= self.LOGGED_ENTRIES else None
         self.start = time.perf_counter()
 
     def add(self, data: TensorDictBase, frames: int, scalars: dict[str, float]) -> None:
@@ -612,6 +621,8 @@ class CurveRecorder:
                 **scalars,
                 "frames_per_second": frames / max(time.perf_counter() - self.start, 1e-9),
             }
+            if self.table is not None:
+                logged.update({f"potential_z{i}": v for i, v in enumerate(self.table.detach().reshape(-1).tolist())})
             for name, value in logged.items():
                 if not math.isnan(value):
                     self.logger.log_scalar(name, value, step=frames)

@@ -280,7 +280,9 @@ def train_ddpg(
     _close_probe(probe)
     collector = make_collector(factory, agent.policy, config, init_random_frames=config.learning_starts)
     _seed_collector(collector, seed)
-    recorder = CurveRecorder(config.record_window, cap, config.reward_scale, logger, progress)
+    recorder = CurveRecorder(
+        config.record_window, cap, config.reward_scale, logger, progress, shaping.potential if shaping else None
+    )
     frames = 0
     try:
         for data in collector:

@@ -340,7 +340,9 @@ def train_dqn(
     )
     collector = make_collector(factory, policy, config, init_random_frames=config.learning_starts)
     _seed_collector(collector, seed)
-    recorder = CurveRecorder(config.record_window, cap, config.reward_scale, logger, progress)
+    recorder = CurveRecorder(
+        config.record_window, cap, config.reward_scale, logger, progress, shaping.potential if shaping else None
+    )
     frames = 0
     parameters = list(loss.parameters())
     try:

@@ -314,7 +314,9 @@ def train_ppo(
     total_updates = config.iterations * config.updates_per_batch
     collector = make_collector(factory, actor, config)
     _seed_collector(collector, seed)
-    recorder = CurveRecorder(config.record_window, cap, config.reward_scale, logger, progress)
+    recorder = CurveRecorder(
+        config.record_window, cap, config.reward_scale, logger, progress, shaping.potential if shaping else None
+    )
     frames = updates = 0
     try:
         for data in collector:
