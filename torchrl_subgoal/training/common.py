@@ -572,9 +572,8 @@ class CurveRecorder:
         reward_scale: the env reward's scale in the learner (records are in env units).
         logger: a TorchRL logger (``None``: none).
         progress: called with 1 after every batch (``None``: none).
-        potential: the shaping potential; a table of at most :attr:`LOGGED_ENTRIES` values
-            (a :class:`~torchrl_subgoal.TabularPotential`) is logged after every batch, one
-            scalar ``potential_z{i}`` per entry, so a run shows what ``V(z)`` learned.
+        potential: the shaping potential; a table of at most :attr:`LOGGED_ENTRIES` values is logged
+            after every batch, one scalar ``potential_z{i}`` per entry (what ``V(z)`` learned).
 
     Examples:
         >>> from tensordict import TensorDict
@@ -585,7 +584,6 @@ class CurveRecorder:
         ([4], [50.0])
     """
 
-    #: the most table entries logged (a larger table is not logged)
     LOGGED_ENTRIES = 32
 
     def __init__(
@@ -767,9 +765,6 @@ def learner_env(
         >>> factory, trainer = learner_env(FourRoomsEnv, DQNConfig(num_envs=2, frames_per_batch=2), shaping)
         >>> factory().batch_size, trainer  # the default: the transform trains the potential online
         (torch.Size([2]), None)
-        >>> per_batch = DQNConfig(num_envs=2, frames_per_batch=2, online_potential=False)
-        >>> type(learner_env(FourRoomsEnv, per_batch, shaping)[1]).__name__
-        'PotentialTrainer'
     """
     online = shaping is not None and config.online_potential and shaping.trained
     factory: EnvFactory[EnvBase] = EnvFactory(
