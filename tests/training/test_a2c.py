@@ -107,13 +107,15 @@ def test_the_default_trains_the_potential_online_and_logs_its_table(tmp_path: Pa
     assert any(v != 0.0 for v in last)  # the goal was reached: a closed transition moved the table
 
 
+@pytest.mark.parametrize("workers", [{"collector_workers": 1}, {"env_workers": 2, "num_envs": 4}])
 @pytest.mark.parametrize("online", [False, True])
-def test_a2c_with_a_multisync_collector(online: bool) -> None:
-    """Envs in a worker process; the potential trained in the main process (or online in the worker)."""
+def test_a2c_with_envs_in_worker_processes(online: bool, workers: dict[str, int]) -> None:
+    """Envs in worker processes (a MultiSyncCollector's, or a ParallelEnv's); the potential trained in the main
+    process (or online in the workers, into the main process's table)."""
     potential = TabularPotential(3)
     shaping = Shaping(SubgoalSeries([State(1), State(3)]), potential)
     config = A2CConfig(
-        features="one_hot", hidden=(), total_frames=2048, collector_workers=1, online_potential=online, value_lr=0.1
+        features="one_hot", hidden=(), total_frames=2048, online_potential=online, value_lr=0.1, **workers
     )
     curve = train_a2c(lambda n: LineEnv(n, length=4), config, shaping=shaping, seed=1, episode_cap=100)
     assert len(curve.frames) == 8

@@ -572,8 +572,8 @@ class CurveRecorder:
         reward_scale: the env reward's scale in the learner (records are in env units).
         logger: a TorchRL logger (``None``: none).
         progress: called with 1 after every batch (``None``: none).
-        potential: the shaping potential; a table of at most :attr:`LOGGED_ENTRIES` values is logged
-            after every batch, one scalar ``potential_z{i}`` per entry (what ``V(z)`` learned).
+        potential: the shaping potential; one shared table of at most :attr:`LOGGED_ENTRIES` values is
+            logged after every batch, one scalar ``potential_z{i}`` per entry (what ``V(z)`` learned).
 
     Examples:
         >>> from tensordict import TensorDict
@@ -599,7 +599,8 @@ class CurveRecorder:
         self.curve = LearningCurve()
         self.logger, self.progress = logger, progress
         table = getattr(potential, "table", None)
-        self.table = table if isinstance(table, torch.Tensor) and table.numel() <= self.LOGGED_ENTRIES else None
+        shared = isinstance(table, torch.Tensor) and table.dim() == 1  # not one table per env
+        self.table = table if shared and table.numel() <= self.LOGGED_ENTRIES else None
         self.start = time.perf_counter()
 
     def add(self, data: TensorDictBase, frames: int, scalars: dict[str, float]) -> None:
