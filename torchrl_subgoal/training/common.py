@@ -599,8 +599,8 @@ class CurveRecorder:
         self.curve = LearningCurve()
         self.logger, self.progress = logger, progress
         table = getattr(potential, "table", None)
-        shared = isinstance(table, torch.Tensor) and table.dim() == 1  # not one table per env
-        self.table = table if shared and table.numel() <= self.LOGGED_ENTRIES else None
+        small = isinstance(table, torch.Tensor) and table.dim() == 1 and len(table) <= self.LOGGED_ENTRIES
+        self.table = table if small else None  # one shared table (not one per env), small enough to log
         self.start = time.perf_counter()
 
     def add(self, data: TensorDictBase, frames: int, scalars: dict[str, float]) -> None:
