@@ -7,7 +7,8 @@ import pytest
 import torch
 
 from torchrl_subgoal import Box, SubgoalSeries, TabularPotential
-from torchrl_subgoal.training import DQN_PRESETS, DQNConfig, Shaping, train_dqn
+from torchrl_subgoal.envs import FourRoomsEnv
+from torchrl_subgoal.training import DQN_PRESETS, DQNConfig, Shaping, q_network, train_dqn
 
 from .corridor import discrete_corridor
 
@@ -65,6 +66,13 @@ def test_dqn_in_a_collector_worker_explores_with_the_annealed_epsilon() -> None:
     torch.set_num_threads(1)
     curve = train_dqn(discrete_corridor, _config(collector_workers=1), seed=0)
     assert curve.episode_length[-1] < 12
+
+
+def test_one_hot_features_without_hidden_layers_make_a_q_table_without_bias() -> None:
+    env = FourRoomsEnv(2)
+    table = q_network(env, features="one_hot", hidden=())
+    assert [name for name, _ in table.named_parameters()] == ["module.0.module.1.weight"]
+    assert any(name.endswith("bias") for name, _ in q_network(env, features="one_hot", hidden=(8,)).named_parameters())
 
 
 def test_mountain_car_preset_is_rl_zoo_s() -> None:

@@ -229,7 +229,8 @@ def q_network(
 ) -> QValueActor:
     """A Q-network over ``observation_key`` for ``env``'s discrete actions: a ReLU MLP, one output per
     action, as TorchRL's ``QValueActor`` (writes ``"action_value"``, ``"chosen_action_value"`` and the
-    greedy ``"action"``).
+    greedy ``"action"``). With one-hot features and no hidden layer it is a Q-table: the output layer has
+    no bias.
 
     Args:
         env: gives the observation and action specs.
@@ -252,7 +253,10 @@ def q_network(
         raise ValueError(f"DQN needs discrete actions (Categorical or OneHot), got {type(action_spec).__name__}")
     spec = env.observation_spec[observation_key]
     trunk, size = _trunk(spec, features, hidden, fourier_order, activation=nn.ReLU, subgoal_states=subgoal_states)
-    net = _network(trunk, nn.Linear(size, int(action_spec.space.n)))
+    # one-hot features and no hidden layer: a Q-table; a bias would give every state's value of an action a
+    # shared term (four-rooms: greedy loops through rarely visited cells valued at that term)
+    table = features == "one_hot" and not hidden
+    net = _network(trunk, nn.Linear(size, int(action_spec.space.n), bias=not table))
     return QValueActor(net, in_keys=_subgoal_keys(observation_key, subgoal_states), spec=action_spec)
 
 
