@@ -1,6 +1,6 @@
-"""Four-rooms A2C or PPO with the learned potential against the optimal one: is the potential the limit?
+"""Four-rooms A2C, PPO or DQN with the learned potential against the optimal one: is the potential the limit?
 
-Trains the ``recipes/train.py`` set-up of A2C or PPO on four-rooms (the domain's defaults for
+Trains the ``recipes/train.py`` set-up of A2C, PPO or DQN on four-rooms (the domain's defaults for
 the learner; one learner per shipped participant pattern) three ways:
 
 * **unshaped**;
@@ -165,7 +165,7 @@ def report(results: dict[str, list[dict]], budget: int) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
-    parser.add_argument("--algo", choices=("a2c", "ppo"), default="a2c")
+    parser.add_argument("--algo", choices=("a2c", "ppo", "dqn"), default="a2c")
     parser.add_argument("--task", choices=("goal", "step"), default="goal")
     parser.add_argument("--learners", type=int, default=10, help="learners per condition (one per pattern, cycled)")
     parser.add_argument("--total-frames", type=int, default=0, help="frames per learner (0: the domain's default)")

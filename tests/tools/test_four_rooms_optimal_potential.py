@@ -35,9 +35,10 @@ def test_optimal_values_under_either_reward() -> None:
 
 
 @pytest.mark.slow
-def test_a_tiny_run_prints_every_condition() -> None:
+@pytest.mark.parametrize("algo", ["a2c", "dqn"])
+def test_a_tiny_run_prints_every_condition(algo: str) -> None:
     done = subprocess.run(
-        [sys.executable, str(TOOL), "--task", "step", "--learners", "2", "--total-frames", "512"],
+        [sys.executable, str(TOOL), "--algo", algo, "--task", "step", "--learners", "2", "--total-frames", "3072"],
         capture_output=True,
         text=True,
         timeout=600,
