@@ -44,8 +44,8 @@ from torchrl_subgoal.methods import Method, shaping_parts
 from torchrl_subgoal.training import LEARNERS, LearnerDomain, Shaping
 
 CONDITIONS = ("unshaped", "HRS, learned", "HRS, optimal")
-#: the ``--conditions`` names
-SHORT = {"unshaped": "unshaped", "learned": "HRS, learned", "optimal": "HRS, optimal"}
+#: the ``--conditions`` names (``monotone``: learned, shaped with the table made non-decreasing along the series)
+SHORT = {"unshaped": "unshaped", "learned": "HRS, learned", "optimal": "HRS, optimal", "monotone": "HRS, monotone"}
 THRESHOLDS = (100.0, 50.0)
 
 
@@ -95,7 +95,11 @@ def run(
             shaping = None
             if condition != "unshaped":
                 parts = shaping_parts(
-                    Method("HRS", "subgoals", "human"), (), patterns=[series], observation_key=domain.subgoal_key
+                    Method("HRS", "subgoals", "human"),
+                    (),
+                    patterns=[series],
+                    observation_key=domain.subgoal_key,
+                    monotone_potential=condition == "HRS, monotone",
                 )
                 assert parts is not None
                 _, potential, options = parts
@@ -169,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--task", choices=("goal", "step"), default="goal")
     parser.add_argument("--learners", type=int, default=10, help="learners per condition (one per pattern, cycled)")
     parser.add_argument("--total-frames", type=int, default=0, help="frames per learner (0: the domain's default)")
-    parser.add_argument("--conditions", default="unshaped,learned,optimal", help="any of unshaped, learned, optimal")
+    parser.add_argument("--conditions", default="unshaped,learned,optimal", help="any of unshaped, learned, optimal, monotone")
     parser.add_argument("--sees-subgoal", action="store_true", help="the shaped learners' networks also read z")
     parser.add_argument(
         "--value-lr", type=float, default=0.0, help="the potential's step size (0: the learner's default)"

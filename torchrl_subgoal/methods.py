@@ -104,6 +104,7 @@ def shaping_parts(
     aggregation_key: NestedKey = "observation",
     zero_terminal_potential: bool = True,
     start_potential: StartPotential = "nonpositive",
+    monotone_potential: bool = False,
 ) -> tuple[SubgoalSeries | list[SubgoalSeries] | StateAggregation, Potential, dict[str, Any]] | None:
     """What :class:`SubgoalPotentialTransform` needs for ``method``: the subgoals (or aggregation),
     the potential and the other keyword arguments; ``None`` for the unshaped baseline.
@@ -113,6 +114,9 @@ def shaping_parts(
     ``batch_shape`` is the potential's: the env batch for one table per env (one
     learner per env, as the SARSA recipes), ``()`` for one table shared by every
     env (one learner stepping many envs, as A2C).
+
+    ``monotone_potential`` applies to the learned tables over subgoal series (HRS, RRS); the
+    naive potential and an aggregation's table are shaped as they are.
 
     Examples:
         >>> from torchrl_subgoal.subgoals import Cell
@@ -141,6 +145,8 @@ def shaping_parts(
     if method.shaping == "naive":
         return per_env, NaivePotential(eta), options
     num_states = max(len(p) for p in patterns) + 1
+    if monotone_potential:
+        options["monotone_potential"] = True
     return per_env, TabularPotential(num_states, batch_shape), options
 
 
@@ -176,7 +182,7 @@ def shaping_transform(
         eta: the naive potential's ``η`` (NRS).
         observation_key: what subgoal predicates read.
         aggregation_key: what ``g`` reads.
-        **conventions: ``zero_terminal_potential`` and ``start_potential`` (the transform's, see
+        **conventions: ``zero_terminal_potential``, ``start_potential`` and ``monotone_potential`` (the transform's, see
             :class:`SubgoalPotentialTransform`), ``expectile`` and ``bootstrap_truncated`` (the learned
             potential's target, see :class:`SubgoalValueLoss`); the library's defaults otherwise.
 

@@ -102,6 +102,9 @@ class LearnerRecipeConfig(RecipeConfig):
         "level of Φ: nonpositive (the library default; docs/shaping_defaults.md), zero or value (Φ = V)",
         choices=["value", "zero", "nonpositive"],
     )
+    monotone_potential: bool = setting(
+        False, "shape with the learned table made non-decreasing along the series (HRS, RRS)"
+    )
     seed: int = setting(0, "sweep seed (random patterns, learner seeds)")
     results: str = setting("", "results directory (default results/<algo>_<domain>; re-run to resume)")
     backend: Literal["local", "ray"] = setting("local", "where learners run")
@@ -256,6 +259,7 @@ def learner_plan(
         "learner": dataclasses.asdict(settings),
         "zero_terminal_potential": cfg.zero_terminal_potential,
         "start_potential": cfg.start_potential,
+        **({"monotone_potential": True} if cfg.monotone_potential else {}),
         "subgoal_file": subgoal_file,
         "patterns": pattern_config(patterns),
         "pattern_sources": pattern_sources(patterns),
@@ -311,6 +315,7 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
             aggregation_key=domain.aggregation_key,
             zero_terminal_potential=config["zero_terminal_potential"],
             start_potential=config["start_potential"],
+            monotone_potential=config.get("monotone_potential", False),
         )
         seed = chunk.seed + i
         # a pattern-less learner (unshaped, SARSA-RS) runs the task its learning number picks

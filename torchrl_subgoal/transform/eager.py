@@ -10,20 +10,21 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-from torchrl_subgoal.potentials import NaivePotential, check_value
+from torchrl_subgoal.potentials import NaivePotential, TabularPotential, check_value
 from torchrl_subgoal.transform.cache import ValueCache
 from torchrl_subgoal.transform.compiled import StepInputs, check_finite
 from torchrl_subgoal.transform.setup import BatchSetup, Settings
 from torchrl_subgoal.transform.shaping import (
     accumulate,
     closes,
+    nondecreasing,
     restart,
     shaped_reward,
     start_level,
 )
 from torchrl_subgoal.transform.transitions import transition
 
-__all__ = ["potential_value", "start_entries", "torch_step"]
+__all__ = ["monotone_values", "potential_value", "start_entries", "torch_step"]
 
 
 def potential_value(
@@ -114,17 +115,23 @@ def torch_step(
         assert smdp is not None
         update(smdp)
     with torch.no_grad():
-        # Φ(z) of this step is last step's Φ(z') (unless an env was reset), Φ(z') is Φ(z) until a subgoal is
-        # achieved, and Φ(z_0) holds for the episode: none is evaluated again while the inputs and the
-        # potential are unchanged
-        cache.check(potential)
-        phi = potential_value(potential, cache, current, batch_shape, "z")
-        phi_next = potential_value(potential, cache, nxt, batch_shape, "z")
-        if settings.start != "value" and not isinstance(potential, NaivePotential):
-            level = start_level(
-                potential_value(potential, cache, start_entries(current, settings), batch_shape, "start"),
-                settings.start,
+        if settings.monotone:
+            assert isinstance(potential, TabularPotential) and setup.lengths is not None
+            phi, phi_next, v_start = monotone_values(
+                potential, setup, [current[keys.index], z_next, start_entries(current, settings)[keys.index]]
             )
+        else:
+            # Φ(z) of this step is last step's Φ(z') (unless an env was reset), Φ(z') is Φ(z) until a subgoal is
+            # achieved, and Φ(z_0) holds for the episode: none is evaluated again while the inputs and the
+            # potential are unchanged
+            cache.check(potential)
+            phi = potential_value(potential, cache, current, batch_shape, "z")
+            phi_next = potential_value(potential, cache, nxt, batch_shape, "z")
+            v_start = None
+            if settings.start != "value" and not isinstance(potential, NaivePotential):
+                v_start = potential_value(potential, cache, start_entries(current, settings), batch_shape, "start")
+        if v_start is not None and settings.start != "value":
+            level = start_level(v_start, settings.start)
             assert level is not None
             phi, phi_next = phi - level, phi_next - level
     shaped = shaped_reward(step.reward, phi, phi_next, step.terminated, settings.gamma, settings.zero_terminal)
@@ -134,6 +141,30 @@ def torch_step(
     if settings.transitions:
         out["transition"] = smdp
     return out
+
+
+def monotone_values(potential: TabularPotential, setup: BatchSetup, indices: list[torch.Tensor]) -> list[torch.Tensor]:
+    """``Φ`` at each of ``indices`` (``z`` entries, ``[*B, 1]``) read from each row's table made non-decreasing
+    along its series (:func:`~torchrl_subgoal.transform.shaping.nondecreasing`).
+
+    Examples:
+        >>> from torchrl_subgoal import State, SubgoalSeries, TabularPotential
+        >>> from torchrl_subgoal.transform.setup import Subgoals
+        >>> v, learner = TabularPotential(3), torch.zeros(1, 1, dtype=torch.long)
+        >>> with torch.no_grad():
+        ...     v.table[:] = torch.tensor([1.0, 0.5, 2.0])
+        >>> subgoals = Subgoals(SubgoalSeries([State(1), State(2)]))
+        >>> batch = BatchSetup(torch.Size([1]), subgoals.compile(learner, torch.Size([1]), 1, (1, False), "o"), learner,
+        ...                    lengths=torch.tensor([3]))
+        >>> [phi.item() for phi in monotone_values(v, batch, [torch.tensor([[1]]), torch.tensor([[2]])])]
+        [0.75, 2.0]
+    """
+    rows = setup.learner.reshape(-1)
+    table = potential.table.detach().reshape(-1, potential.num_states)
+    per_row = table[rows] if potential.batch_shape else table.expand(rows.numel(), -1)
+    assert setup.lengths is not None
+    projected = nondecreasing(per_row, setup.lengths)
+    return [projected.gather(1, z.reshape(-1, 1)).view(*setup.batch_shape, 1) for z in indices]
 
 
 def start_entries(current: dict[str, torch.Tensor], settings: Settings) -> dict[str, torch.Tensor]:

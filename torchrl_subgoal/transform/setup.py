@@ -32,11 +32,13 @@ __all__ = [
     "Subgoals",
     "check_options",
     "check_potential",
+    "check_monotone",
     "compiled_potential",
     "initial_state",
     "kept_entries",
     "observation_layout",
     "online_update",
+    "series_lengths",
     "settings",
 ]
 
@@ -64,6 +66,7 @@ class Settings(NamedTuple):
     reads_observation: bool  #: whether a region predicate or an aggregation reads it
     transitions: bool  #: whether every step writes its SMDP transition entry
     inputs: tuple[NestedKey, ...]  #: the potential's inputs (a transition keeps them at z and z')
+    monotone: bool = False  #: shape with the table made non-decreasing along the series
 
 
 class Subgoals:
@@ -218,6 +221,7 @@ def settings(
     *,
     zero_terminal: bool,
     start: StartPotential,
+    monotone: bool = False,
 ) -> Settings:
     """A transform's :class:`Settings`: ``γ_v`` is the online update's loss's (``γ`` without one).
 
@@ -230,8 +234,46 @@ def settings(
     """
     value_gamma = float(gamma) if update is None or update.loss is None else update.loss.gamma
     kept = kept_entries(keys, potential, subgoals, start)
+    if monotone:
+        check_monotone(potential, subgoals)
     return Settings(keys, kept, float(gamma), value_gamma, zero_terminal, start, observation_key,
-                    subgoals.reads_observation, transitions_key is not None, tuple(potential.in_keys))  # fmt: skip
+                    subgoals.reads_observation, transitions_key is not None, tuple(potential.in_keys),
+                    monotone)  # fmt: skip
+
+
+def check_monotone(potential: TensorDictModuleBase, subgoals: Subgoals) -> None:
+    """Refuse ``monotone_potential`` where "later along the series" has no meaning: a potential that
+    is not a :class:`TabularPotential` over ``z``, an aggregation, or a series with a partial order.
+
+    Examples:
+        >>> from torchrl_subgoal import NaivePotential, State
+        >>> check_monotone(NaivePotential(1.0), Subgoals(SubgoalSeries([State(1)])))
+        Traceback (most recent call last):
+        ...
+        ValueError: monotone_potential: it projects a TabularPotential's table along z, not a NaivePotential
+    """
+    if not isinstance(potential, TabularPotential):
+        raise ValueError(
+            f"monotone_potential: it projects a TabularPotential's table along z, not a {type(potential).__name__}"
+        )
+    if subgoals.aggregation is not None or not all(p.is_chain for p in subgoals.patterns):
+        raise ValueError(
+            "monotone_potential: it needs subgoal series in a total order (a chain), where a larger z is "
+            "later along the series; an aggregation or a partial order has no such order"
+        )
+
+
+def series_lengths(subgoals: Subgoals, learner: torch.Tensor, n_learners: int) -> torch.Tensor:
+    """The number of abstract states of each row's series (``learner``: ``[*B, 1]``), flattened: ``[R]``.
+
+    Examples:
+        >>> from torchrl_subgoal import State
+        >>> subgoals = Subgoals([SubgoalSeries([State(1)]), SubgoalSeries([State(1), State(2)])])
+        >>> series_lengths(subgoals, torch.tensor([[1], [0], [1]]), 2).tolist()
+        [3, 2, 3]
+    """
+    sizes = torch.tensor([p.num_abstract_states for p in subgoals.patterns], dtype=torch.long)
+    return sizes[subgoals.pattern_of(n_learners)[learner.reshape(-1)]]
 
 
 def check_table(potential: TensorDictModuleBase, n_learners: int, num_states: int) -> None:
@@ -255,15 +297,22 @@ def check_table(potential: TensorDictModuleBase, n_learners: int, num_states: in
         raise ValueError(f"TabularPotential has {potential.num_states} states; the abstraction has {num_states}")
 
 
-def compiles(backend: str, potential: TensorDictModuleBase, update: ValueUpdate | None) -> bool:
+def compiles(backend: str, potential: TensorDictModuleBase, update: ValueUpdate | None, monotone: bool = False) -> bool:
     """Whether the compiled step shapes with ``potential`` (trained online by ``update``) under ``backend``;
     ``backend="compiled"`` where it cannot is a ``TypeError`` saying why.
 
     Examples:
         >>> compiles("auto", TabularPotential(3), None), compiles("torch", TabularPotential(3), None)
         (True, False)
+        >>> compiles("auto", TabularPotential(3), None, monotone=True)
+        False
     """
-    why = "backend='torch'" if backend == "torch" else compiled_potential(potential, update.loss if update else None)
+    if backend == "torch":
+        why: str | None = "backend='torch'"
+    elif monotone:
+        why = "monotone_potential projects the table in the torch step"
+    else:
+        why = compiled_potential(potential, update.loss if update else None)
     if why is not None and backend == "compiled":
         raise TypeError(f"SubgoalPotentialTransform(backend='compiled'): {why}; use backend='torch' or 'auto'")
     return why is None
@@ -284,6 +333,8 @@ def compiled_batch(
         raise TypeError("kernel_state needs the env reset through the transform first (env.reset())")
     if not batch.compiled:
         why = compiled_potential(potential, update.loss if update else None) or f"backend={backend!r}"
+        if batch.lengths is not None:
+            why = "monotone_potential projects the table in the torch step"
         raise TypeError(f"a compiled loop shapes as the compiled step does, which it cannot here: {why}")
     return batch
 
@@ -312,6 +363,7 @@ class BatchSetup:
     table: torch.Tensor | None = None  #: the tabular potential's parameter, to see it move
     table_ptr: int = 0
     z_start: np.ndarray = field(default_factory=lambda: np.zeros((1, 1), np.int64))
+    lengths: torch.Tensor | None = None  #: with ``monotone_potential``: each row's number of abstract states, ``[R]``
 
     def __post_init__(self) -> None:
         self.rows = self.batch_shape.numel()  #: rows of the batch

@@ -8,7 +8,8 @@ One env step from the abstract state ``(z, r_h, k)`` to ``z'``, with the env rew
   ``r_h`` and ``k`` restart from 0 (:func:`restart`);
 * the reward becomes ``r + γ Φ(z') − Φ(z)`` (:func:`shaped_reward`), with ``Φ = V − c`` where
   ``c`` is set by the start state's value (:func:`start_level`) and, optionally, ``Φ(z') = 0``
-  at a terminal state.
+  at a terminal state; with ``monotone_potential`` ``V`` is first replaced by the nearest table
+  that does not decrease along the series (:func:`nondecreasing`).
 
 The online update of the potential (one SGD step of :class:`~torchrl_subgoal.SubgoalValueLoss` on
 the closed transitions, before shaping) is the loss's own code.
@@ -16,11 +17,21 @@ the closed transitions, before shaping) is the loss's own code.
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
 import torch
 
-__all__ = ["START_MODES", "StartPotential", "accumulate", "closes", "restart", "shaped_reward", "start_level"]
+__all__ = [
+    "START_MODES",
+    "StartPotential",
+    "accumulate",
+    "closes",
+    "nondecreasing",
+    "restart",
+    "shaped_reward",
+    "start_level",
+]
 
 StartPotential = Literal["value", "zero", "nonpositive"]
 #: the start levels, and the code the compiled kernels read (``_kernels.shaping.START_*``)
@@ -92,3 +103,29 @@ def shaped_reward(
     if zero_terminal:
         phi_next = phi_next.masked_fill(terminated, 0.0)
     return reward + (gamma * phi_next - phi).to(reward.dtype)
+
+
+def nondecreasing(values: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+    """The nearest (least-squares) non-decreasing sequence to each row's first ``lengths`` entries;
+    the entries past a row's length are left as they are.
+
+    ``values`` is ``[R, n]`` (a table row per batch row), ``lengths`` ``[R]``. Entry ``i`` of the
+    projection is ``max_{j ≤ i} min_{k ≥ i} mean(values[j..k])`` (the min-max formula of isotonic
+    regression): where a later subgoal is valued below an earlier one, both get the mean of the
+    run they form, so the shaping neither charges for reaching the later one nor pays for lingering
+    before it.
+
+    Examples:
+        >>> nondecreasing(torch.tensor([[1.0, 0.5, 2.0], [1.0, 0.5, 0.0]]), torch.tensor([3, 2])).tolist()
+        [[0.75, 0.75, 2.0], [0.75, 0.75, 0.0]]
+    """
+    n = values.shape[-1]
+    idx = torch.arange(n, device=values.device)
+    valid = idx < lengths[:, None]  # [R, n]
+    sums = torch.nn.functional.pad(values.masked_fill(~valid, 0.0).cumsum(-1), (1, 0))  # [R, n + 1]
+    first, last = idx[:, None], idx[None, :]  # run [first, last]
+    means = (sums[:, None, 1:] - sums[:, :-1, None]) / (last - first + 1).clamp(min=1)  # [R, first, last]
+    means = means.masked_fill((first > last) | (last >= lengths[:, None, None]), math.inf)
+    lowest = means.flip(-1).cummin(-1).values.flip(-1)  # [R, j, i]: min over runs from j ending at i or later
+    best = lowest.masked_fill(first > last, -math.inf).amax(-2)  # [R, i]: max over runs starting at j <= i
+    return torch.where(valid, best, values)
