@@ -390,3 +390,33 @@ def test_conditions_advance_alike_compiled_and_in_torch(case: tuple, data: st.Da
     tables = SubgoalTables(mixed, index, D)
     observation = obs if tables.uses_regions else None
     assert torch.equal(tables.advance(z, observation, td), tables.advance_eager(z, observation, td))
+
+
+@PROPERTY
+@given(
+    st.integers(1, 6).flatmap(
+        lambda n: st.tuples(
+            st.lists(
+                st.tuples(st.lists(st.floats(-50, 50, allow_nan=False), min_size=n, max_size=n), st.integers(1, n)),
+                min_size=1,
+                max_size=4,
+            )
+        )
+    )
+)
+def test_nondecreasing_is_the_least_squares_isotonic_fit(case: tuple) -> None:
+    """Each row's first ``length`` entries become scipy's isotonic regression of them; the rest stay."""
+    from scipy.optimize import isotonic_regression
+
+    from torchrl_subgoal.transform.shaping import nondecreasing
+
+    (rows,) = case
+    values = torch.tensor([r for r, _ in rows], dtype=torch.float64)
+    lengths = torch.tensor([n for _, n in rows])
+    out = nondecreasing(values, lengths)
+    for row, (entries, n) in enumerate(rows):
+        expected = isotonic_regression(np.array(entries[:n])).x
+        assert np.allclose(out[row, :n].numpy(), expected, atol=1e-9)
+        assert out[row, n:].tolist() == entries[n:]
+        assert (out[row, 1:n] >= out[row, : n - 1] - 1e-12).all()
+    assert torch.allclose(nondecreasing(out, lengths), out)  # a projection: applying it again changes nothing

@@ -815,3 +815,67 @@ def test_fused_step_reads_state_entries_written_in_place_or_moved_to_other_memor
     assert (nxt["subgoal_steps"][kept] == 8).all()
     expected = 0.5 + 0.9**7 * nxt["env_reward"][kept]
     assert torch.allclose(nxt["subgoal_return"][kept], expected)
+
+
+# ----------------------------------------------------------------- a monotone table
+
+
+def monotone_run(monotone: bool, table: torch.Tensor, **kwargs) -> tuple[TensorDict, SubgoalPotentialTransform]:
+    """A random walk of 8 four-rooms envs under three patterns (one of a single subgoal), per-env tables."""
+    n = 8
+    patterns = [HALLWAYS, SubgoalSeries([Cell(6, 2), Cell(10, 6)]), SubgoalSeries([Cell(1, 2)])]
+    v = TabularPotential(3, batch_shape=(n,), monotone=monotone)
+    with torch.no_grad():
+        v.table.copy_(table)
+    t = SubgoalPotentialTransform([patterns[i % 3] for i in range(n)], v, gamma=0.95, observation_key="cell", **kwargs)
+    env = TransformedEnv(FourRoomsEnv(n, max_steps=40), t)
+    torch.manual_seed(0)
+    return env.rollout(150, break_when_any_done=False), t
+
+
+def test_a_monotone_table_shapes_with_its_isotonic_fit() -> None:
+    from scipy.optimize import isotonic_regression
+
+    table = torch.randn(8, 3, generator=torch.Generator().manual_seed(5))
+    data, t = monotone_run(True, table)
+    assert t._online is not None and not t._online.compiled  # the torch step shapes
+    fitted = table.clone()
+    for row in range(8):
+        length = 2 if row % 3 == 2 else 3  # the single-subgoal pattern has z = 0, 1
+        fitted[row, :length] = torch.from_numpy(isotonic_regression(table[row, :length].numpy()).x)
+    assert not torch.allclose(fitted, table)  # some rows were out of order
+    phi_table = fitted - fitted[:, :1].clamp(min=0.0)  # the default start level
+    z, z_next = data["subgoal_index"], data["next", "subgoal_index"]
+    rows = torch.arange(8)[:, None, None].expand_as(z)
+    phi, phi_next = phi_table[rows, z], phi_table[rows, z_next].masked_fill(data["next", "terminated"], 0.0)
+    assert (z_next > 0).any() and data["next", "done"].any()
+    assert torch.allclose(data["next", "reward"], data["next", "env_reward"] + 0.95 * phi_next - phi, atol=1e-5)
+    assert torch.equal(t.potential(z[:, 0], torch.arange(8)[:, None]), table.gather(1, z[:, 0]))  # V reads as learned
+    assert_forward_matches(t, data)  # stored data (a replay sample) shaped the same way
+
+
+def test_a_table_already_in_order_shapes_as_without_monotone() -> None:
+    table = torch.randn(8, 3, generator=torch.Generator().manual_seed(5)).sort(dim=-1).values
+    monotone, _ = monotone_run(True, table)
+    plain, t = monotone_run(False, table)
+    assert t._online is not None and t._online.compiled
+    assert torch.allclose(monotone["next", "reward"], plain["next", "reward"], atol=1e-6)
+
+
+def test_a_monotone_table_trains_as_the_plain_one() -> None:
+    """The online update reads the table as it is: the same walk trains the same table."""
+    table = torch.randn(8, 3, generator=torch.Generator().manual_seed(6))
+    _, monotone = monotone_run(True, table, value_update=0.3)
+    _, plain = monotone_run(False, table, value_update=0.3)
+    assert not torch.allclose(plain.potential.table, table)
+    assert torch.allclose(monotone.potential.table, plain.potential.table, atol=1e-5)
+
+
+def test_a_monotone_table_needs_ordered_series_and_the_torch_step() -> None:
+    with pytest.raises(ValueError, match=r"monotone=True\): the shaping needs subgoal series in a total order"):
+        SubgoalPotentialTransform(room_aggregation(), TabularPotential(4, monotone=True), gamma=0.9)
+    t = SubgoalPotentialTransform(
+        HALLWAYS, TabularPotential(3, monotone=True), gamma=0.9, observation_key="cell", backend="compiled"
+    )
+    with pytest.raises(TypeError, match=r"not made non-decreasing \(TabularPotential\(monotone=True\)\)"):
+        TransformedEnv(FourRoomsEnv(2), t).reset()

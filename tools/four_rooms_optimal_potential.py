@@ -173,7 +173,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--task", choices=("goal", "step"), default="goal")
     parser.add_argument("--learners", type=int, default=10, help="learners per condition (one per pattern, cycled)")
     parser.add_argument("--total-frames", type=int, default=0, help="frames per learner (0: the domain's default)")
-    parser.add_argument("--conditions", default="unshaped,learned,optimal", help="any of unshaped, learned, optimal, monotone")
+    parser.add_argument(
+        "--conditions", default="unshaped,learned,optimal", help="any of unshaped, learned, optimal, monotone"
+    )
     parser.add_argument("--sees-subgoal", action="store_true", help="the shaped learners' networks also read z")
     parser.add_argument(
         "--value-lr", type=float, default=0.0, help="the potential's step size (0: the learner's default)"

@@ -115,8 +115,9 @@ def shaping_parts(
     learner per env, as the SARSA recipes), ``()`` for one table shared by every
     env (one learner stepping many envs, as A2C).
 
-    ``monotone_potential`` applies to the learned tables over subgoal series (HRS, RRS); the
-    naive potential and an aggregation's table are shaped as they are.
+    ``monotone_potential`` makes the learned tables over subgoal series (HRS, RRS) shape
+    non-decreasing along ``z`` (``TabularPotential(monotone=True)``); the naive potential and an
+    aggregation's table are shaped as they are.
 
     Examples:
         >>> from torchrl_subgoal.subgoals import Cell
@@ -145,9 +146,7 @@ def shaping_parts(
     if method.shaping == "naive":
         return per_env, NaivePotential(eta), options
     num_states = max(len(p) for p in patterns) + 1
-    if monotone_potential:
-        options["monotone_potential"] = True
-    return per_env, TabularPotential(num_states, batch_shape), options
+    return per_env, TabularPotential(num_states, batch_shape, monotone=monotone_potential), options
 
 
 #: the keyword arguments of :func:`shaping_transform` that configure the learned potential's loss
@@ -182,9 +181,10 @@ def shaping_transform(
         eta: the naive potential's ``η`` (NRS).
         observation_key: what subgoal predicates read.
         aggregation_key: what ``g`` reads.
-        **conventions: ``zero_terminal_potential``, ``start_potential`` and ``monotone_potential`` (the transform's, see
-            :class:`SubgoalPotentialTransform`), ``expectile`` and ``bootstrap_truncated`` (the learned
-            potential's target, see :class:`SubgoalValueLoss`); the library's defaults otherwise.
+        **conventions: ``zero_terminal_potential`` and ``start_potential`` (the transform's, see
+            :class:`SubgoalPotentialTransform`), ``monotone_potential`` (:func:`shaping_parts`),
+            ``expectile`` and ``bootstrap_truncated`` (the learned potential's target, see
+            :class:`SubgoalValueLoss`); the library's defaults otherwise.
 
     Examples:
         >>> import torch

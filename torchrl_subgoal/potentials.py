@@ -138,6 +138,12 @@ class TabularPotential(Potential):
         init: initial value of every entry.
 
     Keyword Args:
+        monotone: the shaping transform shapes with the nearest table that does not decrease along
+            ``z`` (least squares, each learner's table on its own) instead of the table as learned.
+            Training and :meth:`value` read the table as it is. Where a learned table values a later
+            subgoal below an earlier one, the shaping then neither charges the agent for reaching it
+            nor pays it for staying before it. For subgoal series in a total order (the transform
+            refuses an aggregation); the transform's torch step shapes with it.
         index_key: the abstract state entry read.
         learner_key: the learner entry read (with a batch of tables).
         out_key: where the value is written.
@@ -164,6 +170,7 @@ class TabularPotential(Potential):
         batch_shape: tuple[int, ...] | torch.Size = (),
         init: float = 0.0,
         *,
+        monotone: bool = False,
         index_key: NestedKey = INDEX,
         learner_key: NestedKey = LEARNER,
         out_key: NestedKey = VALUE,
@@ -172,6 +179,7 @@ class TabularPotential(Potential):
         super().__init__([index_key, learner_key] if self.batch_shape else [index_key], out_key)
         self.optional_in_keys = (learner_key,)
         self.num_states = int(num_states)
+        self.monotone = bool(monotone)
         if self.num_states < 1:
             raise ValueError(f"num_states must be >= 1, got {num_states}")
         self.table = nn.Parameter(torch.full((*self.batch_shape, self.num_states), float(init)))

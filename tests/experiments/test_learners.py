@@ -56,3 +56,28 @@ def test_the_plan_stores_the_learner_and_reports_frames() -> None:
         and config["routes"] == ["swing_then_speed"]
     )
     assert config["report"]["frames_per_unit"] == 16 and config["report"]["asymptotic_window"] == [90, 100]
+
+
+@pytest.mark.parametrize("monotone", [False, True])
+def test_monotone_potential_reaches_the_shaped_learners_table(
+    monotone: bool, tmp_path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from torchrl_subgoal.experiments import learners
+    from torchrl_subgoal.experiments.store import Chunk
+
+    made = []
+
+    def recording(*args, **kwargs):
+        parts = shaping_parts(*args, **kwargs)
+        made.append(parts[1] if parts is not None else None)
+        return parts
+
+    shaping_parts = learners.shaping_parts
+    monkeypatch.setattr(learners, "shaping_parts", recording)
+    cfg = LearnerRecipeConfig(methods="A2C,HRS", total_frames=256, results=str(tmp_path), monotone_potential=monotone)
+    plan = learner_plan(cfg, "a2c")
+    assert ("monotone_potential" in plan.config) == monotone  # absent by default: older results still resume
+    for spec in plan.specs:  # A2C (pattern "none"), HRS (the first participant's)
+        chunk = Chunk(spec.name, 0, ((spec.patterns[0], 0),), seed=1)
+        learners.run_learner_chunk(chunk, plan.config, lambda done: None)
+    assert made[0] is None and made[1].monotone == monotone

@@ -37,12 +37,19 @@ def test_optimal_values_under_either_reward() -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("algo", ["a2c", "dqn"])
 def test_a_tiny_run_prints_every_condition(algo: str) -> None:
+    args = ["--algo", algo, "--task", "step", "--learners", "2", "--total-frames", "3072"]
     done = subprocess.run(
-        [sys.executable, str(TOOL), "--algo", algo, "--task", "step", "--learners", "2", "--total-frames", "3072"],
+        [sys.executable, str(TOOL), *args, "--conditions", "unshaped,learned,optimal,monotone"],
         capture_output=True,
         text=True,
         timeout=600,
     )
     assert done.returncode == 0, done.stderr[-3000:]
-    for condition in ("| unshaped |", "| HRS, learned |", "| HRS, optimal |", "unshaped / HRS, optimal"):
+    for condition in (
+        "| unshaped |",
+        "| HRS, learned |",
+        "| HRS, optimal |",
+        "| HRS, monotone |",
+        "unshaped / HRS, optimal",
+    ):
         assert condition in done.stdout

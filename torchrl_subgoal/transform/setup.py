@@ -30,9 +30,9 @@ __all__ = [
     "PotentialKernelState",
     "Settings",
     "Subgoals",
+    "check_monotone",
     "check_options",
     "check_potential",
-    "check_monotone",
     "compiled_potential",
     "initial_state",
     "kept_entries",
@@ -66,7 +66,7 @@ class Settings(NamedTuple):
     reads_observation: bool  #: whether a region predicate or an aggregation reads it
     transitions: bool  #: whether every step writes its SMDP transition entry
     inputs: tuple[NestedKey, ...]  #: the potential's inputs (a transition keeps them at z and z')
-    monotone: bool = False  #: shape with the table made non-decreasing along the series
+    monotone: bool = False  #: shape with the table made non-decreasing along z (``TabularPotential(monotone=True)``)
 
 
 class Subgoals:
@@ -184,6 +184,8 @@ def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss
         'it shapes with a TabularPotential or a NaivePotential, not NeuralPotential'
     """
     if isinstance(potential, TabularPotential):
+        if potential.monotone:
+            return "it reads the table as it is, not made non-decreasing (TabularPotential(monotone=True))"
         if potential.table.device.type != "cpu":
             return f"it reads the potential's table on the CPU, not {potential.table.device}"
     elif not isinstance(potential, NaivePotential):
@@ -221,7 +223,6 @@ def settings(
     *,
     zero_terminal: bool,
     start: StartPotential,
-    monotone: bool = False,
 ) -> Settings:
     """A transform's :class:`Settings`: ``γ_v`` is the online update's loss's (``γ`` without one).
 
@@ -234,32 +235,29 @@ def settings(
     """
     value_gamma = float(gamma) if update is None or update.loss is None else update.loss.gamma
     kept = kept_entries(keys, potential, subgoals, start)
+    monotone = isinstance(potential, TabularPotential) and potential.monotone
     if monotone:
-        check_monotone(potential, subgoals)
+        check_monotone(subgoals)
     return Settings(keys, kept, float(gamma), value_gamma, zero_terminal, start, observation_key,
                     subgoals.reads_observation, transitions_key is not None, tuple(potential.in_keys),
                     monotone)  # fmt: skip
 
 
-def check_monotone(potential: TensorDictModuleBase, subgoals: Subgoals) -> None:
-    """Refuse ``monotone_potential`` where "later along the series" has no meaning: a potential that
-    is not a :class:`TabularPotential` over ``z``, an aggregation, or a series with a partial order.
+def check_monotone(subgoals: Subgoals) -> None:
+    """Refuse a monotone table (``TabularPotential(monotone=True)``) where "later along the series" has
+    no meaning: an aggregation, or a series with a partial order.
 
     Examples:
-        >>> from torchrl_subgoal import NaivePotential, State
-        >>> check_monotone(NaivePotential(1.0), Subgoals(SubgoalSeries([State(1)])))
+        >>> from torchrl_subgoal import StateAggregation
+        >>> check_monotone(Subgoals(StateAggregation(torch.tensor([0, 0, 1, 1]), num_states=2)))
         Traceback (most recent call last):
         ...
-        ValueError: monotone_potential: it projects a TabularPotential's table along z, not a NaivePotential
+        ValueError: TabularPotential(monotone=True): the shaping needs subgoal series in a total order ...
     """
-    if not isinstance(potential, TabularPotential):
-        raise ValueError(
-            f"monotone_potential: it projects a TabularPotential's table along z, not a {type(potential).__name__}"
-        )
     if subgoals.aggregation is not None or not all(p.is_chain for p in subgoals.patterns):
         raise ValueError(
-            "monotone_potential: it needs subgoal series in a total order (a chain), where a larger z is "
-            "later along the series; an aggregation or a partial order has no such order"
+            "TabularPotential(monotone=True): the shaping needs subgoal series in a total order (a chain), "
+            "where a larger z is later along the series; an aggregation or a partial order has no such order"
         )
 
 
@@ -297,22 +295,17 @@ def check_table(potential: TensorDictModuleBase, n_learners: int, num_states: in
         raise ValueError(f"TabularPotential has {potential.num_states} states; the abstraction has {num_states}")
 
 
-def compiles(backend: str, potential: TensorDictModuleBase, update: ValueUpdate | None, monotone: bool = False) -> bool:
+def compiles(backend: str, potential: TensorDictModuleBase, update: ValueUpdate | None) -> bool:
     """Whether the compiled step shapes with ``potential`` (trained online by ``update``) under ``backend``;
     ``backend="compiled"`` where it cannot is a ``TypeError`` saying why.
 
     Examples:
         >>> compiles("auto", TabularPotential(3), None), compiles("torch", TabularPotential(3), None)
         (True, False)
-        >>> compiles("auto", TabularPotential(3), None, monotone=True)
+        >>> compiles("auto", TabularPotential(3, monotone=True), None)
         False
     """
-    if backend == "torch":
-        why: str | None = "backend='torch'"
-    elif monotone:
-        why = "monotone_potential projects the table in the torch step"
-    else:
-        why = compiled_potential(potential, update.loss if update else None)
+    why = "backend='torch'" if backend == "torch" else compiled_potential(potential, update.loss if update else None)
     if why is not None and backend == "compiled":
         raise TypeError(f"SubgoalPotentialTransform(backend='compiled'): {why}; use backend='torch' or 'auto'")
     return why is None
@@ -333,8 +326,6 @@ def compiled_batch(
         raise TypeError("kernel_state needs the env reset through the transform first (env.reset())")
     if not batch.compiled:
         why = compiled_potential(potential, update.loss if update else None) or f"backend={backend!r}"
-        if batch.lengths is not None:
-            why = "monotone_potential projects the table in the torch step"
         raise TypeError(f"a compiled loop shapes as the compiled step does, which it cannot here: {why}")
     return batch
 

@@ -70,11 +70,6 @@ class SubgoalPotentialTransform(Transform):
         start_potential: the level of ``Φ``, set by the potential of the state the episode started in: ``"value"`` (``Φ
             = V``), ``"zero"`` (``Φ = V − V(z_0)``) or ``"nonpositive"`` (default, ``Φ = V − max(V(z_0), 0)``; see
             docs/shaping_defaults.md).
-        monotone_potential: shape with the nearest table that does not decrease along the series (least squares,
-            each learner's table on its own) instead of the table as learned, which keeps training unchanged: where
-            a learned ``V`` values a later subgoal below an earlier one, the shaping then neither charges for
-            reaching it nor pays for staying before it. A :class:`TabularPotential` over subgoal series in a total
-            order only; the torch step shapes (no compiled kernels).
         transitions_key: if given, every step also writes its SMDP transition under ``("next", transitions_key)``
             (``"mask"`` tells the real ones).
         prefix: the names of the kept entries; two transforms on one env need different prefixes (the same one is
@@ -109,7 +104,6 @@ class SubgoalPotentialTransform(Transform):
         value_update: ValueUpdate | float | None = None,
         zero_terminal_potential: bool = True,
         start_potential: StartPotential = "nonpositive",
-        monotone_potential: bool = False,
         transitions_key: NestedKey | None = None,
         prefix: str = "subgoal",
         backend: Backend = "auto",
@@ -127,7 +121,7 @@ class SubgoalPotentialTransform(Transform):
         self._parameters_list = list(potential.parameters())
         self._settings = setup.settings(
             self.keys, potential, self.subgoals, gamma, self.value_update, observation_key, transitions_key,
-            zero_terminal=zero_terminal_potential, start=start_potential, monotone=monotone_potential,
+            zero_terminal=zero_terminal_potential, start=start_potential,
         )  # fmt: skip
         self._env = EnvKeys.resolve(None)
         self._online: BatchSetup | None = None
@@ -141,7 +135,6 @@ class SubgoalPotentialTransform(Transform):
     observation_key = property(lambda self: self._settings.observation_key, doc="What the subgoals and anchor read.")
     zero_terminal_potential = property(lambda self: self._settings.zero_terminal, doc="``Φ = 0`` at terminal states.")
     start_potential = property(lambda self: self._settings.start, doc="The level of ``Φ``.")
-    monotone_potential = property(lambda self: self._settings.monotone, doc="Shaping with the non-decreasing table.")
     state_keys = property(
         lambda self: self._settings.kept,
         doc='The abstract-state entries kept (``"subgoal_*"``, in the reward\'s group).',
@@ -214,7 +207,7 @@ class SubgoalPotentialTransform(Transform):
         batch = BatchSetup(batch_shape, abstraction, learner, compiled_search=self.backend != "torch")
         if self._settings.monotone:
             batch.lengths = setup.series_lengths(self.subgoals, learner, n_learners)
-        if setup.compiles(self.backend, self.potential, self.value_update, self._settings.monotone):
+        if setup.compiles(self.backend, self.potential, self.value_update):
             batch.use_kernels(self.potential, self._settings, self.value_update, online)
         return batch
 
