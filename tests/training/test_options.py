@@ -45,26 +45,42 @@ def _td(obs: torch.Tensor, z: int) -> TensorDict:
     return TensorDict({"observation": obs, "subgoal_index": torch.full((obs.shape[0], 1), z)}, [obs.shape[0]])
 
 
-@pytest.mark.parametrize("hidden", [(), (8,)])
-def test_a2c_and_ppo_networks_read_z_one_hot(hidden: tuple[int, ...]) -> None:
+@pytest.mark.parametrize(("features", "hidden"), [("fourier", ()), ("mlp", ()), ("mlp", (8,))])
+def test_a2c_and_ppo_networks_read_z_one_hot(features: str, hidden: tuple[int, ...]) -> None:
     """With subgoal_states, policy and value network read "subgoal_index": the same observation with
-    another z gives other outputs. A linear learner (hidden=()) gets one weight set per z (the product of
-    the features with one-hot z); with hidden layers, z is concatenated to the features."""
+    another z gives other outputs. Outside one-hot features with no hidden layer, z is concatenated to
+    the features: a linear learner adds one term per z (the form of V(s) − Φ(z))."""
     env = Corridor(2)
-    actor, critic = actor_critic(env, features="mlp", hidden=hidden, subgoal_states=3)
+    actor, critic = actor_critic(env, features=features, hidden=hidden, fourier_order=2, subgoal_states=3)
     assert list(actor.in_keys) == ["observation", "subgoal_index"] and critic.in_keys == [
         "observation",
         "subgoal_index",
     ]
     first = next(m for m in critic.module.modules() if isinstance(m, torch.nn.Linear))
-    assert first.in_features == (1 * 3 if not hidden else 1 + 3)
+    n_features = 3 if features == "fourier" else 1  # Fourier order 2 over one entry: cos(0), cos(πx), cos(2πx)
+    assert first.in_features == n_features + 3
     _randomise_heads(critic)
     obs = torch.tensor([[0.5], [0.5]])
     values = [critic(_td(obs, z))["state_value"][0].item() for z in range(3)]
     assert len(set(values)) == 3
-    if not hidden:  # a table over (s, z): z = 1 reads only its own weights
-        weight = first.weight.detach()
-        assert values[1] == pytest.approx(float(weight[0, 1] * 0.5 + first.bias.detach()[0]), abs=1e-6)
+    if not hidden:  # V(s, z) = w·φ(s) + u_z + b: moving between z changes the value by u_z' − u_z only
+        weight = first.weight.detach()[0]
+        assert values[2] - values[1] == pytest.approx(float(weight[n_features + 2] - weight[n_features + 1]), abs=1e-6)
+
+
+def test_one_hot_features_without_hidden_layers_read_a_table_over_s_and_z() -> None:
+    from torchrl_subgoal.envs import FourRoomsEnv
+
+    env = FourRoomsEnv(2)
+    _, critic = actor_critic(env, features="one_hot", hidden=(), subgoal_states=3)
+    first = next(m for m in critic.module.modules() if isinstance(m, torch.nn.Linear))
+    cells = int(env.observation_spec["observation"].space.n)
+    assert first.in_features == cells * 3  # one copy of the one-hot cell per z
+    _randomise_heads(critic)
+    cell = torch.tensor([5, 5])
+    td = TensorDict({"observation": cell, "subgoal_index": torch.tensor([[1], [1]])}, [2])
+    weight, bias = first.weight.detach()[0], first.bias.detach()[0]
+    assert critic(td)["state_value"][0].item() == pytest.approx(float(weight[5 * 3 + 1] + bias), abs=1e-6)
 
 
 def test_ppo_gaussian_policy_and_dqn_and_ddpg_read_z() -> None:

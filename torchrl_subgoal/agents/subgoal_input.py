@@ -22,11 +22,13 @@ SUBGOAL_INDEX = "subgoal_index"
 class SubgoalInput(nn.Module):
     """``body(join(features(x), one_hot(z)))``: a network over an input and the subgoal index ``z``.
 
-    The join concatenates the features and the one-hot ``z`` (``product=False``,
-    for a network with hidden layers, which can learn how ``z`` interacts with
-    the observation), or takes their outer product (``product=True``: one copy
-    of the features per ``z``, so that a linear learner has one weight set per
-    abstract state: over one-hot states, a table over ``(s, z)``).
+    The join concatenates the features and the one-hot ``z`` (``product=False``:
+    a network with hidden layers can learn how ``z`` interacts with the
+    observation; a linear one adds one term per ``z`` to its output, the form of
+    a shaped value ``V(s) − Φ(z)``), or takes their outer product
+    (``product=True``: one copy of the features per ``z``, one weight set per
+    abstract state, each trained only on the steps spent in it; over one-hot
+    states, a table over ``(s, z)``).
 
     Args:
         num_states: abstract states ``z`` can take (``series.num_abstract_states``).

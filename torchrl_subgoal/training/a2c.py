@@ -196,8 +196,8 @@ def actor_critic(
         hidden: hidden layer sizes.
         fourier_order: order of the Fourier basis.
         subgoal_states: if positive, both networks also read ``"subgoal_index"`` (``z``, one-hot
-            over this many abstract states): joined to the features, concatenated, or as their
-            product when ``hidden=()`` (a table over ``(s, z)`` with one-hot features).
+            over this many abstract states): joined to the features as their product for one-hot
+            features with ``hidden=()`` (a table over ``(s, z)``), else concatenated.
 
     Examples:
         >>> from torchrl_subgoal.envs import FourRoomsEnv

@@ -335,11 +335,11 @@ def _trunk(
     activation: type[nn.Module] = nn.Tanh,
     subgoal_states: int = 0,
 ) -> tuple[nn.Module, int]:
-    """The input layers for an observation spec (and, with ``subgoal_states``, the one-hot ``z``
-    joined to the features: concatenated, or their product when there is no hidden layer), then the
-    hidden layers: a module over ``observation`` (or ``(observation, z)``) and its output size."""
+    """The input layers for an observation spec (with ``subgoal_states``, the one-hot ``z`` joined:
+    their product for one-hot features and no hidden layer, a table over ``(s, z)``; else concatenated),
+    then the hidden layers: a module over ``observation`` (or ``(observation, z)``) and its output size."""
     first, size = _input_layer(spec, features, order)
-    product = not hidden
+    product = not hidden and features == "one_hot"
     if subgoal_states:
         size = SubgoalInput.size(size, subgoal_states, product=product)
     layers: list[nn.Module] = []
