@@ -18,7 +18,7 @@ in batches and in frames. TorchRL CSV logs go to ``RESULTS/logs``.
 
     python recipes/train.py --algo ppo --domain four_rooms
     python recipes/train.py --algo dqn --domain mountain_car --methods DQN,HRS --learnings 3
-    python recipes/train.py --algo ddpg --domain point_maze_umaze --total-frames 50000 --sees-subgoal
+    python recipes/train.py --algo ddpg --domain point_maze_umaze --total-frames 50000 --sees-subgoal yes
 """
 
 from __future__ import annotations

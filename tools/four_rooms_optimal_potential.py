@@ -20,7 +20,7 @@ unshaped learner, the final episode length, and the learned tables beside the op
     python tools/four_rooms_optimal_potential.py --algo a2c --task goal     # 30 learnings, ~5 CPU-minutes
     python tools/four_rooms_optimal_potential.py --algo a2c --task step
     python tools/four_rooms_optimal_potential.py --algo ppo --task step --learners 5
-    python tools/four_rooms_optimal_potential.py --task step --conditions learned --sees-subgoal
+    python tools/four_rooms_optimal_potential.py --task step --conditions learned --sees-subgoal yes
     python tools/four_rooms_optimal_potential.py --algo ppo --task step --conditions learned --per-batch-potential
 """
 
@@ -71,12 +71,12 @@ def run(
     learners: int,
     total_frames: int,
     conditions: tuple[str, ...] = CONDITIONS,
-    sees: bool = False,
+    sees: str = "default",
     value_lr: float = 0.0,
     per_batch: bool = False,
 ) -> dict[str, list[dict]]:
-    """Every condition's learners: frames to each threshold, final length, learned table (``sees``: the shaped
-    learners' networks also read ``z``)."""
+    """Every condition's learners: frames to each threshold, final length, learned table (``sees``: whether
+    the shaped learners' networks also read ``z``: ``"yes"``, ``"no"`` or the learner's ``"default"``)."""
     domain = domains.part("four_rooms", LearnerDomain)
     learner = LEARNERS[algo]
     config = domain.defaults[algo]
@@ -110,7 +110,9 @@ def run(
                 shaping = Shaping(series, potential, options)
             curve = learner.train(
                 functools.partial(make_env, task),
-                dataclasses.replace(config, sees_subgoal=sees and shaping is not None),
+                config
+                if sees == "default"
+                else dataclasses.replace(config, sees_subgoal=sees == "yes" and shaping is not None),
                 shaping=shaping,
                 observation_key=domain.observation_key,
                 seed=1000 + i,
@@ -176,7 +178,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--conditions", default="unshaped,learned,optimal", help="any of unshaped, learned, optimal, monotone"
     )
-    parser.add_argument("--sees-subgoal", action="store_true", help="the shaped learners' networks also read z")
+    parser.add_argument(
+        "--sees-subgoal",
+        choices=("default", "yes", "no"),
+        default="default",
+        help="the shaped learners' networks also read z (default: the learner's, DQN yes, the others no)",
+    )
     parser.add_argument(
         "--value-lr", type=float, default=0.0, help="the potential's step size (0: the learner's default)"
     )
@@ -195,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     logging.getLogger("torchrl").setLevel(logging.WARNING)  # its buffers' set-up notes would mix into the tables
     budget = opts.total_frames or domains.part("four_rooms", LearnerDomain).defaults[opts.algo].total_frames
-    sees = ", the shaped learners see z" if opts.sees_subgoal else ""
+    sees = {"yes": ", the shaped learners see z", "no": ", the shaped learners do not see z"}.get(opts.sees_subgoal, "")
     print(
         f"four-rooms ({opts.task} reward), {opts.algo.upper()}, {opts.learners} learners per condition, "
         f"{budget:,} frames each{sees}\n"

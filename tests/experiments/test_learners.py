@@ -21,9 +21,9 @@ def test_flags_left_at_zero_keep_the_domains_defaults() -> None:
     settings = learner_settings(LearnerRecipeConfig(), "dqn", mountain_car)
     assert settings == DQNConfig.preset("mountain_car")  # value_lr 0.05 and the rest as the preset's
     changed = learner_settings(
-        LearnerRecipeConfig(total_frames=3200, lr=1e-3, sees_subgoal=True, reshape_samples=True), "dqn", mountain_car
+        LearnerRecipeConfig(total_frames=3200, lr=1e-3, sees_subgoal="no", reshape_samples=True), "dqn", mountain_car
     )
-    assert (changed.total_frames, changed.lr, changed.sees_subgoal, changed.reshape_samples) == (3200, 1e-3, True, True)
+    assert (changed.total_frames, changed.lr, changed.sees_subgoal) == (3200, 1e-3, False) and changed.reshape_samples
     assert changed.gradient_steps == 8  # the preset's, untouched
 
 
@@ -81,3 +81,12 @@ def test_monotone_potential_reaches_the_shaped_learners_table(
         chunk = Chunk(spec.name, 0, ((spec.patterns[0], 0),), seed=1)
         learners.run_learner_chunk(chunk, plan.config, lambda done: None)
     assert made[0] is None and made[1].monotone == monotone
+
+
+def test_the_learner_sees_z_by_its_own_default_unless_told() -> None:
+    """DQN reads z whenever shaped (its default), the others do not; --sees-subgoal yes / no overrides."""
+    four_rooms = domains.part("four_rooms", LearnerDomain)
+    default = {algo: learner_settings(LearnerRecipeConfig(), algo, four_rooms).sees_subgoal for algo in ("dqn", "ppo")}
+    assert default == {"dqn": None, "ppo": False}
+    assert learner_settings(LearnerRecipeConfig(sees_subgoal="no"), "dqn", four_rooms).sees_subgoal is False
+    assert learner_settings(LearnerRecipeConfig(sees_subgoal="yes"), "ppo", four_rooms).sees_subgoal is True

@@ -46,6 +46,7 @@ def test_on_policy_learners_on_four_rooms(tmp_path: Path, algo: str) -> None:
         "--total-frames",
         "512",
         "--sees-subgoal",
+        "yes",
     ]
     assert run(tmp_path, *args) == 0
     summary = json.loads((tmp_path / "res" / "summary.json").read_text())

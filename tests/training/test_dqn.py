@@ -113,3 +113,15 @@ def test_mountain_car_preset_is_rl_zoo_s() -> None:
 def test_bad_settings_name_the_field(bad: dict, field: str) -> None:
     with pytest.raises(ValueError, match=f"^{field}"):
         _config(**bad)
+
+
+def test_dqn_reads_z_by_default_when_shaped_and_not_otherwise() -> None:
+    from torchrl_subgoal import Cell
+    from torchrl_subgoal.training import subgoal_states
+
+    shaping = Shaping(SubgoalSeries([Cell(3, 6), Cell(7, 9)]), TabularPotential(3))
+    assert DQNConfig().sees_subgoal is None
+    assert subgoal_states(DQNConfig(), shaping) == 3 and subgoal_states(DQNConfig(), None) == 0
+    assert subgoal_states(DQNConfig(sees_subgoal=False), shaping) == 0
+    with pytest.raises(ValueError, match="sees_subgoal needs shaping"):
+        subgoal_states(DQNConfig(sees_subgoal=True), None)

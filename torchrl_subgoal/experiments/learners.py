@@ -92,7 +92,12 @@ class LearnerRecipeConfig(RecipeConfig):
     online_potential: bool = setting(
         True, "train the potential in the transform at every step (else one Adam step per batch)"
     )
-    sees_subgoal: bool = setting(False, "the shaped learners' networks also read the subgoal index z (one-hot)")
+    sees_subgoal: str = setting(
+        "default",
+        "the shaped learners' networks also read the subgoal index z (one-hot): yes, no, or default "
+        "(the learner's: DQN yes, the others no)",
+        choices=["default", "yes", "no"],
+    )
     reshape_samples: bool = setting(
         False, "the shaped learners re-shape replay samples with the potential as it is now (DQN, DDPG)"
     )
@@ -172,7 +177,7 @@ def learner_settings(
         collector_workers=cfg.collector_workers,
         value_lr=cfg.value_lr,
         online_potential=cfg.online_potential,
-        sees_subgoal=cfg.sees_subgoal,
+        **({} if cfg.sees_subgoal == "default" else {"sees_subgoal": cfg.sees_subgoal == "yes"}),
         **(extra or {}),
     )
     if cfg.reshape_samples:

@@ -9,11 +9,9 @@ One learner, whatever its algorithm, is the same pipeline:
   reaches collector worker processes through shared memory
   (:class:`~torchrl_subgoal.training.EnvFactory`);
 * :func:`make_collector`: a TorchRL ``Collector`` (or ``MultiSyncCollector``);
-* per collected batch, the learner's own update, then the potential's:
-  :class:`PotentialTrainer` (one step of :class:`~torchrl_subgoal.SubgoalValueLoss`
-  on the batch's SMDP transitions), unless the transform trains it online;
-* :class:`CurveRecorder`: the :class:`LearningCurve`, a TorchRL logger and a
-  progress callback.
+* per collected batch, the learner's own update, then the potential's: :class:`PotentialTrainer` (one
+  step of :class:`~torchrl_subgoal.SubgoalValueLoss` on the batch's SMDP transitions), unless online;
+* :class:`CurveRecorder`: the :class:`LearningCurve`, a TorchRL logger and a progress callback.
 
 Two options any deep learner may need: the learner sees ``z``
 (:func:`subgoal_states` and :class:`~torchrl_subgoal.agents.subgoal_input.SubgoalInput`,
@@ -92,7 +90,9 @@ class LearnerSettings(Protocol):
     value_optimizer: Literal["adam", "sgd"]
     online_potential: bool
     record_window: int
-    sees_subgoal: bool
+
+    @property
+    def sees_subgoal(self) -> bool | None: ...  # None: whenever there is shaping
 
 
 def check_settings(config: LearnerSettings) -> None:
@@ -360,20 +360,20 @@ def subgoal_states(config: LearnerSettings, shaping: Shaping | None) -> int:
     """Abstract states the networks' one-hot ``z`` input spans; 0 when they do not see ``z``.
 
     Args:
-        config: ``config.sees_subgoal`` asks for the input.
+        config: ``config.sees_subgoal`` asks for the input (``None``: whenever there is shaping).
         shaping: the shaping whose transform keeps ``z`` (``"subgoal_index"``).
 
     Raises:
-        ValueError: ``sees_subgoal`` without shaping (no transform keeps ``z``).
+        ValueError: ``sees_subgoal=True`` without shaping (no transform keeps ``z``).
 
     Examples:
         >>> from torchrl_subgoal import Cell, SubgoalSeries, TabularPotential
         >>> from torchrl_subgoal.training import DQNConfig
         >>> shaping = Shaping(SubgoalSeries([Cell(3, 6), Cell(7, 9)]), TabularPotential(3))
-        >>> subgoal_states(DQNConfig(sees_subgoal=True), shaping), subgoal_states(DQNConfig(), shaping)
+        >>> subgoal_states(DQNConfig(), shaping), subgoal_states(DQNConfig(sees_subgoal=False), shaping)
         (3, 0)
     """
-    if not config.sees_subgoal:
+    if config.sees_subgoal is False or (config.sees_subgoal is None and shaping is None):
         return 0
     if shaping is None:
         raise ValueError("sees_subgoal needs shaping: the subgoal index z is kept by the shaping transform")
