@@ -34,7 +34,8 @@ def test_random_patterns_are_seeded_and_valid() -> None:
         ("SARSA-RS", TabularPotential, True),
     ],
 )
-def test_shaping_transform_per_method(name: str, potential: type, learning: bool) -> None:
+@pytest.mark.parametrize("monotone", [False, True])
+def test_shaping_transform_per_method(name: str, potential: type, learning: bool, monotone: bool) -> None:
     patterns = [SubgoalSeries([Cell(3, 6), Cell(7, 9)])]
     t = shaping_transform(
         paper_methods("SARSA")[name],
@@ -44,8 +45,11 @@ def test_shaping_transform_per_method(name: str, potential: type, learning: bool
         patterns=patterns,
         aggregation=room_aggregation(),
         eta=1.0,
+        monotone_potential=monotone,
     )
     assert t is not None and isinstance(t.potential, potential) and t.learning == learning
+    # a monotone table is one over a series: not the naive potential, not an aggregation's table
+    assert getattr(t.potential, "monotone", False) == (monotone and name in ("HRS", "RRS"))
     assert shaping_transform(paper_methods("SARSA")["SARSA"], torch.Size([4]), gamma=0.99, value_lr=0.25) is None
 
 
@@ -54,22 +58,3 @@ def test_missing_pieces_are_errors() -> None:
         shaping_transform(paper_methods("SARSA")["HRS"], torch.Size([2]), gamma=0.9, value_lr=0.1)
     with pytest.raises(ValueError, match="needs an aggregation"):
         shaping_transform(paper_methods("SARSA")["SARSA-RS"], torch.Size([2]), gamma=0.9, value_lr=0.1)
-
-
-def test_monotone_potential_applies_to_the_learned_tables_over_series() -> None:
-    patterns = [SubgoalSeries([Cell(3, 6), Cell(7, 9)])]
-    made = {
-        name: shaping_transform(
-            paper_methods("SARSA")[name],
-            torch.Size([4]),
-            gamma=0.99,
-            value_lr=0.25,
-            patterns=patterns,
-            aggregation=room_aggregation(),
-            monotone_potential=True,
-        )
-        for name in ("HRS", "RRS", "NRS", "SARSA-RS")
-    }
-    assert made["HRS"].potential.monotone and made["RRS"].potential.monotone  # type: ignore[union-attr]
-    assert isinstance(made["NRS"].potential, NaivePotential)  # type: ignore[union-attr]
-    assert not made["SARSA-RS"].potential.monotone  # type: ignore[union-attr]  # an aggregation has no order

@@ -879,3 +879,23 @@ def test_a_monotone_table_needs_ordered_series_and_the_torch_step() -> None:
     )
     with pytest.raises(TypeError, match=r"not made non-decreasing \(TabularPotential\(monotone=True\)\)"):
         TransformedEnv(FourRoomsEnv(2), t).reset()
+
+
+def test_a_monotone_table_in_a_collector_over_a_parallel_env() -> None:
+    """The TorchRL path: the transform on the outer env of a ParallelEnv, a Collector collecting."""
+    from torchrl.collectors import Collector
+
+    v = TabularPotential(3, monotone=True)  # one table shared by both envs
+    with torch.no_grad():
+        v.table.copy_(torch.tensor([-1.0, -3.0, -0.5]))  # fit: −2, −2, −0.5
+    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.9, observation_key="cell", start_potential="value")
+    env = TransformedEnv(ParallelEnv(2, make_four_rooms, mp_start_method="spawn"), t)
+    collector = Collector(env, None, frames_per_batch=200, total_frames=400)
+    try:
+        for data in collector:
+            phi = torch.tensor([-2.0, -2.0, -0.5])
+            z, z_next = data["subgoal_index"], data["next", "subgoal_index"]
+            phi_next = phi[z_next].masked_fill(data["next", "terminated"], 0.0)
+            assert torch.allclose(data["next", "reward"], data["next", "env_reward"] + 0.9 * phi_next - phi[z])
+    finally:
+        collector.shutdown()  # closes the env too

@@ -115,8 +115,8 @@ def torch_step(
         assert smdp is not None
         update(smdp)
     with torch.no_grad():
-        if settings.monotone:
-            assert isinstance(potential, TabularPotential) and setup.lengths is not None
+        if setup.lengths is not None:  # a monotone table
+            assert isinstance(potential, TabularPotential)
             phi, phi_next, v_start = monotone_values(
                 potential, setup, [current[keys.index], z_next, start_entries(current, settings)[keys.index]]
             )

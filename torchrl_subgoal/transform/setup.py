@@ -36,9 +36,9 @@ __all__ = [
     "compiled_potential",
     "initial_state",
     "kept_entries",
+    "monotone_lengths",
     "observation_layout",
     "online_update",
-    "series_lengths",
     "settings",
 ]
 
@@ -66,7 +66,6 @@ class Settings(NamedTuple):
     reads_observation: bool  #: whether a region predicate or an aggregation reads it
     transitions: bool  #: whether every step writes its SMDP transition entry
     inputs: tuple[NestedKey, ...]  #: the potential's inputs (a transition keeps them at z and z')
-    monotone: bool = False  #: shape with the table made non-decreasing along z (``TabularPotential(monotone=True)``)
 
 
 class Subgoals:
@@ -235,12 +234,10 @@ def settings(
     """
     value_gamma = float(gamma) if update is None or update.loss is None else update.loss.gamma
     kept = kept_entries(keys, potential, subgoals, start)
-    monotone = isinstance(potential, TabularPotential) and potential.monotone
-    if monotone:
+    if isinstance(potential, TabularPotential) and potential.monotone:
         check_monotone(subgoals)
     return Settings(keys, kept, float(gamma), value_gamma, zero_terminal, start, observation_key,
-                    subgoals.reads_observation, transitions_key is not None, tuple(potential.in_keys),
-                    monotone)  # fmt: skip
+                    subgoals.reads_observation, transitions_key is not None, tuple(potential.in_keys))  # fmt: skip
 
 
 def check_monotone(subgoals: Subgoals) -> None:
@@ -261,15 +258,22 @@ def check_monotone(subgoals: Subgoals) -> None:
         )
 
 
-def series_lengths(subgoals: Subgoals, learner: torch.Tensor, n_learners: int) -> torch.Tensor:
-    """The number of abstract states of each row's series (``learner``: ``[*B, 1]``), flattened: ``[R]``.
+def monotone_lengths(
+    potential: TensorDictModuleBase, subgoals: Subgoals, learner: torch.Tensor, n_learners: int
+) -> torch.Tensor | None:
+    """With a monotone table (``TabularPotential(monotone=True)``), the number of abstract states of each
+    row's series (``learner``: ``[*B, 1]``), flattened: ``[R]``; else ``None``.
 
     Examples:
         >>> from torchrl_subgoal import State
         >>> subgoals = Subgoals([SubgoalSeries([State(1)]), SubgoalSeries([State(1), State(2)])])
-        >>> series_lengths(subgoals, torch.tensor([[1], [0], [1]]), 2).tolist()
+        >>> monotone_lengths(TabularPotential(3, monotone=True), subgoals, torch.tensor([[1], [0], [1]]), 2).tolist()
         [3, 2, 3]
+        >>> monotone_lengths(TabularPotential(3), subgoals, torch.tensor([[1], [0], [1]]), 2) is None
+        True
     """
+    if not (isinstance(potential, TabularPotential) and potential.monotone):
+        return None
     sizes = torch.tensor([p.num_abstract_states for p in subgoals.patterns], dtype=torch.long)
     return sizes[subgoals.pattern_of(n_learners)[learner.reshape(-1)]]
 
@@ -354,7 +358,7 @@ class BatchSetup:
     table: torch.Tensor | None = None  #: the tabular potential's parameter, to see it move
     table_ptr: int = 0
     z_start: np.ndarray = field(default_factory=lambda: np.zeros((1, 1), np.int64))
-    lengths: torch.Tensor | None = None  #: with ``monotone_potential``: each row's number of abstract states, ``[R]``
+    lengths: torch.Tensor | None = None  #: with a monotone table: each row's number of abstract states, ``[R]``
 
     def __post_init__(self) -> None:
         self.rows = self.batch_shape.numel()  #: rows of the batch

@@ -204,9 +204,8 @@ class SubgoalPotentialTransform(Transform):
             if spec is not None:
                 self._layout = layout
         abstraction = self.subgoals.compile(learner, batch_shape, n_learners, layout, self.observation_key)
-        batch = BatchSetup(batch_shape, abstraction, learner, compiled_search=self.backend != "torch")
-        if self._settings.monotone:
-            batch.lengths = setup.series_lengths(self.subgoals, learner, n_learners)
+        lengths = setup.monotone_lengths(self.potential, self.subgoals, learner, n_learners)
+        batch = BatchSetup(batch_shape, abstraction, learner, compiled_search=self.backend != "torch", lengths=lengths)
         if setup.compiles(self.backend, self.potential, self.value_update):
             batch.use_kernels(self.potential, self._settings, self.value_update, online)
         return batch
