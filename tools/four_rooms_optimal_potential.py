@@ -18,7 +18,7 @@ never does counts as the budget), how many never did, Holm-corrected Welch tests
 unshaped learner, the final episode length, and the learned tables beside the optimal ones.
 
     python tools/four_rooms_optimal_potential.py --algo a2c --task goal     # 30 learnings, ~5 CPU-minutes
-    python tools/four_rooms_optimal_potential.py --algo a2c --task step
+    python tools/four_rooms_optimal_potential.py --algo a2c --task step    # 300,032 frames: the four_rooms_step default
     python tools/four_rooms_optimal_potential.py --algo ppo --task step --learners 5
     python tools/four_rooms_optimal_potential.py --task step --conditions learned --sees-subgoal yes
     python tools/four_rooms_optimal_potential.py --algo ppo --task step --conditions learned --per-batch-potential
@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import functools
 import logging
 import sys
 
@@ -36,7 +35,6 @@ import numpy as np
 import torch
 from scipy import stats
 from statsmodels.stats.multitest import multipletests
-from torchrl.envs import EnvBase
 
 from torchrl_subgoal import SubgoalSeries, domains, load_patterns
 from torchrl_subgoal.envs import four_rooms
@@ -58,11 +56,9 @@ def optimal_values(series: SubgoalSeries, task: str, gamma: float) -> list[float
     return [-(1 - gamma ** (distance[c] - 1)) / (1 - gamma) for c in cells]
 
 
-def make_env(task: str, num_envs: int) -> EnvBase:
-    """Four-rooms with the paper's goal reward or with a step cost, the 1,000-step cap."""
-    if task == "goal":
-        return four_rooms.FourRoomsEnv(num_envs)
-    return four_rooms.FourRoomsEnv(num_envs, goal_reward=0.0, step_reward=-1.0)
+def learner_domain(task: str) -> LearnerDomain:
+    """The registered set-up of ``task``: ``four_rooms`` (the paper's goal reward) or ``four_rooms_step``."""
+    return domains.part("four_rooms" if task == "goal" else "four_rooms_step", LearnerDomain)
 
 
 def run(
@@ -77,7 +73,7 @@ def run(
 ) -> dict[str, list[dict]]:
     """Every condition's learners: frames to each threshold, final length, learned table (``sees``: whether
     the shaped learners' networks also read ``z``: ``"yes"``, ``"no"`` or the learner's ``"default"``)."""
-    domain = domains.part("four_rooms", LearnerDomain)
+    domain = learner_domain(task)
     learner = LEARNERS[algo]
     config = domain.defaults[algo]
     if total_frames:
@@ -109,7 +105,7 @@ def run(
                     potential.table.requires_grad_(False)
                 shaping = Shaping(series, potential, options)
             curve = learner.train(
-                functools.partial(make_env, task),
+                domain.make_env,
                 config
                 if sees == "default"
                 else dataclasses.replace(config, sees_subgoal=sees == "yes" and shaping is not None),
@@ -201,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--learners: at least 2 (the tests need a spread), got {opts.learners}")
     torch.set_num_threads(1)
     logging.getLogger("torchrl").setLevel(logging.WARNING)  # its buffers' set-up notes would mix into the tables
-    budget = opts.total_frames or domains.part("four_rooms", LearnerDomain).defaults[opts.algo].total_frames
+    budget = opts.total_frames or learner_domain(opts.task).defaults[opts.algo].total_frames
     sees = {"yes": ", the shaped learners see z", "no": ", the shaped learners do not see z"}.get(opts.sees_subgoal, "")
     print(
         f"four-rooms ({opts.task} reward), {opts.algo.upper()}, {opts.learners} learners per condition, "

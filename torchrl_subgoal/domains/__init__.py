@@ -15,8 +15,8 @@ when imported, as ``import torchrl_subgoal`` does).
 
 Domain plugins register themselves when imported. A package makes its plugin
 modules known by name under the ``torchrl_subgoal.domains`` entry-point group
-(the built-in four-rooms, PinBall, pick-and-place, PointMaze and MountainCar plugins are declared so in
-this package's ``pyproject.toml``): a lookup imports the module the first time
+(the built-in four-rooms with its step-cost variant, PinBall, pick-and-place, PointMaze and
+MountainCar plugins are declared so in this package's ``pyproject.toml``): a lookup imports the module the first time
 its name is asked for, so a domain whose optional dependency is missing costs
 nothing until it is used. A script can also import its plugin module itself
 (docs/adding_a_domain.md).
@@ -119,7 +119,7 @@ def names() -> list[str]:
 
     Examples:
         >>> names()[:4]
-        ['four_rooms', 'mountain_car', 'pick_and_place', 'pinball']
+        ['four_rooms', 'four_rooms_step', 'mountain_car', 'pick_and_place']
     """
     declared = list(_plugins())
     return [*declared, *(n for n in _REGISTRY if n not in declared)]
@@ -164,7 +164,7 @@ def having(kind: type) -> list[str]:
     Examples:
         >>> from torchrl_subgoal.training import LearnerDomain
         >>> having(LearnerDomain)
-        ['four_rooms', 'mountain_car', 'pinball', 'point_maze_medium', 'point_maze_umaze']
+        ['four_rooms', 'four_rooms_step', 'mountain_car', 'pinball', 'point_maze_medium', 'point_maze_umaze']
     """
     return [n for n in names() if (domain := find(n)) is not None and domain.part(kind) is not None]
 

@@ -69,7 +69,8 @@ class LearnerRecipeConfig(RecipeConfig):
 
     domain: str = setting(
         "four_rooms",
-        "a domain with a learner set-up (four_rooms, pinball, point_maze_umaze, point_maze_medium, mountain_car)",
+        "a domain with a learner set-up (four_rooms, four_rooms_step, pinball, point_maze_umaze, point_maze_medium, "
+        "mountain_car)",
     )
     methods: str = setting(
         "",
