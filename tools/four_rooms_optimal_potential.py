@@ -87,7 +87,8 @@ def run(
     for condition in conditions:
         for i in range(learners):
             series = patterns[i % len(patterns)]
-            optimal = optimal_values(series, task, config.gamma)
+            # in the learner's reward units, as its table is (the env's reward times its reward_scale)
+            optimal = [config.reward_scale * v for v in optimal_values(series, task, config.gamma)]
             shaping = None
             if condition != "unshaped":
                 parts = shaping_parts(

@@ -29,7 +29,7 @@ def test_dqn_defaults_find_the_shortest_path_and_keep_it() -> None:
 
 def test_the_step_cost_variant_is_a_domain_of_its_own() -> None:
     """``four_rooms_step``: the same map, subgoals and learner set-ups under −1 per step, A2C given 300,032
-    frames; a subgoal file is checked against the four-rooms map."""
+    frames and DQN's rewards scaled by 0.01; a subgoal file is checked against the four-rooms map."""
     goal = domains.part("four_rooms", LearnerDomain)
     step = domains.part("four_rooms_step", LearnerDomain)
     assert domains.get("four_rooms_step").part(PaperResults) is None  # the paper did not run it
@@ -37,7 +37,8 @@ def test_the_step_cost_variant_is_a_domain_of_its_own() -> None:
     assert torch.equal(rewards, torch.full_like(rewards, -1.0))
     assert (step.participants, step.thresholds, step.subgoal_key) == (goal.participants, goal.thresholds, "cell")
     assert step.defaults["a2c"] == dataclasses.replace(goal.defaults["a2c"], total_frames=300_032)
-    assert step.defaults["ppo"] == goal.defaults["ppo"] and step.defaults["dqn"] == goal.defaults["dqn"]
+    assert step.defaults["ppo"] == goal.defaults["ppo"]
+    assert step.defaults["dqn"] == dataclasses.replace(goal.defaults["dqn"], reward_scale=0.01)
     assert len(load_patterns(step.participants, domain="four_rooms_step")) == 10
     with pytest.raises(SubgoalFileError, match="is a wall"):
         patterns_from_data({"patterns": {"p": {"subgoals": [{"cell": [0, 6]}]}}}, "mine.yaml", domain="four_rooms_step")
