@@ -179,7 +179,9 @@ def test_a2c_domains_come_from_the_registry() -> None:
     assert A2CDomain is LearnerDomain  # the earlier name still finds the part
     assert domains.part("four_rooms", A2CDomain).name == "four_rooms"
     assert domains.part("pinball", A2CDomain).a2c.features == "fourier"
-    with pytest.raises(ValueError, match=r"^unknown domain 'chess'; these did: four_rooms, four_rooms_step, mountain_car, pinball"):
+    with pytest.raises(
+        ValueError, match=r"^unknown domain 'chess'; these did: four_rooms, four_rooms_step, mountain_car, pinball"
+    ):
         domains.part("chess", A2CDomain)
     with pytest.raises(
         ValueError, match=r"^domain 'pick_and_place' registered no LearnerDomain; these did: four_rooms, "

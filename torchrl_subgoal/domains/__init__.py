@@ -16,9 +16,9 @@ when imported, as ``import torchrl_subgoal`` does).
 Domain plugins register themselves when imported. A package makes its plugin
 modules known by name under the ``torchrl_subgoal.domains`` entry-point group
 (the built-in four-rooms with its step-cost variant, PinBall, pick-and-place, PointMaze and
-MountainCar plugins are declared so in this package's ``pyproject.toml``): a lookup imports the module the first time
-its name is asked for, so a domain whose optional dependency is missing costs
-nothing until it is used. A script can also import its plugin module itself
+MountainCar plugins are declared so in this package's ``pyproject.toml``): a lookup imports
+the module the first time its name is asked for, so a domain whose optional dependency is
+missing costs nothing until it is used. A script can also import its plugin module itself
 (docs/adding_a_domain.md).
 """
 
