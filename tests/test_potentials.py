@@ -85,3 +85,22 @@ def test_learner_key_errors() -> None:
         from tensordict import TensorDict
 
         v(TensorDict({}, [2]))
+
+
+def test_a_frozen_table_is_not_trained_online() -> None:
+    from torchrl.envs import TransformedEnv
+
+    from torchrl_subgoal import SubgoalPotentialTransform, SubgoalSeries
+    from torchrl_subgoal.envs import FourRoomsEnv
+    from torchrl_subgoal.subgoals import Cell
+
+    potential = TabularPotential(2).freeze([0.25, 0.75])
+    transform = SubgoalPotentialTransform(
+        SubgoalSeries([Cell(4, 9)]), potential, gamma=0.99, observation_key="cell", value_update=0.5
+    )
+    env = TransformedEnv(FourRoomsEnv(), transform)
+    assert not transform.learning
+    env.rollout(200)  # long enough to close SMDP transitions
+    assert potential.table.tolist() == [0.25, 0.75]
+    with pytest.raises(ValueError, match="finite"):
+        TabularPotential(2).freeze([0.0, float("nan")])

@@ -101,9 +101,7 @@ def run(
                 assert parts is not None
                 _, potential, options = parts
                 if condition == "HRS, optimal":
-                    with torch.no_grad():
-                        potential.table.copy_(torch.tensor(optimal).view_as(potential.table))
-                    potential.table.requires_grad_(False)
+                    potential.freeze(optimal)
                 shaping = Shaping(series, potential, options)
             curve = learner.train(
                 domain.make_env,

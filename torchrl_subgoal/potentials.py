@@ -189,6 +189,34 @@ class TabularPotential(Potential):
         """Number of tables (1 when shared)."""
         return self.batch_shape.numel()
 
+    def freeze(self, values: Sequence[float] | torch.Tensor) -> TabularPotential:
+        """Set every learner's table to ``values`` (one per abstract state) and stop it learning.
+
+        The shaping transform then shapes with these values and does not update them
+        (online or through :class:`~torchrl_subgoal.SubgoalValueLoss`): a known or
+        previously learned potential, given from the first step.
+
+        Examples:
+            >>> v = TabularPotential(3, batch_shape=(2,)).freeze([0.2, 0.5, 0.9])
+            >>> v.table.requires_grad, v.table[1].tolist() == [0.2, 0.5, 0.9]
+            (False, True)
+            >>> TabularPotential(3).freeze([0.2, 0.5])
+            Traceback (most recent call last):
+            ...
+            ValueError: a frozen table needs 3 values (z = 0..2), got 2
+        """
+        values = torch.as_tensor(values, dtype=self.table.dtype).reshape(-1)
+        if values.numel() != self.num_states:
+            raise ValueError(
+                f"a frozen table needs {self.num_states} values (z = 0..{self.num_states - 1}), got {values.numel()}"
+            )
+        if not torch.isfinite(values).all():
+            raise ValueError(f"a frozen table's values must be finite, got {values.tolist()}")
+        with torch.no_grad():
+            self.table.copy_(values.expand_as(self.table))
+        self.table.requires_grad_(False)
+        return self
+
     def value(self, z: torch.Tensor, learner: torch.Tensor | None = None) -> torch.Tensor:  # type: ignore[override]
         if z.shape[-1:] != (1,):
             raise ValueError(f"subgoal_index must end with a singleton dim, got shape {tuple(z.shape)}")

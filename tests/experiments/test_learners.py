@@ -3,9 +3,11 @@ and the plan's stored configuration."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
-from torchrl_subgoal import domains
+from torchrl_subgoal import domains, load_patterns
 from torchrl_subgoal.experiments.cli import ConfigError
 from torchrl_subgoal.experiments.learners import (
     LearnerRecipeConfig,
@@ -90,3 +92,59 @@ def test_the_learner_sees_z_by_its_own_default_unless_told() -> None:
     assert default == {"dqn": None, "ppo": False}
     assert learner_settings(LearnerRecipeConfig(sees_subgoal="no"), "dqn", four_rooms).sees_subgoal is False
     assert learner_settings(LearnerRecipeConfig(sees_subgoal="yes"), "ppo", four_rooms).sees_subgoal is True
+
+
+def _tables_file(tmp_path, tables) -> str:
+    path = tmp_path / "tables.json"
+    path.write_text(json.dumps(tables))
+    return str(path)
+
+
+def test_a_frozen_potential_shapes_from_the_first_step_and_never_learns(tmp_path) -> None:
+    from torchrl_subgoal.experiments import learners
+    from torchrl_subgoal.experiments.store import Chunk
+
+    first = next(iter(load_patterns(domains.part("four_rooms", LearnerDomain).participants, domain="four_rooms")))
+    frozen = {first: [0.2, 0.5, 0.9]}
+    cfg = LearnerRecipeConfig(
+        methods="HRS", total_frames=512, results=str(tmp_path / "run"), frozen_potential=_tables_file(tmp_path, frozen)
+    )
+    with pytest.raises(ConfigError, match=r"no table for pattern 'participant_2' \(HRS\)"):
+        learner_plan(cfg, "a2c")  # every participant's pattern needs one
+    patterns = load_patterns(domains.part("four_rooms", LearnerDomain).participants, domain="four_rooms")
+    tables = {name: [0.2, 0.5, 0.9] for name in patterns}
+    cfg.frozen_potential = _tables_file(tmp_path, tables)
+    plan = learner_plan(cfg, "a2c")
+    assert plan.config["frozen_potential"] == tables  # stored: resuming with other tables is another experiment
+    learners.run_learner_chunk(Chunk("HRS", 0, ((first, 0),), seed=1), plan.config, lambda done: None)
+    logged = tmp_path / "run" / "logs" / f"HRS_{first}_0" / "scalars"
+    for z, value in enumerate([0.2, 0.5, 0.9]):
+        rows = (logged / f"potential_z{z}.csv").read_text().split()
+        assert [float(r.split(",")[1]) for r in rows] == pytest.approx([value, value])  # after each of 2 batches
+    assert "frozen_potential" not in learner_plan(LearnerRecipeConfig(methods="HRS"), "a2c").config
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (None, r"cannot read it"),
+        ("{not json", r"not valid JSON \(line 1"),
+        ("[0.1, 0.2]", r"expected an object \{pattern: \[V\(z0\), V\(z1\), \.\.\.\]\}, got list"),
+        ('{"participant_1": [0.1, "x", 0.3]}', r"pattern 'participant_1': expected 3 finite numbers"),
+        ('{"participant_1": [0.1, 0.3]}', r"pattern 'participant_1': expected 3 finite numbers .* got \[0\.1, 0\.3\]"),
+    ],
+)
+def test_a_bad_frozen_potential_file_names_the_file_and_the_pattern(tmp_path, content, message) -> None:
+    path = tmp_path / "tables.json"
+    if content is not None:
+        path.write_text(content)
+    cfg = LearnerRecipeConfig(methods="HRS", frozen_potential=str(path), results=str(tmp_path / "run"))
+    with pytest.raises(ConfigError, match=rf"^--frozen-potential: {path}: {message}"):
+        learner_plan(cfg, "a2c")
+    assert not (tmp_path / "run").exists()  # nothing written before the check
+
+
+def test_a_frozen_potential_needs_a_method_that_learns_a_table(tmp_path) -> None:
+    cfg = LearnerRecipeConfig(methods="A2C,NRS", frozen_potential=_tables_file(tmp_path, {}))
+    with pytest.raises(ConfigError, match=r"^--frozen-potential: no method of --methods learns a table"):
+        learner_plan(cfg, "a2c")

@@ -18,7 +18,9 @@ updates and in frames.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Literal
@@ -26,9 +28,10 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 import torch
 
-from torchrl_subgoal import domains, load_patterns
+from torchrl_subgoal import TabularPotential, domains, load_patterns
 from torchrl_subgoal.experiments.cli import ConfigError, check, setting
 from torchrl_subgoal.experiments.recipe import (
+    PatternSets,
     Plan,
     RecipeConfig,
     check_methods,
@@ -50,7 +53,14 @@ from torchrl_subgoal.training import (
     experiment_logger,
 )
 
-__all__ = ["LearnerRecipeConfig", "learner_methods", "learner_plan", "learner_settings", "run_learner_chunk"]
+__all__ = [
+    "LearnerRecipeConfig",
+    "frozen_tables",
+    "learner_methods",
+    "learner_plan",
+    "learner_settings",
+    "run_learner_chunk",
+]
 
 
 @dataclass
@@ -110,6 +120,11 @@ class LearnerRecipeConfig(RecipeConfig):
     )
     monotone_potential: bool = setting(
         False, "shape with the learned table made non-decreasing along the series (HRS, RRS)"
+    )
+    frozen_potential: str = setting(
+        "",
+        "a JSON file {pattern: [V(z0), V(z1), ...]}: HRS and RRS shape with these tables from the first step and "
+        "do not train them (tools/learned_tables.py writes one from a run's logs)",
     )
     seed: int = setting(0, "sweep seed (random patterns, learner seeds)")
     results: str = setting("", "results directory (default results/<algo>_<domain>; re-run to resume)")
@@ -256,6 +271,7 @@ def learner_plan(
     )
     check_patterns(patterns, probe, str(domain.subgoal_key))
     specs = method_specs(methods, names, patterns, cfg.learnings)
+    frozen = frozen_tables(cfg.frozen_potential, [methods[n] for n in names], patterns) if cfg.frozen_potential else {}
     results = cfg.results or f"results/{algo}_{cfg.domain}"
     iterations = settings.iterations
     final = final_updates if final_updates is not None else max(10, iterations // 20)
@@ -266,6 +282,7 @@ def learner_plan(
         "zero_terminal_potential": cfg.zero_terminal_potential,
         "start_potential": cfg.start_potential,
         **({"monotone_potential": True} if cfg.monotone_potential else {}),
+        **({"frozen_potential": frozen} if frozen else {}),
         "subgoal_file": subgoal_file,
         "patterns": pattern_config(patterns),
         "pattern_sources": pattern_sources(patterns),
@@ -282,6 +299,56 @@ def learner_plan(
     return Plan(
         f"{algo}_{cfg.domain}", specs, run_learner_chunk, config, episodes=iterations, chunk_size=1, results=results
     )
+
+
+def frozen_tables(path: str, methods: Sequence[Method], patterns: PatternSets) -> dict[str, list[float]]:
+    """The tables ``--frozen-potential`` gives: one per pattern of the sweep's learned-potential methods (HRS, RRS).
+
+    Raises:
+        ConfigError: naming the flag, the file and the pattern (an unreadable or malformed file, a
+            pattern without a table, a table of the wrong length), or no method that learns a table.
+
+    Examples:
+        >>> import json, tempfile
+        >>> from torchrl_subgoal.subgoals import Cell, SubgoalSeries
+        >>> sets = {"human": {"alice": SubgoalSeries([Cell(4, 9)], name="alice")}, "random": {}}
+        >>> path = tempfile.mktemp(suffix=".json")
+        >>> _ = Path(path).write_text(json.dumps({"alice": [0.5, 0.8]}))
+        >>> frozen_tables(path, [Method("HRS", "subgoals", "human")], sets)
+        {'alice': [0.5, 0.8]}
+        >>> _ = Path(path).write_text(json.dumps({"alice": [0.5]}))
+        >>> frozen_tables(path, [Method("HRS", "subgoals", "human")], sets)
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --frozen-potential: ...: pattern 'alice': expected 2 ...
+    """
+    where = f"--frozen-potential: {path}"
+    try:
+        data = json.loads(Path(path).read_text())
+    except OSError as exc:
+        raise ConfigError(f"{where}: cannot read it ({exc.strerror or exc})") from None
+    except json.JSONDecodeError as exc:
+        raise ConfigError(f"{where}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where}: expected an object {{pattern: [V(z0), V(z1), ...]}}, got {type(data).__name__}")
+    learned = [m for m in methods if m.shaping == "subgoals"]
+    check(bool(learned), "frozen_potential", "no method of --methods learns a table (HRS and RRS do)")
+    tables = {}
+    for method in learned:
+        for name, series in patterns[method.subgoals].items():
+            if name not in data:
+                raise ConfigError(f"{where}: no table for pattern {name!r} ({method.name}); it has {sorted(data)}")
+            table, size = data[name], series.num_abstract_states
+            numbers = isinstance(table, list) and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in table
+            )
+            if not numbers or len(table) != size:
+                raise ConfigError(
+                    f"{where}: pattern {name!r}: expected {size} finite numbers (V(z) for z = 0..{size - 1}), "
+                    f"got {table!r}"
+                )
+            tables[name] = [float(v) for v in table]
+    return tables
 
 
 def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
@@ -323,6 +390,11 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
             start_potential=config["start_potential"],
             monotone_potential=config.get("monotone_potential", False),
         )
+        frozen = config.get("frozen_potential", {}).get(pattern) if method.shaping == "subgoals" else None
+        if parts is not None and frozen is not None:
+            potential = parts[1]
+            assert isinstance(potential, TabularPotential), f"{method.name} learns no table to freeze"
+            potential.freeze(frozen)
         seed = chunk.seed + i
         # a pattern-less learner (unshaped, SARSA-RS) runs the task its learning number picks
         make_env = domain.env_for(pattern if pattern in routes else routes[learning % len(routes)], seed)

@@ -180,7 +180,7 @@ class SubgoalPotentialTransform(Transform):
     @property
     def learning(self) -> bool:
         """Whether the potential is trained online: ``value_update`` was given and it is not frozen
-        (freeze it with ``transform.potential.requires_grad_(False)``)."""
+        (freeze it with ``TabularPotential.freeze`` or ``transform.potential.requires_grad_(False)``)."""
         return self.value_update is not None and any(p.requires_grad for p in self._parameters_list)
 
     @property
