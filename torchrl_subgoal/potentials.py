@@ -197,8 +197,8 @@ class TabularPotential(Potential):
         previously learned potential, given from the first step.
 
         Examples:
-            >>> v = TabularPotential(3, batch_shape=(2,)).freeze([0.2, 0.5, 0.9])
-            >>> v.table.requires_grad, v.table[1].tolist() == [0.2, 0.5, 0.9]
+            >>> v = TabularPotential(3, batch_shape=(2,)).freeze([0.25, 0.5, 0.75])
+            >>> v.table.requires_grad, v.table[1].tolist() == [0.25, 0.5, 0.75]
             (False, True)
             >>> TabularPotential(3).freeze([0.2, 0.5])
             Traceback (most recent call last):
