@@ -88,19 +88,28 @@ def test_learner_key_errors() -> None:
 
 
 def test_a_frozen_table_is_not_trained_online() -> None:
+    """The same random walk moves a table that is not frozen (it closes an SMDP transition) and not a frozen one."""
     from torchrl.envs import TransformedEnv
 
     from torchrl_subgoal import SubgoalPotentialTransform, SubgoalSeries
     from torchrl_subgoal.envs import FourRoomsEnv
     from torchrl_subgoal.subgoals import Cell
 
-    potential = TabularPotential(2).freeze([0.25, 0.75])
-    transform = SubgoalPotentialTransform(
-        SubgoalSeries([Cell(4, 9)]), potential, gamma=0.99, observation_key="cell", value_update=0.5
-    )
-    env = TransformedEnv(FourRoomsEnv(), transform)
-    assert not transform.learning
-    env.rollout(200)  # long enough to close SMDP transitions
-    assert potential.table.tolist() == [0.25, 0.75]
+    tables = {}
+    for frozen in (False, True):
+        potential = TabularPotential(2)
+        if frozen:
+            potential.freeze([0.25, 0.75])
+        else:
+            with torch.no_grad():
+                potential.table.copy_(torch.tensor([0.25, 0.75]))
+        transform = SubgoalPotentialTransform(
+            SubgoalSeries([Cell(4, 9)]), potential, gamma=0.99, observation_key="cell", value_update=0.5
+        )
+        assert transform.learning != frozen
+        torch.manual_seed(1)  # a walk that reaches the hallway within 200 steps
+        TransformedEnv(FourRoomsEnv(), transform).rollout(200)
+        tables[frozen] = potential.table.tolist()
+    assert tables[False] != [0.25, 0.75] and tables[True] == [0.25, 0.75]
     with pytest.raises(ValueError, match="finite"):
         TabularPotential(2).freeze([0.0, float("nan")])

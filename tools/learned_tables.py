@@ -88,8 +88,10 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         parser.error(f"--at: expected comma-separated frame counts, got {opts.at!r}")
     chosen: dict[str, list[float]] = {}
+    wanted: set[str] = set()
     for results in opts.results:
         tables = learner_tables(results, opts.method)
+        wanted.update(pattern for pattern, _ in tables)
         finals = {key: [float(values[-1]) for _, values in series] for key, series in tables.items()}
         disorder = [key for key, table in finals.items() if not in_order(table)]
         print(f"\n{results}: {opts.method}, {len(finals)} learners, {len(disorder)} tables out of order (*)\n")
@@ -110,7 +112,6 @@ def main(argv: list[str] | None = None) -> int:
                 cells = " | ".join(f"{m:.3f} ({s:.3f})" for m, s in zip(values.mean(0), values.std(0), strict=True))
                 print(f"| {frames:,.0f} | {cells} | {int((np.abs(values).max(1) == 0).sum())} of {len(same)} |")
     if opts.json:
-        wanted = {pattern for results in opts.results for pattern, _ in learner_tables(results, opts.method)}
         missing = sorted(wanted - set(chosen))
         if missing:
             raise SystemExit(f"--json: no {'in-order ' if opts.in_order else ''}table for pattern(s) {missing}")

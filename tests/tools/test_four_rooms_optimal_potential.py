@@ -2,30 +2,20 @@
 
 from __future__ import annotations
 
-import importlib.util
 import subprocess
 import sys
-from pathlib import Path
-from types import ModuleType
 
 import pytest
 
+from tests.tools import TOOLS, load_tool
 from torchrl_subgoal import SubgoalSeries
 from torchrl_subgoal.subgoals import Cell
 
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "four_rooms_optimal_potential.py"
-
-
-def _tool() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("four_rooms_optimal_potential", TOOL)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+TOOL = TOOLS / "four_rooms_optimal_potential.py"
 
 
 def test_optimal_values_under_either_reward() -> None:
-    tool = _tool()
+    tool = load_tool("four_rooms_optimal_potential")
     series = SubgoalSeries([Cell(4, 9), Cell(11, 10)])  # the hallway, then next to the goal
     goal = tool.optimal_values(series, "goal", 0.99)
     step = tool.optimal_values(series, "step", 0.99)

@@ -2,22 +2,12 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
-from types import ModuleType
 
 import pytest
 
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "learned_tables.py"
-
-
-def _tool() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("learned_tables", TOOL)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from tests.tools import load_tool
 
 
 def _results(root: Path, tables: dict[str, list[list[float]]]) -> Path:
@@ -36,7 +26,7 @@ def _results(root: Path, tables: dict[str, list[list[float]]]) -> Path:
 
 
 def test_final_tables_over_time_and_the_frozen_file(tmp_path, capsys) -> None:
-    tool = _tool()
+    tool = load_tool("learned_tables")
     first = _results(tmp_path / "a", {"alice": [[0, 0, 0], [0.1, 0.4, 0.8]], "bob": [[0, 0, 0.1], [0.5, 0.2, 0.9]]})
     second = _results(tmp_path / "b", {"bob": [[0, 0, 0], [0.3, 0.6, 0.7]]})
     out = tmp_path / "tables.json"
@@ -53,7 +43,7 @@ def test_final_tables_over_time_and_the_frozen_file(tmp_path, capsys) -> None:
 
 
 def test_what_it_cannot_read_is_named(tmp_path) -> None:
-    tool = _tool()
+    tool = load_tool("learned_tables")
     results = _results(tmp_path / "a", {"bob": [[0.5, 0.2, 0.9]]})
     with pytest.raises(SystemExit, match=r"no in-order table for pattern\(s\) \['bob'\]"):
         tool.main([str(results), "--json", str(tmp_path / "t.json"), "--in-order"])

@@ -122,6 +122,17 @@ def test_a2c_with_envs_in_worker_processes(online: bool, workers: dict[str, int]
     assert curve.episodes[-1] > 0 and bool((potential.table.detach() > 0.5).all())
 
 
+@pytest.mark.parametrize("workers", [{"collector_workers": 1}, {"env_workers": 2, "num_envs": 4}])
+def test_a_frozen_potential_stays_frozen_in_worker_processes(workers: dict[str, int]) -> None:
+    """The set-up above, whose online update moves the shared table, with the table frozen: the workers'
+    transforms shape with it and leave it as it was."""
+    potential = TabularPotential(3).freeze([0.25, 0.5, 0.75])
+    shaping = Shaping(SubgoalSeries([State(1), State(3)]), potential)
+    config = A2CConfig(features="one_hot", hidden=(), total_frames=2048, value_lr=0.1, **workers)
+    curve = train_a2c(lambda n: LineEnv(n, length=4), config, shaping=shaping, seed=1, episode_cap=100)
+    assert curve.episodes[-1] > 0 and potential.table.tolist() == [0.25, 0.5, 0.75]
+
+
 def test_a2c_with_two_collector_workers_takes_a_sweep_seed() -> None:
     """Sweep seeds take 63 bits; a worker seeds numpy with the collector's seed, which takes 32. A batch
     holds frames_per_batch frames of both workers: as many batches as ``iterations`` says."""
