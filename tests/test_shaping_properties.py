@@ -250,8 +250,8 @@ def test_infinite_observations_compare_as_numbers() -> None:
 @given(st.data())
 def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> None:
     """``_kernels.shaping.shape_step`` against the torch functions of ``transform.shaping`` and one SGD step of
-    ``SubgoalValueLoss`` (reduction "sum"): the SMDP return, the online update (a table per row or one shared
-    table), the start level and the terminal potential."""
+    ``SubgoalValueLoss`` (reduction "sum"): the SMDP return, the online update (a table per row, one shared
+    table, or a table per group of rows), the start level and the terminal potential."""
     from torchrl_subgoal import SubgoalValueLoss
     from torchrl_subgoal._kernels.shaping import shape_step
     from torchrl_subgoal.transform.setup import PotentialKernelState
@@ -267,6 +267,9 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
 
     n, states = data.draw(st.integers(1, 6)), data.draw(st.integers(2, 4))
     shared, zero_terminal = data.draw(st.booleans()), data.draw(st.booleans())
+    # a table per row (group 1), or consecutive rows sharing one (envs_per_table = group)
+    group = 1 if shared else data.draw(st.sampled_from([g for g in range(1, n + 1) if n % g == 0]))
+    tables = 1 if shared else n // group
     start, lr = data.draw(st.sampled_from(sorted(START_MODES))), data.draw(st.sampled_from([0.0, 0.25, 1.0]))
     gamma, value_gamma = data.draw(st.sampled_from([0.9, 0.99, 1.0])), data.draw(st.sampled_from([0.5, 0.95]))
     expectile, bootstrap = data.draw(st.sampled_from([0.5, 0.9, 0.3])), data.draw(st.booleans())
@@ -285,8 +288,8 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
         data.draw(
             st.lists(
                 st.floats(-3, 3, width=32),
-                min_size=(1 if shared else n) * states,
-                max_size=(1 if shared else n) * states,
+                min_size=tables * states,
+                max_size=tables * states,
             )
         )
     ).reshape(-1, states)
@@ -305,7 +308,7 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
     )
     shape_step(
         potential,
-        shared,
+        n if shared else (group if group > 1 else 0),
         z.numpy(),
         z_next.numpy(),
         z.numpy(),
@@ -318,7 +321,7 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
         *outputs,
     )
     # the torch reference
-    v = TabularPotential(states, () if shared else (n,))
+    v = TabularPotential(states, () if shared else (tables,), envs_per_table=group)
     with torch.no_grad():
         v.table.copy_(table[0] if shared else table)
     r_acc, k_acc = accumulate(r_h, k, reward, value_gamma)
@@ -343,7 +346,7 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
         )["loss_value"].backward()
         with torch.no_grad():
             v.table -= lr * v.table.grad
-    rows = torch.zeros(n, dtype=torch.long) if shared else torch.arange(n)
+    rows = torch.zeros(n, dtype=torch.long) if shared else torch.arange(n) // group
     values = v.table.detach().reshape(-1, states)[rows]
     level = start_level(values[:, :1], start)  # z_0 = 0: every subgoal series starts there
     phi, phi_next = values.gather(1, z), values.gather(1, z_next)

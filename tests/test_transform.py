@@ -899,3 +899,59 @@ def test_a_monotone_table_in_a_collector_over_a_parallel_env() -> None:
             assert torch.allclose(data["next", "reward"], data["next", "env_reward"] + 0.9 * phi_next - phi[z])
     finally:
         collector.shutdown()  # closes the env too
+
+
+def test_learners_sharing_tables_in_one_env_batch_equal_each_learner_alone(backend: str) -> None:
+    """``TabularPotential(envs_per_table=M)``: K learners of M envs each as one env batch of K·M envs, one table
+    per learner trained online, give each learner the rewards and the table it gets alone (M envs, one shared
+    table), bit for bit (four-rooms is deterministic given the actions)."""
+    learners, envs, steps = 3, 4, 120
+    actions = torch.randint(0, 4, (steps, learners * envs), generator=torch.Generator().manual_seed(3))
+
+    def run(n: int, potential: TabularPotential, acts: torch.Tensor) -> torch.Tensor:
+        t = SubgoalPotentialTransform(
+            HALLWAYS, potential, gamma=0.99, observation_key="cell", value_update=0.5, backend=backend
+        )
+        env = TransformedEnv(FourRoomsEnv(n, max_steps=40, step_reward=-1.0), t)
+        td, rewards = env.reset(), []
+        for a in acts:
+            out, td = step(env, td, a.tolist())
+            rewards.append(out["next", "reward"].reshape(-1))
+        return torch.stack(rewards)
+
+    batch = TabularPotential(3, (learners,), envs_per_table=envs)
+    together = run(learners * envs, batch, actions)
+    for k in range(learners):
+        alone = TabularPotential(3)
+        rewards = run(envs, alone, actions[:, k * envs : (k + 1) * envs])
+        assert torch.equal(together[:, k * envs : (k + 1) * envs], rewards)
+        assert torch.equal(batch.table[k].detach(), alone.table.detach())
+    assert not torch.equal(batch.table[0], batch.table[1])  # the learners' tables differ: each learned its own
+
+
+def test_tables_shared_by_envs_must_fit_the_env_batch() -> None:
+    with pytest.raises(ValueError, match="batch_shape \\(3,\\) of 4 envs each but the env batch has 8 envs"):
+        TransformedEnv(
+            FourRoomsEnv(8),
+            SubgoalPotentialTransform(
+                HALLWAYS, TabularPotential(3, (3,), envs_per_table=4), gamma=0.99, observation_key="cell"
+            ),
+        ).rollout(2)
+    with pytest.raises(ValueError, match="envs_per_table needs a batch of tables"):
+        TabularPotential(3, envs_per_table=2)
+
+
+def test_stored_rows_of_learners_sharing_tables_read_their_learners_table(backend: str) -> None:
+    """Re-shaping collected data (in env order, or shuffled rows with their learner entries) reads each row's
+    table as the online pass did."""
+    v = TabularPotential(3, (2,), envs_per_table=3)
+    with torch.no_grad():
+        v.table.copy_(torch.tensor([[0.0, 0.5, 0.75], [-1.0, -0.5, 0.25]]))
+    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.9, observation_key="cell", backend=backend)
+    data = TransformedEnv(FourRoomsEnv(6, max_steps=50), t).rollout(150, break_when_any_done=False)
+    assert data["next", "subgoal_index"].max() > 0
+    offline = t(data.clone())
+    assert torch.equal(offline["next", "reward"], data["next", "reward"])
+    rows = torch.randperm(6)
+    shuffled = t(data[rows].clone())
+    assert torch.equal(shuffled["next", "reward"], data["next", "reward"][rows])

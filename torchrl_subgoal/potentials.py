@@ -133,11 +133,15 @@ class TabularPotential(Potential):
     Args:
         num_states: number of abstract states (``SubgoalSeries.num_abstract_states``
             or the aggregation's ``num_states``).
-        batch_shape: shape of the learner batch (the env's batch size);
-            ``()`` for one table shared by every env.
+        batch_shape: shape of the learner batch (the env's batch size, or with ``envs_per_table``
+            the number of tables); ``()`` for one table shared by every env.
         init: initial value of every entry.
 
     Keyword Args:
+        envs_per_table: envs that share each table of a batch: table ``t`` serves the envs
+            (learner indices) ``t·envs_per_table … (t+1)·envs_per_table − 1``, so a batch of
+            learners that each step several envs is one env batch (learner-major) with one table
+            per learner, each updated as that learner's shared table would be on its own.
         monotone: the shaping transform shapes with the nearest table that does not decrease along
             ``z`` (least squares, each learner's table on its own) instead of the table as learned.
             Training and :meth:`value` read the table as it is. Where a learned table values a later
@@ -162,6 +166,11 @@ class TabularPotential(Potential):
         ...                      "subgoal_learner": torch.tensor([[1], [0], [1]])}, [3])
         >>> v(sample)["subgoal_value"].squeeze(-1)
         tensor([0.5000, 0.0000, 0.0000], grad_fn=<SqueezeBackward1>)
+        >>> grouped = TabularPotential(3, batch_shape=(2,), envs_per_table=2)  # envs 0, 1 | envs 2, 3
+        >>> with torch.no_grad():
+        ...     grouped.table[1, 2] = 0.5
+        >>> grouped.learners, grouped(torch.tensor([[2], [2], [2], [2]])).squeeze(-1).tolist()
+        (4, [0.0, 0.0, 0.5, 0.5])
     """
 
     def __init__(
@@ -171,6 +180,7 @@ class TabularPotential(Potential):
         init: float = 0.0,
         *,
         monotone: bool = False,
+        envs_per_table: int = 1,
         index_key: NestedKey = INDEX,
         learner_key: NestedKey = LEARNER,
         out_key: NestedKey = VALUE,
@@ -182,12 +192,22 @@ class TabularPotential(Potential):
         self.monotone = bool(monotone)
         if self.num_states < 1:
             raise ValueError(f"num_states must be >= 1, got {num_states}")
+        self.envs_per_table = int(envs_per_table)
+        if self.envs_per_table < 1:
+            raise ValueError(f"envs_per_table must be >= 1, got {envs_per_table}")
+        if self.envs_per_table > 1 and not self.batch_shape:
+            raise ValueError("envs_per_table needs a batch of tables (batch_shape); one shared table serves every env")
         self.table = nn.Parameter(torch.full((*self.batch_shape, self.num_states), float(init)))
 
     @property
-    def learners(self) -> int:
+    def tables(self) -> int:
         """Number of tables (1 when shared)."""
         return self.batch_shape.numel()
+
+    @property
+    def learners(self) -> int:
+        """Number of envs (learner indices) the tables serve: ``tables × envs_per_table`` (1 when shared)."""
+        return self.tables * self.envs_per_table
 
     def freeze(self, values: Sequence[float] | torch.Tensor) -> TabularPotential:
         """Set every learner's table to ``values`` (one per abstract state) and stop it learning.
@@ -228,7 +248,7 @@ class TabularPotential(Potential):
             )
         if not self.batch_shape:
             return self.table[z]
-        table = self.table.reshape(self.learners, self.num_states)
+        table = self.table.reshape(self.tables, self.num_states)
         if learner is not None:
             if learner.shape != z.shape:
                 raise ValueError(
@@ -238,15 +258,17 @@ class TabularPotential(Potential):
                 raise ValueError(
                     f"subgoal_learner values must lie in [0, {self.learners}) for a table batch "
                     f"of shape {tuple(self.batch_shape)}"
+                    + (f" of {self.envs_per_table} envs each" if self.envs_per_table > 1 else "")
                 )
-            return table[learner.long(), z]
-        nb = len(self.batch_shape)
-        if z.shape[:nb] != self.batch_shape:
+            rows = learner.long() if self.envs_per_table == 1 else learner.long() // self.envs_per_table
+            return table[rows, z]
+        envs = self.batch_shape if self.envs_per_table == 1 else torch.Size([self.learners])
+        if z.shape[: len(envs)] != envs:
             raise ValueError(
                 f"subgoal_index of shape {tuple(z.shape)} does not start with the learner batch "
-                f"shape {tuple(self.batch_shape)}; pass the learner indices (the 'subgoal_learner' entry)"
+                f"shape {tuple(envs)}; pass the learner indices (the 'subgoal_learner' entry)"
             )
-        return table.gather(1, z.reshape(self.learners, -1)).view(z.shape)
+        return table.gather(1, z.reshape(self.tables, -1)).view(z.shape)
 
 
 class NeuralPotential(Potential):

@@ -25,6 +25,7 @@ from torchrl_subgoal.training import (
     experiment_logger,
     shaped_env,
     train_a2c,
+    train_a2c_batch,
 )
 
 from ..line_env import LineEnv
@@ -238,3 +239,40 @@ def test_train_a2c_on_a_single_env_batched_by_serial_env() -> None:
     config = A2CConfig(num_envs=2, frames_per_batch=32, total_frames=64, features="one_hot", hidden=())
     curve = train_a2c(batched(make_single), config, shaping=shaping, seed=0, episode_cap=100)
     assert curve.frames == [32, 64]
+
+
+def test_a2c_learners_as_a_batch_each_learn_with_their_own_table(tmp_path: Path) -> None:
+    """Three A2C learners as one batch: each learns four-rooms, trains its own table online from its own envs,
+    and logs its own curve and table."""
+    torch.set_num_threads(1)
+    shapings = [Shaping(HALLWAYS, TabularPotential(3), {"observation_key": "cell"}) for _ in range(3)]
+    config = A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=40_960)
+    ticks: list[int] = []
+    loggers = [experiment_logger(tmp_path, f"HRS_{k}") for k in range(3)]
+    curves = train_a2c_batch(
+        four_rooms_env, config, [0, 1, 2], shapings=shapings, loggers=loggers, progress=ticks.append
+    )
+    assert len(ticks) == 3 * config.iterations
+    for k, curve in enumerate(curves):
+        assert curve.frames[-1] == 40_960 and len(curve.frames) == config.iterations
+        assert curve.episodes[-1] > 100 and min(curve.episode_length) < 150  # each learns
+        table = shapings[k].potential.table.detach()
+        assert torch.equal(table, torch.zeros(3))  # the learner's own potential is copied, not trained
+        logged = float((tmp_path / f"HRS_{k}" / "scalars" / "potential_z2.csv").read_text().split()[-1].split(",")[-1])
+        assert logged > 0  # its batch table learned from the goal reward
+    assert len({c.episode_length[-1] for c in curves} | {tuple(c.episodes) for c in curves}) > 1
+
+
+@pytest.mark.parametrize(
+    ("settings", "match"),
+    [
+        ({"collector_workers": 1}, "collector_workers off"),
+        ({"normalize_advantage": True}, "normalize_advantage off"),
+        ({"online_potential": False}, "online_potential must be True"),
+    ],
+)
+def test_a2c_learner_batch_refuses_settings_it_has_no_per_learner_version_of(settings: dict, match: str) -> None:
+    config = A2CConfig(features="one_hot", hidden=(), total_frames=512, **settings)
+    shapings = [Shaping(HALLWAYS, TabularPotential(3), {"observation_key": "cell"}) for _ in range(2)]
+    with pytest.raises(ValueError, match=match):
+        train_a2c_batch(four_rooms_env, config, [0, 1], shapings=shapings)

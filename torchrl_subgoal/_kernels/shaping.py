@@ -112,7 +112,7 @@ def _shape_learner(potential, row, zb, znb, achieved_prev, r_h, k, reward, done,
 @numba.njit(cache=True, nogil=True)
 def shape_step(
     potential,
-    shared,
+    group,
     z,
     z_next,
     achieved_prev,
@@ -140,18 +140,21 @@ def shape_step(
     ``k_acc_out`` and ``emit_out`` (the SMDP transition's ``r_h``, ``k`` and
     mask) are filled when not empty.
 
-    With a table per row this is :func:`_shape_learner` row by row, as in the
-    fused loops. With one ``shared`` table the update is one SGD step of
-    :class:`~torchrl_subgoal.SubgoalValueLoss` (reduction ``"sum"``) over the
-    batch: every TD error is computed with the table as it was, then all are
-    applied, then every reward is shaped; row by row would let a row's update
-    change the next row's TD error.
+    With a table per row (``group = 0``) this is :func:`_shape_learner` row by
+    row, as in the fused loops. With ``group > 0`` rows share tables: rows
+    ``b`` read and train ``table[b // group]`` (one table for every row:
+    ``group ≥`` the rows), and each table's update is one SGD step of
+    :class:`~torchrl_subgoal.SubgoalValueLoss` (reduction ``"sum"``) over its
+    rows: every TD error is computed with the tables as they were, then all
+    are applied, then every reward is shaped; row by row would let a row's
+    update change the next row's TD error.
     """
     n = z.shape[0]
     fill = emit_out.shape[0] > 0
-    if shared:
+    if group > 0:
         _shape_shared(
             potential,
+            group,
             z,
             z_next,
             achieved_prev,
@@ -195,6 +198,7 @@ def shape_step(
 @numba.njit(cache=True, nogil=True, inline="always")
 def _shape_shared(
     potential,
+    group,
     z,
     z_next,
     achieved_prev,
@@ -211,8 +215,8 @@ def _shape_shared(
     k_acc_out,
     emit_out,
 ):
-    """:func:`shape_step` with one table for every row: :func:`_shape_learner`'s three parts
-    (accumulate and TD error; update; shape) each over the whole batch."""
+    """:func:`shape_step` with rows sharing tables (row ``b`` reads ``table[b // group]``):
+    :func:`_shape_learner`'s three parts (accumulate and TD error; update; shape) each over the whole batch."""
     n = z.shape[0]
     table = potential.table
     learn = potential.value_lr > 0.0 and table.shape[0] > 0
@@ -222,7 +226,9 @@ def _shape_shared(
             z[b, 0], z_next[b, 0], r_h[b, 0], k[b, 0], reward[b, 0], done[b, 0], potential.value_gamma
         )
         if emit and learn and _learns_from(potential.bootstrap_truncated, z[b, 0], z_next[b, 0], terminated[b, 0]):
-            delta[b] = _td_error(table, 0, z[b, 0], z_next[b, 0], terminated[b, 0], r, discount, potential.value_gamma)
+            delta[b] = _td_error(
+                table, b // group, z[b, 0], z_next[b, 0], terminated[b, 0], r, discount, potential.value_gamma
+            )
         rh_out[b, 0] = 0.0 if emit else r
         k_out[b, 0] = 0 if emit else kb
         if emit_out.shape[0] > 0:
@@ -232,11 +238,13 @@ def _shape_shared(
     if learn:
         for b in range(n):
             if delta[b] != 0.0:
-                table[0, z[b, 0]] += potential.value_lr * _expectile_weight(potential.expectile, delta[b]) * delta[b]
+                table[b // group, z[b, 0]] += (
+                    potential.value_lr * _expectile_weight(potential.expectile, delta[b]) * delta[b]
+                )
     for b in range(n):
         reward_out[b, 0] = _shaped_reward(
             table,
-            0,
+            b // group,
             z[b, 0],
             z_next[b, 0],
             achieved_prev[b, 0],
@@ -308,7 +316,7 @@ def shaping_carry(z, achieved, r_h, k, b, reset, z_reset, zb, znb, rh_new, k_new
 def advance_and_shape(
     regions,
     potential,
-    shared,
+    group,
     z,
     obs,
     achieved,
@@ -336,7 +344,7 @@ def advance_and_shape(
     advance_regions(regions, z, obs, z_out)
     shape_step(
         potential,
-        shared,
+        group,
         z,
         z_out,
         achieved,

@@ -51,10 +51,12 @@ from torchrl_subgoal.training import (
     Shaping,
     check_actions,
     experiment_logger,
+    train_a2c_batch,
 )
 
 __all__ = [
     "LearnerRecipeConfig",
+    "check_seed_batch",
     "frozen_tables",
     "learner_methods",
     "learner_plan",
@@ -126,12 +128,17 @@ class LearnerRecipeConfig(RecipeConfig):
         "a JSON file {pattern: [V(z0), V(z1), ...]}: HRS and RRS shape with these tables from the first step and "
         "do not train them (tools/learned_tables.py writes one from a run's logs)",
     )
+    seed_batch: int = setting(
+        1,
+        "learners of a method trained together as one batch in one process (A2C: one env batch, stacked "
+        "networks, a table per learner); 1: one learner at a time",
+    )
     seed: int = setting(0, "sweep seed (random patterns, learner seeds)")
     results: str = setting("", "results directory (default results/<algo>_<domain>; re-run to resume)")
     backend: Literal["local", "ray"] = setting("local", "where learners run")
     workers: int = setting(2, "learners run at once (processes; 0: in this process)")
 
-    AT_LEAST_ONE: ClassVar[tuple[str, ...]] = ("learnings", "random_patterns")
+    AT_LEAST_ONE: ClassVar[tuple[str, ...]] = ("learnings", "random_patterns", "seed_batch")
     AT_LEAST_ZERO: ClassVar[tuple[str, ...]] = (
         "total_frames",
         "num_envs",
@@ -296,8 +303,42 @@ def learner_plan(
             "asymptotic_window": [max(0, iterations - final), iterations],
         },
     }
+    if cfg.seed_batch > 1:
+        check_seed_batch(algo, domain, settings, [methods[n] for n in names])
     return Plan(
-        f"{algo}_{cfg.domain}", specs, run_learner_chunk, config, episodes=iterations, chunk_size=1, results=results
+        f"{algo}_{cfg.domain}",
+        specs,
+        run_learner_chunk,
+        config,
+        episodes=iterations,
+        chunk_size=cfg.seed_batch,
+        results=results,
+    )
+
+
+def check_seed_batch(algo: str, domain: LearnerDomain, settings: Any, methods: Sequence[Method]) -> None:
+    """Refuse ``--seed-batch`` where learners cannot be batched, naming the flag and the reason.
+
+    Examples:
+        >>> from torchrl_subgoal.training import A2CConfig
+        >>> check_seed_batch("ppo", domains.part("four_rooms", LearnerDomain), A2CConfig(), [])
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --seed-batch: only A2C trains learners as a batch; ...
+    """
+    check(algo == "a2c", "seed_batch", f"only A2C trains learners as a batch; run {algo} with --seed-batch 1")
+    check(
+        domain.pattern_env is None,
+        "seed_batch",
+        f"{domain.name} gives each learner its own task (start and goal), so its learners cannot share an env batch",
+    )
+    check(settings.collector_workers == 0, "seed_batch", "needs --collector-workers 0 (one collector for the batch)")
+    check(not settings.normalize_advantage, "seed_batch", "needs normalize_advantage off (it would mix the learners)")
+    trained = any(m.shaping in ("subgoals", "aggregation") for m in methods)
+    check(
+        settings.online_potential or not trained,
+        "seed_batch",
+        "trains each learner's table online: drop --no-online-potential",
     )
 
 
@@ -352,7 +393,9 @@ def frozen_tables(path: str, methods: Sequence[Method], patterns: PatternSets) -
 
 
 def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
-    """Train the chunk's learners one after the other (each steps its own batch of envs); their records.
+    """Train the chunk's learners, one after the other (each steps its own batch of envs) or, for a chunk of
+    several A2C learners (``--seed-batch``), together as one batch (:func:`~torchrl_subgoal.training.train_a2c_batch`);
+    their records.
 
     Examples:
         >>> import tempfile
@@ -375,14 +418,15 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
             **({"reshape_samples": False} if learner.has_setting("reshape_samples") else {}),
         )
     routes = config["routes"]
-    curves = []
+    aggregation = domain.aggregation()
+    runs = []
     for i, (pattern, learning) in enumerate(chunk.learners):
         index = int(pattern_index[i])
         parts = shaping_parts(
             method,
             (),
             patterns=patterns[index : index + 1] if patterns else None,
-            aggregation=domain.aggregation(),
+            aggregation=aggregation,
             eta=domain.eta,
             observation_key=domain.subgoal_key,
             aggregation_key=domain.aggregation_key,
@@ -400,17 +444,30 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
         make_env = domain.env_for(pattern if pattern in routes else routes[learning % len(routes)], seed)
         # fresh: a learner run again after an interruption starts its log over, as its results do
         logger = experiment_logger(Path(config["log_dir"]), f"{chunk.method}_{pattern}_{learning}", fresh=True)
-        curves.append(
+        runs.append((make_env, Shaping(*parts) if parts is not None else None, seed, logger))
+    if len(runs) > 1:  # a seed batch (the plan checked that the learners can share one env batch)
+        curves = train_a2c_batch(
+            runs[0][0],
+            settings,
+            [seed for _, _, seed, _ in runs],
+            shapings=[shaping for _, shaping, _, _ in runs],
+            observation_key=domain.observation_key,
+            loggers=[logger for *_, logger in runs],
+            progress=progress,
+        )
+    else:
+        curves = [
             learner.train(
                 make_env,
                 settings,
-                shaping=Shaping(*parts) if parts is not None else None,
+                shaping=shaping,
                 observation_key=domain.observation_key,
                 seed=seed,
                 logger=logger,
                 progress=progress,
             )
-        )
+            for make_env, shaping, seed, logger in runs
+        ]
     steps = np.array([np.round(c.episode_length) for c in curves], dtype=np.int64)
     returns = np.array([c.episode_return for c in curves])
     success = np.array([c.success for c in curves])

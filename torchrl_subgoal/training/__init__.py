@@ -8,7 +8,8 @@
   :mod:`~torchrl_subgoal.training.ppo` (:func:`train_ppo`),
   :mod:`~torchrl_subgoal.training.dqn` (:func:`train_dqn`) and
   :mod:`~torchrl_subgoal.training.ddpg` (:func:`train_ddpg`, DDPG or TD3): one learner
-  each, ``train_<algo>(make_env, config, shaping=..., seed=...) -> LearningCurve``;
+  each, ``train_<algo>(make_env, config, shaping=..., seed=...) -> LearningCurve``; A2C also as a batch
+  of learners (:func:`train_a2c_batch`, seeds as a batch dimension: :mod:`~torchrl_subgoal.training.batch`);
 * :mod:`~torchrl_subgoal.training.smdp`: keep only the real SMDP transitions
   (:func:`smdp_transitions`, :func:`extend_transitions` into a replay buffer);
 * :mod:`~torchrl_subgoal.training.shared`: :class:`EnvFactory`, one potential
@@ -26,7 +27,7 @@ from typing import Literal
 
 from torchrl.record.loggers import CSVLogger, Logger
 
-from torchrl_subgoal.training.a2c import A2CConfig, actor_critic, train_a2c
+from torchrl_subgoal.training.a2c import A2CConfig, actor_critic, train_a2c, train_a2c_batch
 from torchrl_subgoal.training.common import (
     CurveRecorder,
     EpisodeWindow,
@@ -88,6 +89,7 @@ __all__ = [
     "smdp_transitions",
     "subgoal_states",
     "train_a2c",
+    "train_a2c_batch",
     "train_ddpg",
     "train_dqn",
     "train_ppo",

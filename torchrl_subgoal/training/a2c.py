@@ -21,6 +21,7 @@ factory) and, for shaping, a subgoal series::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -37,6 +38,14 @@ from torchrl.objectives import A2CLoss
 from torchrl.objectives.value import GAE
 from torchrl.record.loggers import Logger
 
+from torchrl_subgoal.potentials import TabularPotential
+from torchrl_subgoal.training.batch import (
+    LearnerStack,
+    batch_shaping,
+    clip_grad_norm_per_learner,
+    learner_means,
+    learner_rows,
+)
 from torchrl_subgoal.training.common import (
     EPISODE_RETURN,
     CurveRecorder,
@@ -70,6 +79,7 @@ __all__ = [
     "make_collector",
     "shaped_env",
     "train_a2c",
+    "train_a2c_batch",
 ]
 
 
@@ -209,6 +219,19 @@ def actor_critic(
         >>> critic.in_keys
         ['observation', 'subgoal_index']
     """
+    policy, value = _networks(env, observation_key, features, hidden, fourier_order, subgoal_states)
+    return _actor_critic_of(env, policy, value, _subgoal_keys(observation_key, subgoal_states))
+
+
+def _networks(
+    env: EnvBase,
+    observation_key: NestedKey,
+    features: Features,
+    hidden: Sequence[int],
+    fourier_order: int,
+    subgoal_states: int,
+) -> tuple[nn.Module, nn.Module]:
+    """:func:`actor_critic`'s policy network (logits) and value network."""
     spec = env.observation_spec[observation_key]
     action_spec = env.full_action_spec[env.action_key]
     if not isinstance(action_spec, Categorical | OneHot):
@@ -220,17 +243,23 @@ def actor_critic(
     for last in (policy_head, value_head):  # start from a uniform policy and a zero value
         nn.init.zeros_(last.weight)
         nn.init.zeros_(last.bias)
-    in_keys = _subgoal_keys(observation_key, subgoal_states)
+    return _network(policy_trunk, policy_head), _network(value_trunk, value_head)
+
+
+def _actor_critic_of(
+    env: EnvBase, policy: nn.Module, value: nn.Module, in_keys: list[NestedKey]
+) -> tuple[ProbabilisticActor, ValueOperator]:
+    """The TorchRL actor (a categorical policy over ``policy``'s logits) and critic of two networks."""
+    action_spec = env.full_action_spec[env.action_key]
     distribution = OneHotCategorical if isinstance(action_spec, OneHot) else torch.distributions.Categorical
     actor = ProbabilisticActor(
-        TensorDictModule(_network(policy_trunk, policy_head), in_keys=in_keys, out_keys=["logits"]),
+        TensorDictModule(policy, in_keys=in_keys, out_keys=["logits"]),
         in_keys=["logits"],
         spec=action_spec,
         distribution_class=distribution,
         return_log_prob=True,
     )
-    critic = ValueOperator(_network(value_trunk, value_head), in_keys=in_keys)
-    return actor, critic
+    return actor, ValueOperator(value, in_keys=in_keys)
 
 
 def train_a2c(
@@ -325,3 +354,139 @@ def train_a2c(
     finally:
         close_collector(collector)
     return recorder.curve
+
+
+def train_a2c_batch(
+    make_env: Callable[[int], EnvBase],
+    config: A2CConfig,
+    seeds: Sequence[int],
+    *,
+    shapings: Sequence[Shaping | None] | None = None,
+    observation_key: NestedKey = "observation",
+    episode_cap: float | None = None,
+    loggers: Sequence[Logger | None] | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> list[LearningCurve]:
+    """Train ``len(seeds)`` independent A2C learners as one batch; each learner's curve.
+
+    Learner ``k`` is :func:`train_a2c` with ``config``, ``shapings[k]`` and ``seeds[k]``: its own
+    networks (started as alone from its seed, :class:`~torchrl_subgoal.training.batch.LearnerStack`),
+    ``config.num_envs`` envs, its own table trained online, its own loss, gradient clipping and Adam
+    state. The ``K`` learners share one env batch of ``K × num_envs`` envs, one collector and one
+    optimiser step per batch, which is what makes a batch faster than ``K`` runs on one core.
+    Statistically, not bitwise, equal to the learners run one by one (one random stream for the
+    batch's actions; the envs seeded with ``seeds[0]``).
+
+    Args:
+        make_env: ``make_env(num_envs)`` returns an env with batch size ``[num_envs]`` (every learner's task).
+        config: every learner's settings; ``collector_workers=0``, ``normalize_advantage=False`` and,
+            with a trained potential, ``online_potential=True`` (per-learner versions of the others are
+            not built).
+        seeds: one per learner: its networks' initial weights.
+        shapings: one per learner (``None``: all unshaped).
+        observation_key: what the networks read.
+        episode_cap: as in :func:`train_a2c`.
+        loggers: one TorchRL logger per learner (or ``None``).
+        progress: called with 1 after every batch for every learner.
+
+    Examples:
+        >>> from torchrl_subgoal import Cell, SubgoalSeries, TabularPotential
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> series = SubgoalSeries([Cell(3, 6)])
+        >>> shapings = [Shaping(series, TabularPotential(2), {"observation_key": "cell"}) for _ in range(3)]
+        >>> config = A2CConfig(num_envs=4, frames_per_batch=64, total_frames=256, features="one_hot", hidden=())
+        >>> curves = train_a2c_batch(FourRoomsEnv, config, [0, 1, 2], shapings=shapings)
+        >>> len(curves), curves[2].frames
+        (3, [64, 128, 192, 256])
+    """
+    k = len(seeds)
+    if k < 1:
+        raise ValueError("train_a2c_batch needs at least one seed")
+    shapings = list(shapings) if shapings is not None else [None] * k
+    loggers = list(loggers) if loggers is not None else [None] * k
+    if len(shapings) != k or len(loggers) != k:
+        raise ValueError(f"{k} seeds need {k} shapings and {k} loggers, got {len(shapings)} and {len(loggers)}")
+    for name, bad in (
+        ("collector_workers", config.collector_workers != 0),
+        ("normalize_advantage", config.normalize_advantage),
+    ):
+        if bad:
+            raise ValueError(f"a learner batch needs {name} off (0 or False): its per-learner version is not built")
+    shaping = batch_shaping(shapings, config.num_envs)
+    if shaping is not None and shaping.trained and not config.online_potential:
+        raise ValueError("a learner batch trains its tables online: online_potential must be True")
+    iterations = config.iterations
+    batch = dataclasses.replace(
+        config,
+        num_envs=k * config.num_envs,
+        frames_per_batch=k * config.frames_per_batch,
+        total_frames=k * config.frames_per_batch * iterations,
+    )
+    factory, _ = learner_env(make_env, batch, shaping)
+    states = subgoal_states(config, shaping)
+    probe, cap = _probe_env(make_env, episode_cap)
+    nets = []
+    for seed in seeds:  # each learner's networks start as they would alone
+        torch.manual_seed(seed)
+        nets.append(_networks(probe, observation_key, config.features, config.hidden, config.fourier_order, states))
+    actor, critic = _actor_critic_of(
+        probe,
+        LearnerStack([p for p, _ in nets]),
+        LearnerStack([v for _, v in nets]),
+        _subgoal_keys(observation_key, states),
+    )
+    _close_probe(probe)
+    torch.manual_seed(seeds[0])
+    advantage = GAE(gamma=config.gamma, lmbda=config.gae_lambda, value_network=critic)
+    loss = A2CLoss(
+        actor,
+        critic,
+        entropy_coeff=config.entropy_coeff,
+        critic_coeff=config.critic_coeff,
+        loss_critic_type="l2",
+        reduction="none",
+    )
+    optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
+    collector = make_collector(factory, actor, batch)
+    _seed_collector(collector, seeds[0])
+    tables = (
+        shaping.potential.table if shaping is not None and isinstance(shaping.potential, TabularPotential) else None
+    )
+    recorders = [
+        CurveRecorder(
+            config.record_window,
+            cap,
+            config.reward_scale,
+            loggers[i],
+            progress,
+            _LearnerTable(tables[i]) if tables is not None else None,
+        )
+        for i in range(k)
+    ]
+    names = ("loss_objective", "loss_critic", "loss_entropy")
+    frames = 0
+    try:
+        for data in collector:
+            frames += data.numel() // k
+            with torch.no_grad():
+                advantage(data)
+            losses = loss(data)
+            means = {name: learner_means(losses[name], k) for name in names}
+            optimizer.zero_grad(set_to_none=True)
+            torch.stack([m.sum() for m in means.values()]).sum().backward()
+            clip_grad_norm_per_learner(loss.parameters(), config.max_grad_norm, k)
+            optimizer.step()
+            for i, rows in enumerate(learner_rows(k, data.shape[0])):
+                scalars = {name: float(means[name][i].detach()) for name in names}
+                recorders[i].add(data[rows], frames, {**scalars, "loss_potential": math.nan})
+    finally:
+        close_collector(collector)
+    return [r.curve for r in recorders]
+
+
+class _LearnerTable(nn.Module):
+    """One learner's row of a batch of tables (a view), as :class:`CurveRecorder` logs a potential's ``table``."""
+
+    def __init__(self, table: torch.Tensor) -> None:
+        super().__init__()
+        self.table = table

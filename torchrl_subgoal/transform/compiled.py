@@ -141,7 +141,7 @@ def compiled_step(
     potential = setup.kernel[learn]  # type: ignore[index]
     if setup.regions is not None:
         if not advance_and_shape(
-            setup.regions, potential, setup.shared, z_col, _rows(step.obs, n, setup), *inputs, *outputs, *extra
+            setup.regions, potential, setup.group, z_col, _rows(step.obs, n, setup), *inputs, *outputs, *extra
         ):
             check_finite(reward, step.obs, "reward", settings.observation_key)  # raises, naming the entry
             raise ValueError(
@@ -157,7 +157,7 @@ def compiled_step(
             z_next = abstraction.advance(z, step.obs, step.td)
             outputs = (z_next.numpy().reshape(col), *outputs[1:])
         zn_col = outputs[0]
-        shape_step(potential, setup.shared, z_col, zn_col, *inputs, *outputs[1:], *extra)
+        shape_step(potential, setup.group, z_col, zn_col, *inputs, *outputs[1:], *extra)
     if reward is not env_reward:  # after another shaping transform: shape its reward, accumulate the env's
         shaped += reward - env_reward
     out: dict[str, Any] = {keys.index: z_next, keys.ret: rh_out, keys.steps: k_out, "reward": shaped}

@@ -161,7 +161,7 @@ def monotone_values(potential: TabularPotential, setup: BatchSetup, indices: lis
     """
     rows = setup.learner.reshape(-1)
     table = potential.table.detach().reshape(-1, potential.num_states)
-    per_row = table[rows] if potential.batch_shape else table.expand(rows.numel(), -1)
+    per_row = table[rows // potential.envs_per_table] if potential.batch_shape else table.expand(rows.numel(), -1)
     assert setup.lengths is not None
     projected = nondecreasing(per_row, setup.lengths)
     return [projected.gather(1, z.reshape(-1, 1)).view(*setup.batch_shape, 1) for z in indices]

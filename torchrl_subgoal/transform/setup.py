@@ -291,9 +291,10 @@ def check_table(potential: TensorDictModuleBase, n_learners: int, num_states: in
     if not isinstance(potential, TabularPotential):
         return
     if potential.batch_shape and potential.learners != n_learners:
+        per_table = f" of {potential.envs_per_table} envs each" if potential.envs_per_table > 1 else ""
         raise ValueError(
-            f"TabularPotential has batch_shape {tuple(potential.batch_shape)} but the env batch has "
-            f"{n_learners} envs: use one table per env or a shared one (batch_shape=())"
+            f"TabularPotential has batch_shape {tuple(potential.batch_shape)}{per_table} but the env batch has "
+            f"{n_learners} envs: use one table per env (or per envs_per_table envs) or a shared one (batch_shape=())"
         )
     if potential.num_states < num_states:
         raise ValueError(f"TabularPotential has {potential.num_states} states; the abstraction has {num_states}")
@@ -353,7 +354,7 @@ class BatchSetup:
     compiled: bool = False  #: whether the compiled step shapes this batch
     compiled_search: bool = True  #: whether the torch step advances regions with the compiled region search
     kernel: tuple[PotentialKernelState, PotentialKernelState] | None = None  #: (without, with) the online update
-    shared: bool = False  #: one table for every row
+    group: int = 0  #: rows sharing each table (row ``b`` reads table ``b // group``; 0: a table per row)
     regions: RegionTables | None = None  #: the regions the compiled step advances (None: advanced in torch)
     table: torch.Tensor | None = None  #: the tabular potential's parameter, to see it move
     table_ptr: int = 0
@@ -378,13 +379,16 @@ class BatchSetup:
             eta = potential.eta
         else:
             assert isinstance(potential, TabularPotential)
-            table = potential.table.detach().numpy().reshape(potential.learners, potential.num_states)
-            self.shared = not potential.batch_shape
-            if not self.shared and not online:
-                table = np.ascontiguousarray(table[self.learner.reshape(-1).numpy()])
+            table = potential.table.detach().numpy().reshape(potential.tables, potential.num_states)
+            if not potential.batch_shape:
+                self.group = max(1, self.batch_shape.numel())  # one table for every row
+            elif not online:  # stored rows: each row's table, copied
+                table = np.ascontiguousarray(table[self.learner.reshape(-1).numpy() // potential.envs_per_table])
+            elif potential.envs_per_table > 1:  # the env batch in order: consecutive envs share a table
+                self.group = potential.envs_per_table
             self.table, self.table_ptr = potential.table, potential.table.data_ptr()
         n = self.batch_shape.numel()
-        if not self.shared and table.shape[0] not in (0, n):
+        if self.group == 0 and table.shape[0] not in (0, n):
             raise ValueError(f"the potential has {table.shape[0]} tables for a batch of {n} rows")
         mode = START_MODES[settings.start]
         loss = update.loss if update is not None else None
