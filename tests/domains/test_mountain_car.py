@@ -21,6 +21,15 @@ def test_mountain_car_registers_a_learner_set_up_and_a_map() -> None:
     assert list(load_patterns(learners.participants, domain="mountain_car")) == ["swing_then_speed"]
 
 
+@pytest.mark.parametrize("learner", ["a2c", "ppo", "dqn"])
+def test_each_learner_records_over_more_than_one_episode_per_env(learner: str) -> None:
+    """Until a learner reaches the flag, all its envs time out at step 200 together. The recorded episode length
+    (frames per finished episode over the last ``record_window`` batches) reads those as episodes as long as
+    the window's steps per env when the window is shorter than 200 steps: below the thresholds."""
+    config = domains.part("mountain_car", LearnerDomain).defaults[learner]
+    assert config.record_window * config.frames_per_batch // config.num_envs >= 3 * 200
+
+
 @pytest.mark.parametrize(
     ("predicate", "message"),
     [

@@ -53,15 +53,15 @@ def test_on_policy_learners_on_four_rooms(tmp_path: Path, algo: str) -> None:
     assert summary["methods"]["HRS"]["learners"] == 10 and summary["n_episodes"] == 2  # 10 patterns; 2 x 256
 
 
-def test_a2c_learners_as_seed_batches_report_and_resume(tmp_path: Path) -> None:
+@pytest.mark.parametrize("algo", ["a2c", "ppo"])
+def test_learners_as_seed_batches_report_and_resume(tmp_path: Path, algo: str) -> None:
     """``--seed-batch 4``: each method's learners train four at a time in one process; every learner reported and
     logged; a re-run resumes; another batch size is another experiment."""
-    args = ["--algo", "a2c", "--methods", "A2C,HRS,NRS,SARSA-RS", "--total-frames", "512", "--seed-batch", "4"]
+    methods = [algo.upper(), "HRS", "NRS", "SARSA-RS"]
+    args = ["--algo", algo, "--methods", ",".join(methods), "--total-frames", "512", "--seed-batch", "4"]
     assert run(tmp_path, *args) == 0
     summary = json.loads((tmp_path / "res" / "summary.json").read_text())
-    assert {m: summary["methods"][m]["learners"] for m in summary["methods"]} == dict.fromkeys(
-        ["A2C", "HRS", "NRS", "SARSA-RS"], 10
-    )
+    assert {m: summary["methods"][m]["learners"] for m in summary["methods"]} == dict.fromkeys(methods, 10)
     config = json.loads((tmp_path / "res" / "config.json").read_text())
     assert config["chunk_size"] == 4
     assert len(list((tmp_path / "res" / "logs").glob("HRS_*/scalars/potential_z2.csv"))) == 10
@@ -128,7 +128,8 @@ def test_continuous_learners_on_point_maze(tmp_path: Path, algo: str) -> None:
         (["--algo", "dqn", "--value-lr", "0"], "--value-lr: must be positive, got 0.0"),
         (["--algo", "dqn", "--learnings", "0"], "--learnings: must be >= 1, got 0"),
         (["--algo", "sac"], "argument --algo: invalid choice: 'sac'"),
-        (["--algo", "ppo", "--seed-batch", "2"], "--seed-batch: only A2C trains learners as a batch"),
+        (["--algo", "dqn", "--seed-batch", "2"], "--seed-batch: dqn has no batch of learners (a2c, ppo have)"),
+        (["--algo", "ppo", "--domain", "point_maze_umaze", "--seed-batch", "2"], "its own task"),
         (["--seed-batch", "0"], "--seed-batch: must be >= 1, got 0"),
         (["--algo", "a2c", "--seed-batch", "2", "--no-online-potential"], "--seed-batch: trains each learner's table"),
         (

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import pytest
 import torch
 from torch import nn
@@ -10,14 +12,14 @@ from torchrl.objectives.value import GAE
 
 from torchrl_subgoal import Cell, NaivePotential, SubgoalSeries, TabularPotential
 from torchrl_subgoal.envs import FourRoomsEnv
-from torchrl_subgoal.training import Shaping
-from torchrl_subgoal.training.a2c import _actor_critic_of, _networks
+from torchrl_subgoal.training import Shaping, actor_critic
 from torchrl_subgoal.training.batch import (
     LearnerStack,
     batch_shaping,
     clip_grad_norm_per_learner,
     learner_means,
     learner_rows,
+    stack_actor_critic,
 )
 
 HALLWAYS = SubgoalSeries([Cell(3, 6), Cell(7, 9)])
@@ -50,17 +52,16 @@ def test_each_learner_gets_the_a2c_gradient_it_gets_alone() -> None:
     learner's parameters the gradient of its own A2C loss on its own rows."""
     learners, envs = 3, 4
     env = FourRoomsEnv(learners * envs, max_steps=30, step_reward=-1.0)
-    nets = []
+    pairs = []
     for seed in range(learners):
         torch.manual_seed(seed)
-        policy, value = _networks(env, "observation", "one_hot", (8,), 3, 0)
+        actor, critic = actor_critic(env, features="one_hot", hidden=(8,))
         with torch.no_grad():  # away from the uniform start, where the entropy's gradient is 0
-            for p in [*policy.parameters(), *value.parameters()]:
+            for p in [*actor.parameters(), *critic.parameters()]:
                 p.add_(0.3 * torch.randn_like(p))
-        nets.append((policy, value))
-    actor, critic = _actor_critic_of(
-        env, LearnerStack([p for p, _ in nets]), LearnerStack([v for _, v in nets]), ["observation"]
-    )
+        pairs.append((actor, critic))
+    alone_pairs = copy.deepcopy(pairs)
+    actor, critic = stack_actor_critic(pairs)
     torch.manual_seed(5)
     data = env.rollout(40, actor, break_when_any_done=False)
     with torch.no_grad():
@@ -71,7 +72,7 @@ def test_each_learner_gets_the_a2c_gradient_it_gets_alone() -> None:
     sum(learner_means(out[n], learners).sum() for n in names).backward()
     batch_grads = [p.grad for p in loss.parameters()]
     for k, rows in enumerate(learner_rows(learners, learners * envs)):
-        alone_actor, alone_critic = _actor_critic_of(env, nets[k][0], nets[k][1], ["observation"])
+        alone_actor, alone_critic = alone_pairs[k]
         alone = A2CLoss(alone_actor, alone_critic, entropy_coeff=0.01, critic_coeff=0.5, loss_critic_type="l2")
         mine = data[rows].exclude("advantage", "value_target", "state_value", ("next", "state_value"))
         with torch.no_grad():
@@ -140,3 +141,43 @@ def test_batch_shaping_gives_each_learner_its_table_and_series() -> None:
 def test_batch_shaping_refuses_learners_it_cannot_batch(shapings: list, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         batch_shaping(shapings, 2)
+
+
+def test_each_learner_gets_the_ppo_gradient_of_its_own_minibatch_alone() -> None:
+    """A PPO minibatch of the batch is ``[K, size]``: each learner's advantages are standardised over its own
+    minibatch and its parameters get the gradient of its own clipped PPO loss."""
+    from torchrl.objectives import ClipPPOLoss
+
+    learners, envs, size = 2, 4, 32
+    env = FourRoomsEnv(learners * envs, max_steps=30, step_reward=-1.0)
+    pairs = []
+    for seed in range(learners):
+        torch.manual_seed(seed)
+        actor, critic = actor_critic(env, features="one_hot", hidden=(8,))
+        with torch.no_grad():
+            for p in [*actor.parameters(), *critic.parameters()]:
+                p.add_(0.3 * torch.randn_like(p))
+        pairs.append((actor, critic))
+    alone_pairs = copy.deepcopy(pairs)
+    actor, critic = stack_actor_critic(pairs)
+    torch.manual_seed(5)
+    with torch.no_grad():
+        data = env.rollout(20, actor, break_when_any_done=False)
+        GAE(gamma=0.9, lmbda=0.95, value_network=critic)(data)
+    for key in [k for k in data.keys() if isinstance(k, str) and k.endswith("log_prob")]:
+        data[key] = data[key] + 0.3 * torch.randn_like(data[key])  # as if another policy acted: some ratios clip
+    order = torch.randperm(envs * 20)[:size]
+    batch_loss = ClipPPOLoss(
+        actor, critic, normalize_advantage=True, normalize_advantage_exclude_dims=(0,), reduction="none"
+    )
+    out = batch_loss(data.reshape(learners, -1)[:, order])
+    names = ("loss_objective", "loss_critic")
+    torch.stack([learner_means(out[n], learners) for n in names]).sum().backward()
+    batch_grads = [p.grad for p in batch_loss.parameters()]
+    for k in range(learners):
+        alone_actor, alone_critic = alone_pairs[k]
+        alone = ClipPPOLoss(alone_actor, alone_critic, normalize_advantage=True)
+        parts = alone(data.reshape(learners, -1)[k, order])
+        sum(parts[n] for n in names).backward()
+        for g, batch_g in zip([p.grad for p in alone.parameters()], batch_grads, strict=True):
+            torch.testing.assert_close(batch_g[k], g, atol=1e-6, rtol=1e-5)

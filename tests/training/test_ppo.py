@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from torchrl_subgoal import Box, SubgoalSeries, TabularPotential
-from torchrl_subgoal.training import PPOConfig, Shaping, train_ppo
+from torchrl_subgoal.training import PPOConfig, Shaping, train_ppo, train_ppo_batch
 
 from .corridor import continuous_corridor, discrete_corridor
 
@@ -45,6 +45,18 @@ def test_shaped_ppo_that_sees_z_learns_and_trains_the_potential() -> None:
     curve = train_ppo(discrete_corridor, _config(sees_subgoal=True, value_lr=0.1), shaping=shaping, seed=1)
     assert curve.episode_length[-1] < 12
     assert bool((potential.table.detach() > 0.3).all())  # V(z) learned from the goal reward
+
+
+@pytest.mark.parametrize("make_env", [discrete_corridor, continuous_corridor], ids=["categorical", "tanh_normal"])
+def test_ppo_learners_as_a_batch_each_learn_the_corridor(make_env) -> None:  # type: ignore[no-untyped-def]
+    """Three shaped PPO learners seeing z as one batch (continuous: each with its own learned
+    state-independent scale): each learns."""
+    torch.set_num_threads(1)
+    shapings = [Shaping(SERIES, TabularPotential(SERIES.num_abstract_states)) for _ in range(3)]
+    curves = train_ppo_batch(make_env, _config(sees_subgoal=True, value_lr=0.1), [0, 1, 2], shapings=shapings)
+    for curve in curves:
+        assert len(curve.frames) == 20 and curve.frames[-1] == 5120
+        assert curve.episode_length[0] > 30 and curve.episode_length[-1] < 12 and curve.success[-1]
 
 
 @pytest.mark.parametrize(

@@ -78,7 +78,9 @@ LEARNERS = LearnerDomain(
     thresholds=(180.0, 150.0, 120.0),
     defaults={
         "dqn": DQNConfig.preset("mountain_car"),  # rl-baselines3-zoo's tuned DQN
-        "a2c": A2CConfig(num_envs=16, frames_per_batch=256, total_frames=500_000),
+        # 40 batches of 16 steps per env: the recorded episode length spans several 200-step episodes (with 8,
+        # the 16 envs' time-outs at step 200, all at once, fell inside 128 steps and read as 128-step episodes)
+        "a2c": A2CConfig(num_envs=16, frames_per_batch=256, total_frames=500_000, record_window=40),
         "ppo": PPOConfig(num_envs=16, frames_per_batch=256 * 16, minibatch_size=256, total_frames=500_000),
     },
 )

@@ -32,6 +32,7 @@ from torchrl.data import Binary, Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from torchrl_subgoal.subgoals import Box, Predicate, StateAggregation, SubgoalSeries, load_patterns
+from torchrl_subgoal.envs.gym_batch import import_robotics
 
 __all__ = [
     "COMPONENTS",
@@ -172,8 +173,9 @@ def require_fetch() -> ModuleType:
     """
     try:
         import gymnasium
-        import gymnasium_robotics
         import mujoco  # noqa: F401
+
+        gymnasium_robotics = import_robotics()
     except ImportError as exc:
         raise FetchUnavailableError(
             f"pick-and-place needs MuJoCo and gymnasium-robotics ({exc.name} is missing): {INSTALL_HINT}"

@@ -13,12 +13,14 @@ Needs ``gymnasium`` (``pip install gymnasium``, or the ``fetch`` extra).
 
 from __future__ import annotations
 
+import contextlib
+import io
 from collections.abc import Callable, Sequence
 from typing import Any
 
 from torchrl.envs import EnvBase
 
-__all__ = ["gym_batch", "require_gymnasium"]
+__all__ = ["gym_batch", "import_robotics", "require_gymnasium"]
 
 
 def require_gymnasium(what: str, *, robotics: bool = False) -> Any:
@@ -43,7 +45,7 @@ def require_gymnasium(what: str, *, robotics: bool = False) -> Any:
         ) from None
     if robotics:
         try:
-            import gymnasium_robotics
+            gymnasium_robotics = import_robotics()
             import mujoco  # noqa: F401
         except ImportError as exc:
             raise ImportError(
@@ -52,6 +54,14 @@ def require_gymnasium(what: str, *, robotics: bool = False) -> Any:
             ) from None
         gymnasium.register_envs(gymnasium_robotics)
     return gymnasium
+
+
+def import_robotics() -> Any:
+    """``gymnasium_robotics``, imported without the notice it prints on stderr at import (about its Adroit hand
+    envs' rewards, which this package does not use), so that a recipe's one-line errors stay one line."""
+    with contextlib.redirect_stderr(io.StringIO()):
+        import gymnasium_robotics
+    return gymnasium_robotics
 
 
 def gym_batch(make_envs: Sequence[Callable[[], Any]], *, max_steps: int | None = None, **kwargs: Any) -> EnvBase:

@@ -51,7 +51,6 @@ from torchrl_subgoal.training import (
     Shaping,
     check_actions,
     experiment_logger,
-    train_a2c_batch,
 )
 
 __all__ = [
@@ -130,8 +129,8 @@ class LearnerRecipeConfig(RecipeConfig):
     )
     seed_batch: int = setting(
         1,
-        "learners of a method trained together as one batch in one process (A2C: one env batch, stacked "
-        "networks, a table per learner); 1: one learner at a time",
+        "learners of a method trained together as one batch in one process (A2C, PPO: one env batch, "
+        "stacked networks, a table per learner); 1: one learner at a time",
     )
     seed: int = setting(0, "sweep seed (random patterns, learner seeds)")
     results: str = setting("", "results directory (default results/<algo>_<domain>; re-run to resume)")
@@ -320,20 +319,29 @@ def check_seed_batch(algo: str, domain: LearnerDomain, settings: Any, methods: S
     """Refuse ``--seed-batch`` where learners cannot be batched, naming the flag and the reason.
 
     Examples:
-        >>> from torchrl_subgoal.training import A2CConfig
-        >>> check_seed_batch("ppo", domains.part("four_rooms", LearnerDomain), A2CConfig(), [])
+        >>> from torchrl_subgoal.training import DQNConfig
+        >>> check_seed_batch("dqn", domains.part("four_rooms", LearnerDomain), DQNConfig(), [])
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.experiments.cli.ConfigError: --seed-batch: only A2C trains learners as a batch; ...
+        torchrl_subgoal.experiments.cli.ConfigError: --seed-batch: dqn has no batch of learners (a2c, ppo have); ...
     """
-    check(algo == "a2c", "seed_batch", f"only A2C trains learners as a batch; run {algo} with --seed-batch 1")
+    batched = [name for name, learner in LEARNERS.items() if learner.train_batch is not None]
+    check(
+        algo in batched,
+        "seed_batch",
+        f"{algo} has no batch of learners ({', '.join(batched)} have); run it with --seed-batch 1",
+    )
     check(
         domain.pattern_env is None,
         "seed_batch",
         f"{domain.name} gives each learner its own task (start and goal), so its learners cannot share an env batch",
     )
     check(settings.collector_workers == 0, "seed_batch", "needs --collector-workers 0 (one collector for the batch)")
-    check(not settings.normalize_advantage, "seed_batch", "needs normalize_advantage off (it would mix the learners)")
+    check(
+        not (algo == "a2c" and settings.normalize_advantage),
+        "seed_batch",
+        "needs A2C's normalize_advantage off (it would mix the learners)",
+    )
     trained = any(m.shaping in ("subgoals", "aggregation") for m in methods)
     check(
         settings.online_potential or not trained,
@@ -394,8 +402,8 @@ def frozen_tables(path: str, methods: Sequence[Method], patterns: PatternSets) -
 
 def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
     """Train the chunk's learners, one after the other (each steps its own batch of envs) or, for a chunk of
-    several A2C learners (``--seed-batch``), together as one batch (:func:`~torchrl_subgoal.training.train_a2c_batch`);
-    their records.
+    several (``--seed-batch``), together as one batch (the learner's ``train_batch``,
+    e.g. :func:`~torchrl_subgoal.training.train_a2c_batch`); their records.
 
     Examples:
         >>> import tempfile
@@ -446,7 +454,8 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
         logger = experiment_logger(Path(config["log_dir"]), f"{chunk.method}_{pattern}_{learning}", fresh=True)
         runs.append((make_env, Shaping(*parts) if parts is not None else None, seed, logger))
     if len(runs) > 1:  # a seed batch (the plan checked that the learners can share one env batch)
-        curves = train_a2c_batch(
+        assert learner.train_batch is not None, f"{learner.name} has no batch of learners"
+        curves = learner.train_batch(
             runs[0][0],
             settings,
             [seed for _, _, seed, _ in runs],

@@ -8,8 +8,9 @@
   :mod:`~torchrl_subgoal.training.ppo` (:func:`train_ppo`),
   :mod:`~torchrl_subgoal.training.dqn` (:func:`train_dqn`) and
   :mod:`~torchrl_subgoal.training.ddpg` (:func:`train_ddpg`, DDPG or TD3): one learner
-  each, ``train_<algo>(make_env, config, shaping=..., seed=...) -> LearningCurve``; A2C also as a batch
-  of learners (:func:`train_a2c_batch`, seeds as a batch dimension: :mod:`~torchrl_subgoal.training.batch`);
+  each, ``train_<algo>(make_env, config, shaping=..., seed=...) -> LearningCurve``; A2C and PPO also
+  as a batch of learners (:func:`train_a2c_batch`, :func:`train_ppo_batch`; seeds as a batch
+  dimension: :mod:`~torchrl_subgoal.training.batch`);
 * :mod:`~torchrl_subgoal.training.smdp`: keep only the real SMDP transitions
   (:func:`smdp_transitions`, :func:`extend_transitions` into a replay buffer);
 * :mod:`~torchrl_subgoal.training.shared`: :class:`EnvFactory`, one potential
@@ -49,7 +50,7 @@ from torchrl_subgoal.training.ddpg import DDPGTrainConfig, ddpg_agent, train_ddp
 from torchrl_subgoal.training.domains import A2CDomain, LearnerDomain
 from torchrl_subgoal.training.dqn import DQN_PRESETS, DQNConfig, q_network, train_dqn
 from torchrl_subgoal.training.learners import LEARNERS, Learner, action_kind, check_actions
-from torchrl_subgoal.training.ppo import PPOConfig, ppo_actor_critic, train_ppo
+from torchrl_subgoal.training.ppo import PPOConfig, ppo_actor_critic, train_ppo, train_ppo_batch
 from torchrl_subgoal.training.shared import EnvFactory
 from torchrl_subgoal.training.smdp import extend_transitions, smdp_transitions
 
@@ -93,6 +94,7 @@ __all__ = [
     "train_ddpg",
     "train_dqn",
     "train_ppo",
+    "train_ppo_batch",
 ]
 
 

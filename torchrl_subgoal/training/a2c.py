@@ -21,7 +21,6 @@ factory) and, for shaping, a subgoal series::
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -38,14 +37,7 @@ from torchrl.objectives import A2CLoss
 from torchrl.objectives.value import GAE
 from torchrl.record.loggers import Logger
 
-from torchrl_subgoal.potentials import TabularPotential
-from torchrl_subgoal.training.batch import (
-    LearnerStack,
-    batch_shaping,
-    clip_grad_norm_per_learner,
-    learner_means,
-    learner_rows,
-)
+from torchrl_subgoal.training.batch import LearnerBatch, clip_grad_norm_per_learner, learner_means
 from torchrl_subgoal.training.common import (
     EPISODE_RETURN,
     CurveRecorder,
@@ -219,19 +211,6 @@ def actor_critic(
         >>> critic.in_keys
         ['observation', 'subgoal_index']
     """
-    policy, value = _networks(env, observation_key, features, hidden, fourier_order, subgoal_states)
-    return _actor_critic_of(env, policy, value, _subgoal_keys(observation_key, subgoal_states))
-
-
-def _networks(
-    env: EnvBase,
-    observation_key: NestedKey,
-    features: Features,
-    hidden: Sequence[int],
-    fourier_order: int,
-    subgoal_states: int,
-) -> tuple[nn.Module, nn.Module]:
-    """:func:`actor_critic`'s policy network (logits) and value network."""
     spec = env.observation_spec[observation_key]
     action_spec = env.full_action_spec[env.action_key]
     if not isinstance(action_spec, Categorical | OneHot):
@@ -243,23 +222,17 @@ def _networks(
     for last in (policy_head, value_head):  # start from a uniform policy and a zero value
         nn.init.zeros_(last.weight)
         nn.init.zeros_(last.bias)
-    return _network(policy_trunk, policy_head), _network(value_trunk, value_head)
-
-
-def _actor_critic_of(
-    env: EnvBase, policy: nn.Module, value: nn.Module, in_keys: list[NestedKey]
-) -> tuple[ProbabilisticActor, ValueOperator]:
-    """The TorchRL actor (a categorical policy over ``policy``'s logits) and critic of two networks."""
-    action_spec = env.full_action_spec[env.action_key]
+    in_keys = _subgoal_keys(observation_key, subgoal_states)
     distribution = OneHotCategorical if isinstance(action_spec, OneHot) else torch.distributions.Categorical
     actor = ProbabilisticActor(
-        TensorDictModule(policy, in_keys=in_keys, out_keys=["logits"]),
+        TensorDictModule(_network(policy_trunk, policy_head), in_keys=in_keys, out_keys=["logits"]),
         in_keys=["logits"],
         spec=action_spec,
         distribution_class=distribution,
         return_log_prob=True,
     )
-    return actor, ValueOperator(value, in_keys=in_keys)
+    critic = ValueOperator(_network(value_trunk, value_head), in_keys=in_keys)
+    return actor, critic
 
 
 def train_a2c(
@@ -370,12 +343,12 @@ def train_a2c_batch(
     """Train ``len(seeds)`` independent A2C learners as one batch; each learner's curve.
 
     Learner ``k`` is :func:`train_a2c` with ``config``, ``shapings[k]`` and ``seeds[k]``: its own
-    networks (started as alone from its seed, :class:`~torchrl_subgoal.training.batch.LearnerStack`),
-    ``config.num_envs`` envs, its own table trained online, its own loss, gradient clipping and Adam
-    state. The ``K`` learners share one env batch of ``K × num_envs`` envs, one collector and one
-    optimiser step per batch, which is what makes a batch faster than ``K`` runs on one core.
-    Statistically, not bitwise, equal to the learners run one by one (one random stream for the
-    batch's actions; the envs seeded with ``seeds[0]``).
+    networks (started as alone from its seed), ``config.num_envs`` envs, its own table trained
+    online, its own loss, gradient clipping and Adam state. The learners share one env batch of
+    ``K × num_envs`` envs, one collector and one optimiser step per batch
+    (:class:`~torchrl_subgoal.training.batch.LearnerBatch`), which is what makes a batch faster
+    than ``K`` runs on one core. Statistically, not bitwise, equal to the learners run one by one
+    (one random stream for the batch's actions; the envs seeded with ``seeds[0]``).
 
     Args:
         make_env: ``make_env(num_envs)`` returns an env with batch size ``[num_envs]`` (every learner's task).
@@ -399,44 +372,23 @@ def train_a2c_batch(
         >>> len(curves), curves[2].frames
         (3, [64, 128, 192, 256])
     """
-    k = len(seeds)
-    if k < 1:
-        raise ValueError("train_a2c_batch needs at least one seed")
-    shapings = list(shapings) if shapings is not None else [None] * k
-    loggers = list(loggers) if loggers is not None else [None] * k
-    if len(shapings) != k or len(loggers) != k:
-        raise ValueError(f"{k} seeds need {k} shapings and {k} loggers, got {len(shapings)} and {len(loggers)}")
-    for name, bad in (
-        ("collector_workers", config.collector_workers != 0),
-        ("normalize_advantage", config.normalize_advantage),
-    ):
-        if bad:
-            raise ValueError(f"a learner batch needs {name} off (0 or False): its per-learner version is not built")
-    shaping = batch_shaping(shapings, config.num_envs)
-    if shaping is not None and shaping.trained and not config.online_potential:
-        raise ValueError("a learner batch trains its tables online: online_potential must be True")
-    iterations = config.iterations
-    batch = dataclasses.replace(
-        config,
-        num_envs=k * config.num_envs,
-        frames_per_batch=k * config.frames_per_batch,
-        total_frames=k * config.frames_per_batch * iterations,
+    if config.normalize_advantage:
+        raise ValueError("a learner batch needs normalize_advantage off (False): its per-learner version is not built")
+    batch = LearnerBatch(
+        make_env, config, seeds, shapings=shapings, loggers=loggers, progress=progress, episode_cap=episode_cap
     )
-    factory, _ = learner_env(make_env, batch, shaping)
-    states = subgoal_states(config, shaping)
-    probe, cap = _probe_env(make_env, episode_cap)
-    nets = []
-    for seed in seeds:  # each learner's networks start as they would alone
-        torch.manual_seed(seed)
-        nets.append(_networks(probe, observation_key, config.features, config.hidden, config.fourier_order, states))
-    actor, critic = _actor_critic_of(
-        probe,
-        LearnerStack([p for p, _ in nets]),
-        LearnerStack([v for _, v in nets]),
-        _subgoal_keys(observation_key, states),
+    k, states = batch.learners, batch.subgoal_states
+    actor, critic = batch.networks(
+        lambda env, key: actor_critic(
+            env,
+            key,
+            features=config.features,
+            hidden=config.hidden,
+            fourier_order=config.fourier_order,
+            subgoal_states=states,
+        ),
+        observation_key,
     )
-    _close_probe(probe)
-    torch.manual_seed(seeds[0])
     advantage = GAE(gamma=config.gamma, lmbda=config.gae_lambda, value_network=critic)
     loss = A2CLoss(
         actor,
@@ -447,23 +399,7 @@ def train_a2c_batch(
         reduction="none",
     )
     optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
-    collector = make_collector(factory, actor, batch)
-    _seed_collector(collector, seeds[0])
-    tables = (
-        shaping.potential.table if shaping is not None and isinstance(shaping.potential, TabularPotential) else None
-    )
-    recorders = [
-        CurveRecorder(
-            config.record_window,
-            cap,
-            config.reward_scale,
-            loggers[i],
-            progress,
-            _LearnerTable(tables[i]) if tables is not None else None,
-        )
-        for i in range(k)
-    ]
-    names = ("loss_objective", "loss_critic", "loss_entropy")
+    collector = batch.collector(actor)
     frames = 0
     try:
         for data in collector:
@@ -471,22 +407,12 @@ def train_a2c_batch(
             with torch.no_grad():
                 advantage(data)
             losses = loss(data)
-            means = {name: learner_means(losses[name], k) for name in names}
+            means = {name: learner_means(losses[name], k) for name in ("loss_objective", "loss_critic", "loss_entropy")}
             optimizer.zero_grad(set_to_none=True)
             torch.stack([m.sum() for m in means.values()]).sum().backward()
             clip_grad_norm_per_learner(loss.parameters(), config.max_grad_norm, k)
             optimizer.step()
-            for i, rows in enumerate(learner_rows(k, data.shape[0])):
-                scalars = {name: float(means[name][i].detach()) for name in names}
-                recorders[i].add(data[rows], frames, {**scalars, "loss_potential": math.nan})
+            batch.record(data, frames, means)
     finally:
         close_collector(collector)
-    return [r.curve for r in recorders]
-
-
-class _LearnerTable(nn.Module):
-    """One learner's row of a batch of tables (a view), as :class:`CurveRecorder` logs a potential's ``table``."""
-
-    def __init__(self, table: torch.Tensor) -> None:
-        super().__init__()
-        self.table = table
+    return batch.curves

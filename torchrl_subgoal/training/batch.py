@@ -22,17 +22,45 @@ sampled from one random stream and the envs are seeded once for the batch.
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterable, Sequence
+import dataclasses
+import math
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any
 
 import torch
 from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+from tensordict.utils import NestedKey
 from torch import nn
+from torchrl.collectors import Collector, MultiSyncCollector
+from torchrl.envs import EnvBase
+from torchrl.modules import ProbabilisticActor, ValueOperator
+from torchrl.record.loggers import Logger
 
 from torchrl_subgoal.potentials import NaivePotential, TabularPotential
 from torchrl_subgoal.subgoals import StateAggregation, SubgoalSeries
-from torchrl_subgoal.training.common import Shaping
+from torchrl_subgoal.training.common import (
+    CurveRecorder,
+    LearnerSettings,
+    LearningCurve,
+    Shaping,
+    _close_probe,
+    _probe_env,
+    _seed_collector,
+    learner_env,
+    make_collector,
+    subgoal_states,
+)
 
-__all__ = ["LearnerStack", "batch_shaping", "clip_grad_norm_per_learner", "learner_means", "learner_rows"]
+__all__ = [
+    "LearnerBatch",
+    "LearnerStack",
+    "batch_shaping",
+    "clip_grad_norm_per_learner",
+    "learner_means",
+    "learner_rows",
+    "stack_actor_critic",
+]
 
 
 class LearnerStack(nn.Module):
@@ -43,8 +71,8 @@ class LearnerStack(nn.Module):
             copied, stacked along a new first dim).
 
     The inputs' first dim is the env batch, learner-major (``K·M`` rows, the first
-    ``M`` learner 0's); any further dims (time, a ``vmap`` of TorchRL's value
-    estimators) follow.
+    ``M`` learner 0's), or the learners themselves (``K`` rows of samples); any further
+    dims (time, minibatch, a ``vmap`` of TorchRL's value estimators) follow.
 
     Examples:
         >>> _ = torch.manual_seed(0)
@@ -79,7 +107,31 @@ class LearnerStack(nn.Module):
                 return base(*xs)
 
         grouped = [x.unflatten(0, (k, -1)) for x in inputs]
-        return torch.vmap(call, (0,) * (len(inputs) + 1))(self.params, *grouped).flatten(0, 1)
+        out = torch.vmap(call, (0,) * (len(inputs) + 1))(self.params, *grouped)
+        if isinstance(out, tuple):  # several outputs (a location and a scale)
+            return tuple(o.flatten(0, 1) for o in out)  # type: ignore[return-value]
+        return out.flatten(0, 1)
+
+
+def stack_actor_critic(
+    pairs: Sequence[tuple[ProbabilisticActor, ValueOperator]],
+) -> tuple[ProbabilisticActor, ValueOperator]:
+    """One actor and one critic for ``K`` learners' ``(actor, critic)`` pairs (one building block's, e.g.
+    :func:`~torchrl_subgoal.training.actor_critic`): the first pair with each network replaced by the
+    :class:`LearnerStack` of every learner's.
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> from torchrl_subgoal.training import actor_critic
+        >>> env = FourRoomsEnv(6)
+        >>> actor, critic = stack_actor_critic([actor_critic(env, features="one_hot") for _ in range(3)])
+        >>> critic(actor(env.reset()))["state_value"].shape, type(critic.module).__name__
+        (torch.Size([6, 1]), 'LearnerStack')
+    """
+    actor, critic = pairs[0]
+    actor.module[0].module = LearnerStack([a.module[0].module for a, _ in pairs])
+    critic.module = LearnerStack([c.module for _, c in pairs])
+    return actor, critic
 
 
 def learner_rows(learners: int, rows: int) -> list[slice]:
@@ -207,3 +259,120 @@ def _batch_potential(potentials: Sequence[nn.Module], envs_per_learner: int) -> 
     if frozen == {True}:
         batch.table.requires_grad_(False)
     return batch
+
+
+class LearnerBatch:
+    """What a building block's batch of ``K`` learners shares: the checks, the env batch and its collector,
+    each learner's networks started from its seed, and one :class:`~torchrl_subgoal.training.CurveRecorder`
+    per learner.
+
+    Args:
+        make_env: ``make_env(num_envs)``, every learner's task.
+        config: every learner's settings; the batch steps ``K × num_envs`` envs and collects
+            ``K × frames_per_batch`` frames per batch (:attr:`config`), as many batches as one learner.
+        seeds: one per learner: its networks' initial weights (the envs and the actions are seeded with
+            the first).
+        shapings: one per learner (``None``: all unshaped); see :func:`batch_shaping`.
+        loggers: one TorchRL logger per learner (``None``: none).
+        progress: called with 1 after every batch for every learner.
+        episode_cap: what the curves record before any episode finished (default: the env's ``max_steps``).
+
+    Raises:
+        ValueError: ``collector_workers`` is not 0, or a trained potential is not trained online (their
+            per-learner versions are not built), or the seeds, shapings and loggers differ in number.
+    """
+
+    def __init__(
+        self,
+        make_env: Callable[[int], EnvBase],
+        config: LearnerSettings,
+        seeds: Sequence[int],
+        *,
+        shapings: Sequence[Shaping | None] | None = None,
+        loggers: Sequence[Logger | None] | None = None,
+        progress: Callable[[int], None] | None = None,
+        episode_cap: float | None = None,
+    ) -> None:
+        k = self.learners = len(seeds)
+        if k < 1:
+            raise ValueError("a learner batch needs at least one seed")
+        shapings = list(shapings) if shapings is not None else [None] * k
+        loggers = list(loggers) if loggers is not None else [None] * k
+        if len(shapings) != k or len(loggers) != k:
+            raise ValueError(f"{k} seeds need {k} shapings and {k} loggers, got {len(shapings)} and {len(loggers)}")
+        if config.collector_workers:
+            raise ValueError("a learner batch needs collector_workers off (0): its per-learner version is not built")
+        self.shaping = batch_shaping(shapings, config.num_envs)
+        if self.shaping is not None and self.shaping.trained and not config.online_potential:
+            raise ValueError("a learner batch trains its tables online: online_potential must be True")
+        self.seeds = list(seeds)
+        self.settings = config
+        iterations = math.ceil(config.total_frames / config.frames_per_batch)
+        self.config: Any = dataclasses.replace(
+            config,  # type: ignore[type-var]
+            num_envs=k * config.num_envs,
+            frames_per_batch=k * config.frames_per_batch,
+            total_frames=k * config.frames_per_batch * iterations,
+        )
+        self.factory, _ = learner_env(make_env, self.config, self.shaping)
+        self.subgoal_states = subgoal_states(config, self.shaping)
+        self.make_env, self.episode_cap = make_env, episode_cap
+        self.loggers, self.progress = loggers, progress
+        self.recorders: list[CurveRecorder] = []
+
+    def networks(
+        self,
+        build: Callable[[EnvBase, NestedKey], tuple[ProbabilisticActor, ValueOperator]],
+        observation_key: NestedKey,
+    ) -> tuple[ProbabilisticActor, ValueOperator]:
+        """Each learner's ``build(env, observation_key)`` from its seed, stacked (:func:`stack_actor_critic`); then
+        torch is seeded with the first seed for the batch's sampling. Sets up the recorders (they need the
+        env's episode cap)."""
+        probe, cap = _probe_env(self.make_env, self.episode_cap)
+        pairs = []
+        for seed in self.seeds:  # each learner's networks start as they would alone
+            torch.manual_seed(seed)
+            pairs.append(build(probe, observation_key))
+        _close_probe(probe)
+        torch.manual_seed(self.seeds[0])
+        potential = self.shaping.potential if self.shaping is not None else None
+        tables = potential.table if isinstance(potential, TabularPotential) else None
+        c = self.settings
+        self.recorders = [
+            CurveRecorder(
+                c.record_window,
+                cap,
+                c.reward_scale,
+                self.loggers[k],
+                self.progress,
+                _LearnerTable(tables[k]) if tables is not None else None,
+            )
+            for k in range(self.learners)
+        ]
+        return stack_actor_critic(pairs)
+
+    def collector(self, actor: TensorDictModuleBase) -> Collector | MultiSyncCollector:
+        """The batch's collector over its env batch, seeded with the first seed."""
+        collector = make_collector(self.factory, actor, self.config)
+        _seed_collector(collector, self.seeds[0])
+        return collector
+
+    def record(self, data: TensorDictBase, frames: int, scalars: Mapping[str, torch.Tensor]) -> None:
+        """Add each learner's rows of a collected batch (``frames`` per learner so far) and its ``scalars``
+        (``[K]`` each) to its recorder."""
+        for k, rows in enumerate(learner_rows(self.learners, data.shape[0])):
+            own = {name: float(values[k].detach()) for name, values in scalars.items()}
+            self.recorders[k].add(data[rows], frames, {**own, "loss_potential": math.nan})
+
+    @property
+    def curves(self) -> list[LearningCurve]:
+        """Each learner's curve."""
+        return [r.curve for r in self.recorders]
+
+
+class _LearnerTable(nn.Module):
+    """One learner's row of a batch of tables (a view), as :class:`CurveRecorder` logs a potential's ``table``."""
+
+    def __init__(self, table: torch.Tensor) -> None:
+        super().__init__()
+        self.table = table

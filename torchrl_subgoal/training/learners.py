@@ -16,11 +16,11 @@ from typing import Any, Literal
 from torchrl.data import Bounded, Categorical, OneHot
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal.training.a2c import A2CConfig, train_a2c
+from torchrl_subgoal.training.a2c import A2CConfig, train_a2c, train_a2c_batch
 from torchrl_subgoal.training.common import LearningCurve
 from torchrl_subgoal.training.ddpg import DDPGTrainConfig, train_ddpg
 from torchrl_subgoal.training.dqn import DQNConfig, train_dqn
-from torchrl_subgoal.training.ppo import PPOConfig, train_ppo
+from torchrl_subgoal.training.ppo import PPOConfig, train_ppo, train_ppo_batch
 
 __all__ = ["LEARNERS", "Actions", "Learner", "action_kind", "check_actions"]
 
@@ -36,6 +36,8 @@ class Learner:
         config: its settings class (:class:`~torchrl_subgoal.training.A2CConfig`, …).
         train: ``train(make_env, config, *, shaping, observation_key, seed, logger, progress) -> LearningCurve``.
         actions: the action kinds it handles.
+        train_batch: ``train_batch(make_env, config, seeds, *, shapings, observation_key, loggers, progress)
+            -> list[LearningCurve]``, several learners as one batch (``None``: not built for this block).
 
     Examples:
         >>> LEARNERS["dqn"].actions, LEARNERS["ppo"].actions
@@ -46,6 +48,7 @@ class Learner:
     config: type
     train: Callable[..., LearningCurve]
     actions: tuple[Actions, ...]
+    train_batch: Callable[..., list[LearningCurve]] | None = None
 
     def has_setting(self, name: str) -> bool:
         """Whether the learner's settings have a field ``name``.
@@ -66,8 +69,8 @@ class Learner:
 LEARNERS: dict[str, Learner] = {
     learner.name: learner
     for learner in (
-        Learner("a2c", A2CConfig, train_a2c, ("discrete",)),
-        Learner("ppo", PPOConfig, train_ppo, ("discrete", "continuous")),
+        Learner("a2c", A2CConfig, train_a2c, ("discrete",), train_a2c_batch),
+        Learner("ppo", PPOConfig, train_ppo, ("discrete", "continuous"), train_ppo_batch),
         Learner("dqn", DQNConfig, train_dqn, ("discrete",)),
         Learner("ddpg", DDPGTrainConfig, train_ddpg, ("continuous",)),
     )

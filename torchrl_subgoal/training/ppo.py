@@ -33,6 +33,7 @@ from torchrl.objectives.value import GAE
 from torchrl.record.loggers import Logger
 
 from torchrl_subgoal.training.a2c import actor_critic
+from torchrl_subgoal.training.batch import LearnerBatch, clip_grad_norm_per_learner, learner_means
 from torchrl_subgoal.training.common import (
     CurveRecorder,
     Features,
@@ -51,7 +52,7 @@ from torchrl_subgoal.training.common import (
     subgoal_states,
 )
 
-__all__ = ["PPOConfig", "ppo_actor_critic", "train_ppo"]
+__all__ = ["PPOConfig", "ppo_actor_critic", "train_ppo", "train_ppo_batch"]
 
 
 @dataclass
@@ -360,3 +361,106 @@ def train_ppo(
     finally:
         close_collector(collector)
     return recorder.curve
+
+
+def train_ppo_batch(
+    make_env: Callable[[int], EnvBase],
+    config: PPOConfig,
+    seeds: Sequence[int],
+    *,
+    shapings: Sequence[Shaping | None] | None = None,
+    observation_key: NestedKey = "observation",
+    episode_cap: float | None = None,
+    loggers: Sequence[Logger | None] | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> list[LearningCurve]:
+    """Train ``len(seeds)`` independent PPO learners as one batch; each learner's curve.
+
+    Learner ``k`` is :func:`train_ppo` with ``config``, ``shapings[k]`` and ``seeds[k]``: its own
+    networks (started as alone from its seed), envs and table (trained online), and every gradient
+    step on a minibatch of its own frames, with its advantages standardised over its own minibatch,
+    its own gradient clipping and Adam state. The learners share one env batch, one collector and
+    one optimiser step per minibatch (:class:`~torchrl_subgoal.training.batch.LearnerBatch`): each
+    step takes every learner's minibatch at the same positions of its own batch, in a fresh random
+    order every epoch. Statistically, not bitwise, equal to the learners run one by one.
+
+    Args:
+        make_env: ``make_env(num_envs)`` returns an env with batch size ``[num_envs]`` (every learner's task).
+        config: every learner's settings (``collector_workers=0``; with a trained potential,
+            ``online_potential=True``).
+        seeds: one per learner: its networks' initial weights.
+        shapings: one per learner (``None``: all unshaped).
+        observation_key: what the networks read.
+        episode_cap: as in :func:`train_ppo`.
+        loggers: one TorchRL logger per learner (or ``None``).
+        progress: called with 1 after every batch for every learner.
+
+    Examples:
+        >>> from torchrl_subgoal import Cell, SubgoalSeries, TabularPotential
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> shapings = [Shaping(SubgoalSeries([Cell(3, 6)]), TabularPotential(2), {"observation_key": "cell"})] * 2
+        >>> config = PPOConfig(num_envs=4, frames_per_batch=64, minibatch_size=32, epochs=2, total_frames=128,
+        ...                    features="one_hot", hidden=())
+        >>> [c.frames for c in train_ppo_batch(FourRoomsEnv, config, [0, 1], shapings=shapings)]
+        [[64, 128], [64, 128]]
+    """
+    batch = LearnerBatch(
+        make_env, config, seeds, shapings=shapings, loggers=loggers, progress=progress, episode_cap=episode_cap
+    )
+    k, states = batch.learners, batch.subgoal_states
+    actor, critic = batch.networks(
+        lambda env, key: ppo_actor_critic(
+            env,
+            key,
+            features=config.features,
+            hidden=config.hidden,
+            fourier_order=config.fourier_order,
+            subgoal_states=states,
+        ),
+        observation_key,
+    )
+    advantage = GAE(gamma=config.gamma, lmbda=config.gae_lambda, value_network=critic, average_gae=False)
+    loss = ClipPPOLoss(
+        actor,
+        critic,
+        clip_epsilon=config.clip_epsilon,
+        entropy_bonus=config.entropy_coeff > 0,
+        entropy_coeff=config.entropy_coeff,
+        critic_coeff=config.critic_coeff,
+        loss_critic_type=config.loss_critic_type,
+        normalize_advantage=config.normalize_advantage,
+        normalize_advantage_exclude_dims=(0,),  # minibatches are [K, size]: standardised learner by learner
+        reduction="none",
+    )
+    optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr, eps=config.adam_eps)
+    total_updates = config.iterations * config.updates_per_batch
+    names = ("loss_objective", "loss_critic", "loss_entropy")
+    collector = batch.collector(actor)
+    frames = updates = 0
+    try:
+        for data in collector:
+            frames += data.numel() // k
+            sums = torch.zeros(3, k)
+            for _ in range(config.epochs):
+                with torch.no_grad():
+                    advantage(data)
+                own = data.reshape(k, -1)  # each learner's frames (its envs are consecutive rows)
+                order = torch.randperm(own.shape[1])
+                for start in range(0, own.shape[1], config.minibatch_size):
+                    if config.anneal_lr:
+                        for group in optimizer.param_groups:
+                            group["lr"] = config.lr * (1.0 - updates / total_updates)
+                    losses = loss(own[:, order[start : start + config.minibatch_size]])
+                    parts = torch.stack([learner_means(losses.get(n, torch.zeros(k)), k) for n in names])
+                    optimizer.zero_grad(set_to_none=True)
+                    parts.sum().backward()
+                    if config.max_grad_norm:
+                        clip_grad_norm_per_learner(loss.parameters(), config.max_grad_norm, k)
+                    optimizer.step()
+                    sums += parts.detach()
+                    updates += 1
+            means = sums / config.updates_per_batch
+            batch.record(data, frames, dict(zip(names, means, strict=True)))
+    finally:
+        close_collector(collector)
+    return batch.curves
