@@ -22,12 +22,16 @@ def test_mountain_car_registers_a_learner_set_up_and_a_map() -> None:
 
 
 @pytest.mark.parametrize("learner", ["a2c", "ppo", "dqn"])
-def test_each_learner_records_over_more_than_one_episode_per_env(learner: str) -> None:
+def test_time_outs_all_at_once_read_as_no_shorter_than_the_thresholds(learner: str) -> None:
     """Until a learner reaches the flag, all its envs time out at step 200 together. The recorded episode length
-    (frames per finished episode over the last ``record_window`` batches) reads those as episodes as long as
-    the window's steps per env when the window is shorter than 200 steps: below the thresholds."""
-    config = domains.part("mountain_car", LearnerDomain).defaults[learner]
-    assert config.record_window * config.frames_per_batch // config.num_envs >= 3 * 200
+    (frames per finished episode over the last ``record_window`` batches, ``W`` steps per env) then reads
+    ``W / n`` with ``n`` the time-outs inside the window: exactly 200 when ``W`` is a multiple of 200, else as low as
+    ``W / ceil(W / 200)``, which must stay above every threshold."""
+    domain = domains.part("mountain_car", LearnerDomain)
+    config = domain.defaults[learner]
+    window = config.record_window * config.frames_per_batch // config.num_envs
+    lowest = 200 if window % 200 == 0 else window / -(-window // 200)
+    assert window >= 200 and lowest > max(domain.thresholds)
 
 
 @pytest.mark.parametrize(

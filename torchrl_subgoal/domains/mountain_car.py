@@ -78,9 +78,10 @@ LEARNERS = LearnerDomain(
     thresholds=(180.0, 150.0, 120.0),
     defaults={
         "dqn": DQNConfig.preset("mountain_car"),  # rl-baselines3-zoo's tuned DQN
-        # 40 batches of 16 steps per env: the recorded episode length spans several 200-step episodes (with 8,
-        # the 16 envs' time-outs at step 200, all at once, fell inside 128 steps and read as 128-step episodes)
-        "a2c": A2CConfig(num_envs=16, frames_per_batch=256, total_frames=500_000, record_window=40),
+        # 50 batches of 16 steps per env = 4 whole 200-step episodes: while a learner never reaches the flag, its
+        # 16 envs time out together every 200 steps, and a window of any other length counts 1 time-out too many
+        # or too few (with 8 batches, 128 steps read as 128-step episodes, below every threshold)
+        "a2c": A2CConfig(num_envs=16, frames_per_batch=256, total_frames=500_000, record_window=50),
         "ppo": PPOConfig(num_envs=16, frames_per_batch=256 * 16, minibatch_size=256, total_frames=500_000),
     },
 )
