@@ -26,6 +26,7 @@ import argparse
 import dataclasses
 import statistics
 import time
+from collections.abc import Callable
 
 import torch
 
@@ -42,7 +43,10 @@ from torchrl_subgoal.training import (
 )
 
 DOMAINS = ("four_rooms", "four_rooms_step", "pinball")
-BLOCKS = {"a2c": (train_a2c, train_a2c_batch), "ppo": (train_ppo, train_ppo_batch)}
+BLOCKS: dict[str, tuple[Callable[..., LearningCurve], Callable[..., list[LearningCurve]]]] = {
+    "a2c": (train_a2c, train_a2c_batch),
+    "ppo": (train_ppo, train_ppo_batch),
+}
 
 
 def shapings(domain: LearnerDomain, name: str, learners: int, shaped: bool) -> list[Shaping | None]:

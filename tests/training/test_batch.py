@@ -164,7 +164,7 @@ def test_each_learner_gets_the_ppo_gradient_of_its_own_minibatch_alone() -> None
     with torch.no_grad():
         data = env.rollout(20, actor, break_when_any_done=False)
         GAE(gamma=0.9, lmbda=0.95, value_network=critic)(data)
-    for key in [k for k in data.keys() if isinstance(k, str) and k.endswith("log_prob")]:
+    for key in [k for k in data.keys(include_nested=False) if isinstance(k, str) and k.endswith("log_prob")]:
         data[key] = data[key] + 0.3 * torch.randn_like(data[key])  # as if another policy acted: some ratios clip
     order = torch.randperm(envs * 20)[:size]
     batch_loss = ClipPPOLoss(

@@ -31,8 +31,8 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Binary, Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal.subgoals import Box, Predicate, StateAggregation, SubgoalSeries, load_patterns
 from torchrl_subgoal.envs.gym_batch import import_robotics
+from torchrl_subgoal.subgoals import Box, Predicate, StateAggregation, SubgoalSeries, load_patterns
 
 __all__ = [
     "COMPONENTS",

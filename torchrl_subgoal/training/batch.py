@@ -94,7 +94,7 @@ class LearnerStack(nn.Module):
         self.params[0].data.to("meta").to_module(base)  # the architecture, without its own weights
         self.__dict__["_base"] = base  # not a submodule: its (meta) parameters are not this module's
 
-    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+    def forward(self, *inputs: torch.Tensor) -> torch.Tensor | tuple[torch.Tensor, ...]:
         k = self.learners
         for x in inputs:
             if x.shape[0] % k:
@@ -109,7 +109,7 @@ class LearnerStack(nn.Module):
         grouped = [x.unflatten(0, (k, -1)) for x in inputs]
         out = torch.vmap(call, (0,) * (len(inputs) + 1))(self.params, *grouped)
         if isinstance(out, tuple):  # several outputs (a location and a scale)
-            return tuple(o.flatten(0, 1) for o in out)  # type: ignore[return-value]
+            return tuple(o.flatten(0, 1) for o in out)
         return out.flatten(0, 1)
 
 
