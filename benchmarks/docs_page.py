@@ -87,6 +87,13 @@ RUNS = (
         ("benchmarks/a2c_collection.py", "--quick"),
     ),
     Run(
+        "seed_batch",
+        "Learners as a batch",
+        "learner-frames per CPU-second of A2C and PPO learners run one at a time against the same learners "
+        "stepped as one batch (`--seed-batch`), unshaped and with HRS.",
+        ("benchmarks/seed_batch.py", "--quick"),
+    ),
+    Run(
         "transform_cost",
         "What the shaping transform costs a collector and an A2C iteration",
         "Python calls per collector batch (16 four-rooms envs x 16 steps) the shaping transform adds over an "

@@ -58,7 +58,12 @@ def require_gymnasium(what: str, *, robotics: bool = False) -> Any:
 
 def import_robotics() -> Any:
     """``gymnasium_robotics``, imported without the notice it prints on stderr at import (about its Adroit hand
-    envs' rewards, which this package does not use), so that a recipe's one-line errors stay one line."""
+    envs' rewards, which this package does not use), so that a recipe's one-line errors stay one line.
+
+    Examples:
+        >>> import_robotics().__name__
+        'gymnasium_robotics'
+    """
     with contextlib.redirect_stderr(io.StringIO()):
         import gymnasium_robotics
     return gymnasium_robotics

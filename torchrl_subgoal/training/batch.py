@@ -280,6 +280,14 @@ class LearnerBatch:
     Raises:
         ValueError: ``collector_workers`` is not 0, or a trained potential is not trained online (their
             per-learner versions are not built), or the seeds, shapings and loggers differ in number.
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> from torchrl_subgoal.training import A2CConfig
+        >>> config = A2CConfig(num_envs=4, frames_per_batch=64, total_frames=256)
+        >>> batch = LearnerBatch(FourRoomsEnv, config, seeds=[0, 1, 2])
+        >>> batch.config.num_envs, batch.config.frames_per_batch, batch.config.total_frames
+        (12, 192, 768)
     """
 
     def __init__(
