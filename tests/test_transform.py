@@ -548,12 +548,11 @@ def test_forward_on_a_replay_sample_of_another_batch_shape(backend: str, batch: 
 
 
 def test_forward_never_changes_parameters(backend: str) -> None:
-    torch.manual_seed(0)  # a random walk that reaches a hallway (about 6% of draws reach none in 150 steps)
     v = fixed_table(TabularPotential(3, (4,)))
     start = v.table.detach().clone()
     t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.99, observation_key="cell", value_update=0.5, backend=backend)
     env = TransformedEnv(FourRoomsEnv(4, max_steps=50), t)
-    env.set_seed(0)
+    env.set_seed(0)  # with the suite's seeded actions, a walk that reaches a hallway (about 6% of draws reach none)
     data = env.rollout(150, break_when_any_done=False)
     assert not torch.equal(v.table.detach(), start)  # the online pass trained it
     before = v.table.detach().clone()
