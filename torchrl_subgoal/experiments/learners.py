@@ -44,7 +44,7 @@ from torchrl_subgoal.experiments.recipe import (
     pattern_sources,
 )
 from torchrl_subgoal.experiments.results import Chunk, EpisodeTable
-from torchrl_subgoal.methods import Method, paper_methods, shaping_parts
+from torchrl_subgoal.methods import Method, all_methods, shaping_parts
 from torchrl_subgoal.training import (
     LEARNERS,
     LearnerDomain,
@@ -120,7 +120,12 @@ class LearnerRecipeConfig(RecipeConfig):
         choices=["value", "zero", "nonpositive"],
     )
     monotone_potential: bool = setting(
-        False, "shape with the learned table made non-decreasing along the series (HRS, RRS)"
+        True, "shape with the learned table made non-decreasing along the series (HRS, RRS)"
+    )
+    progress_scale: float = setting(
+        1.0,
+        "the learned tables (HRS, RRS) start at the subgoals' progress prior of this scale, the goal's worth in "
+        "the learner's reward units (after --reward-scale); 0 starts them at 0; SRS shapes with the prior",
     )
     frozen_potential: str = setting(
         "",
@@ -152,6 +157,16 @@ class LearnerRecipeConfig(RecipeConfig):
         check(self.value_lr > 0, "value_lr", f"must be positive, got {self.value_lr}")
         check(self.lr >= 0, "lr", f"must be >= 0, got {self.lr}")
         check(self.reward_scale >= 0, "reward_scale", f"must be >= 0, got {self.reward_scale}")
+        check(
+            math.isfinite(self.progress_scale) and self.progress_scale >= 0,
+            "progress_scale",
+            f"must be a finite number >= 0, got {self.progress_scale}",
+        )
+        check(
+            self.progress_scale > 0 or "SRS" not in self.method_names,
+            "progress_scale",
+            "SRS shapes with the progress prior: give it a scale > 0",
+        )
 
 
 def learner_methods(algo: str) -> dict[str, Method]:
@@ -159,9 +174,9 @@ def learner_methods(algo: str) -> dict[str, Method]:
 
     Examples:
         >>> list(learner_methods("ppo"))
-        ['HRS', 'RRS', 'PPO', 'NRS', 'SARSA-RS']
+        ['HRS', 'RRS', 'PPO', 'NRS', 'SARSA-RS', 'SRS']
     """
-    return paper_methods(baseline=LEARNERS[algo].title)
+    return all_methods(baseline=LEARNERS[algo].title)
 
 
 def learner_settings(
@@ -287,7 +302,8 @@ def learner_plan(
         "learner": dataclasses.asdict(settings),
         "zero_terminal_potential": cfg.zero_terminal_potential,
         "start_potential": cfg.start_potential,
-        **({"monotone_potential": True} if cfg.monotone_potential else {}),
+        "monotone_potential": cfg.monotone_potential,
+        "progress_scale": cfg.progress_scale,
         **({"frozen_potential": frozen} if frozen else {}),
         "subgoal_file": subgoal_file,
         "patterns": pattern_config(patterns),
@@ -441,6 +457,7 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
             zero_terminal_potential=config["zero_terminal_potential"],
             start_potential=config["start_potential"],
             monotone_potential=config.get("monotone_potential", False),
+            progress_scale=config.get("progress_scale", 0.0),
         )
         frozen = config.get("frozen_potential", {}).get(pattern) if method.shaping == "subgoals" else None
         if parts is not None and frozen is not None:

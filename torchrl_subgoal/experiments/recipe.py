@@ -50,6 +50,8 @@ __all__ = [
     "pattern_config",
     "pattern_sets",
     "pattern_sources",
+    "potential_entries",
+    "potential_options",
     "recipe_main",
     "sweep_and_report",
     "sweep_entries",
@@ -444,6 +446,15 @@ class ReproductionConfig(RecipeConfig):
     bootstrap_truncated: bool = setting(
         True, "train V(z) on a time-out inside z (this engine's reproductions; the library default skips it)"
     )
+    progress_scale: float = setting(
+        0.0,
+        "the learned potentials' tables start at the subgoals' progress prior of this scale, in reward units "
+        "(0: at 0, the authors; the library default: the goal's reward); SRS shapes with that prior "
+        "(of scale --eta when 0)",
+    )
+    monotone_potential: bool = setting(
+        False, "shape with the learned tables non-decreasing along the series (the library default; not the authors)"
+    )
     engine: str = setting(
         "fused",
         "fused: one compiled loop; torchrl: step_and_maybe_reset (identical results)",
@@ -461,6 +472,39 @@ class ReproductionConfig(RecipeConfig):
         super().__post_init__()
         check(self.eta >= 0, "eta", f"must be >= 0, got {self.eta}")
         check(0.0 < self.expectile < 1.0, "expectile", f"must lie strictly between 0 and 1, got {self.expectile}")
+        check(self.progress_scale >= 0, "progress_scale", f"must be >= 0, got {self.progress_scale}")
+
+
+def potential_entries(cfg: ReproductionConfig) -> dict[str, Any]:
+    """The learned potential's conventions a reproduction records beyond the authors' (none when it runs theirs,
+    so that the configuration of an authors' run is what it always was).
+
+    Examples:
+        >>> potential_entries(ReproductionConfig()), potential_entries(ReproductionConfig(progress_scale=1.0))
+        ({}, {'progress_scale': 1.0})
+    """
+    entries: dict[str, Any] = {}
+    if cfg.progress_scale:
+        entries["progress_scale"] = cfg.progress_scale
+    if cfg.monotone_potential:
+        entries["monotone_potential"] = True
+    return entries
+
+
+def potential_options(config: Mapping[str, Any], method: Method) -> dict[str, Any]:
+    """The keyword arguments of :func:`~torchrl_subgoal.methods.shaping_transform` that a reproduction's stored
+    ``config`` gives ``method``'s potential (:func:`potential_entries`); SRS's prior has the scale η when the
+    sweep set none.
+
+    Examples:
+        >>> from torchrl_subgoal.methods import SRS, paper_methods
+        >>> potential_options({"eta": 10.0}, paper_methods("SARSA")["HRS"]), potential_options({"eta": 10.0}, SRS)
+        ({'progress_scale': 0.0, 'monotone_potential': False}, {'progress_scale': 10.0, 'monotone_potential': False})
+    """
+    scale = float(config.get("progress_scale", 0.0))
+    if method.shaping == "progress" and not scale:
+        scale = float(config["eta"])
+    return {"progress_scale": scale, "monotone_potential": bool(config.get("monotone_potential", False))}
 
 
 def sweep_entries(cfg: RecipeConfig, subgoal_file: str, patterns: PatternSets) -> dict[str, Any]:
