@@ -148,10 +148,18 @@ def make_env(config: Mapping[str, Any], n: int) -> EnvBase:
 
         return make_taxi(n)
     goal = config["reward"] == "goal"
-    rewards = {"goal_reward": 1.0 if goal else 0.0, "step_reward": 0.0 if goal else -1.0}
+    goal_reward, step_reward = (1.0, 0.0) if goal else (0.0, -1.0)
     if config["task"] == "sparse_rooms":
-        return FourRoomsEnv(num_envs=n, layout=SPARSE_ROOMS, start=(1, 1), goal=(18, 19), max_steps=500, **rewards)
-    return FourRoomsEnv(num_envs=n, **rewards)
+        return FourRoomsEnv(
+            n,
+            layout=SPARSE_ROOMS,
+            start=(1, 1),
+            goal=(18, 19),
+            max_steps=500,
+            goal_reward=goal_reward,
+            step_reward=step_reward,
+        )
+    return FourRoomsEnv(num_envs=n, goal_reward=goal_reward, step_reward=step_reward)
 
 
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:

@@ -249,7 +249,7 @@ class TabularPotential(Potential):
             [[0.0, 0.6666666865348816, 1.3333333730697632], [0.0, 1.0, 1.0]]
         """
         many = not isinstance(subgoals, SubgoalSeries)
-        series = list(subgoals) if many else [subgoals]  # type: ignore[list-item]
+        series: list[SubgoalSeries] = [subgoals] if isinstance(subgoals, SubgoalSeries) else list(subgoals)
         if not series:
             raise ValueError("for_subgoals needs at least one subgoal series")
         if not scale >= 0:
@@ -259,12 +259,12 @@ class TabularPotential(Potential):
         for s in series:  # past a shorter series' last state, its last value
             prior = list(s.progress(scale))
             rows.append(prior + prior[-1:] * (num_states - len(prior)))
-        prior = torch.tensor(rows, dtype=torch.get_default_dtype())
+        priors = torch.tensor(rows, dtype=torch.get_default_dtype())
         shape = torch.Size(batch_shape if batch_shape is not None else ((len(series),) if many else ()))
         if len(series) == 1 or len({tuple(r) for r in rows}) == 1:
-            init = prior[0]
+            init = priors[0]
         elif len(series) == shape.numel():
-            init = prior.reshape(*shape, num_states)
+            init = priors.reshape(*shape, num_states)
         else:
             raise ValueError(
                 f"{len(series)} subgoal series for tables of batch shape {tuple(shape)}: give one series, or one "

@@ -241,15 +241,16 @@ class FourRoomsEnv(EnvBase):
             size = (len(rows), len(rows[0]))
             cells = [(r, c) for r in range(size[0]) for c in range(size[1]) if rows[r][c] != "w"]
         state = {cell: i for i, cell in enumerate(cells)}
+        start, goal = (int(start[0]), int(start[1])), (int(goal[0]), int(goal[1]))
         for name, cell in (("start", start), ("goal", goal)):
-            if tuple(cell) not in state:
-                raise ValueError(f"{name}: {tuple(cell)} is not a free cell of the layout")
+            if cell not in state:
+                raise ValueError(f"{name}: {cell} is not a free cell of the layout")
         n = len(cells)
         moves = [[state.get((r + dr, c + dc), state[(r, c)]) for dr, dc in ACTIONS] for r, c in cells]
         self.transitions = torch.tensor(moves, device=self.device)  # [S, A] next state
         self.cells = torch.tensor(cells, device=self.device)  # [S, 2]
-        self.start_state = state[tuple(start)]
-        self.goal_state = state[tuple(goal)]
+        self.start_state = state[start]
+        self.goal_state = state[goal]
         self.num_states = n
         self.observation_spec = Composite(
             observation=Categorical(n, shape=batch, dtype=torch.long, device=self.device),
