@@ -194,6 +194,25 @@ def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss
     return None
 
 
+def check_device(potential: TensorDictModuleBase, device: torch.device) -> None:
+    """Refuse a potential whose parameters are not on ``device``, where the data it shapes lies.
+
+    Examples:
+        >>> check_device(TabularPotential(3), torch.device("cpu"))  # fine
+        >>> check_device(TabularPotential(3).to("meta"), torch.device("cpu"))
+        Traceback (most recent call last):
+        ...
+        ValueError: SubgoalPotentialTransform: the potential is on meta but the data it shapes on cpu; ...
+    """
+    for tensor in (*potential.parameters(), *potential.buffers()):
+        if tensor.device != device:
+            raise ValueError(
+                f"SubgoalPotentialTransform: the potential is on {tensor.device} but the data it shapes on {device}; "
+                "keep them on one device: move the env with its transforms (env.to(device)), or the transform "
+                "back (transform.to(device))"
+            )
+
+
 def check_options(gamma: float, start: str, backend: str) -> None:
     """Refuse a discount outside ``[0, 1]``, an unknown start level or backend.
 
