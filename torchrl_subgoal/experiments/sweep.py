@@ -11,7 +11,9 @@ backend:
 * ``"ray"``: one Ray task per chunk on an existing cluster (``RAY_ADDRESS`` or a
   running local cluster), else on a local Ray instance started for the sweep. Tasks
   *return* their table to the driver, which writes it: the cluster needs no shared
-  filesystem, and the store keeps a single writer.
+  filesystem, and the store keeps a single writer. A chunk whose worker process or
+  node dies runs again, up to :data:`RAY_RETRIES` times, before the sweep stops as
+  for any failed chunk.
 
 In both cases the parent process is the only writer: it validates each table and
 writes it atomically as soon as its chunk finishes, so an interrupted sweep loses at
@@ -59,6 +61,9 @@ from torchrl_subgoal.experiments.store import (
 
 Progress = Callable[[int], None]
 Backend = Literal["local", "ray"]
+#: How often Ray runs a chunk again whose worker process or node died (a ``run_chunk`` that raises is not
+#: run again: it would raise again).
+RAY_RETRIES = 3
 
 
 class RunChunk(Protocol):
@@ -331,10 +336,10 @@ def _execute_chunk_ray(
     return table
 
 
-def _failure(chunk: Chunk, exc: BaseException) -> ChunkFailedError:
+def _failure(chunk: Chunk, exc: BaseException, note: str = "") -> ChunkFailedError:
     """The error for a chunk whose ``run_chunk`` raised; :meth:`Sweep.run` adds what to do next."""
-    reason = " ".join(str(exc).split()) or "(no message)"  # one line, however the cause wrote it
-    return ChunkFailedError(f"chunk {chunk.name} failed: {type(exc).__name__}: {reason}.")
+    reason = " ".join(str(exc).split()).rstrip(".") or "(no message)"  # one line, however the cause wrote it
+    return ChunkFailedError(f"chunk {chunk.name} failed: {type(exc).__name__}: {reason}{note}.")
 
 
 # -- backends: each yields (chunk, table) as chunks finish ----------------------------------
@@ -469,7 +474,7 @@ def _run_ray(
         from ray.util.queue import Queue
 
         progress_queue = Queue(actor_options={"num_cpus": 0})  # never waits for a free CPU
-        task = ray.remote(num_cpus=1)(_execute_chunk_ray)
+        task = ray.remote(num_cpus=1, max_retries=RAY_RETRIES)(_execute_chunk_ray)
         config_ref = ray.put(dict(config))
         refs = {task.remote(run_chunk, chunk, config_ref, progress_queue): chunk for chunk in chunks}
         pending = list(refs)
@@ -487,8 +492,11 @@ def _run_ray(
                     continue
                 except ray.exceptions.RayError as exc:
                     if error is None:
-                        # a task's own exception, without Ray's wrapping traceback text
-                        error = _failure(refs[ref], getattr(exc, "cause", None) or exc)
+                        # a task's own exception, without Ray's wrapping traceback text; else its worker
+                        # or node died each time Ray ran it
+                        crashed = not isinstance(exc, ray.exceptions.RayTaskError)
+                        note = f" (Ray ran it {RAY_RETRIES + 1} times)" if crashed else ""
+                        error = _failure(refs[ref], getattr(exc, "cause", None) or exc, note)
                         error.__cause__ = exc
                         for other in pending:
                             ray.cancel(other)
