@@ -586,3 +586,19 @@ def test_a_plan_that_cannot_fit_is_one_line_before_anything_is_built(
     assert line.startswith(f"error: {message}"), line
     assert "fit" in line or "leave it out" in line  # what would fit, or what to do
     assert not (tmp_path / "r").exists()
+
+
+def test_a_ray_address_where_nothing_answers_is_one_line_before_anything_is_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ray itself retries such an address for minutes (over five, with ``config.json`` already written)."""
+    import socket
+
+    with socket.socket() as sock:  # a port nothing listens on: bound, never listening
+        sock.bind(("127.0.0.1", 0))
+        address = f"127.0.0.1:{sock.getsockname()[1]}"
+        monkeypatch.setenv("RAY_ADDRESS", address)
+        code = recipe("qlearning").main(["--episodes", "2", "--backend", "ray", "--results", str(tmp_path / "r")])
+    line = one_error_line(code, capsys)
+    assert line.startswith(f"error: RAY_ADDRESS={address}: no Ray cluster answers there (Connection refused); ")
+    assert not (tmp_path / "r").exists()

@@ -25,6 +25,7 @@ from torchrl_subgoal.experiments.budget import Budget, check_budget
 from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
 from torchrl_subgoal.experiments.results import Chunk, ResultsError, UnknownMethodError
 from torchrl_subgoal.experiments.sweep import (
+    BackendUnavailableError,
     ChunkFailedError,
     MethodSpec,
     RunChunk,
@@ -63,7 +64,7 @@ C = TypeVar("C", bound="RecipeConfig")
 T = TypeVar("T")
 
 #: What a recipe reports as one line on stderr instead of a traceback (see :func:`fail`).
-RECIPE_ERRORS = (ConfigError, SubgoalFileError, ResultsError, ChunkFailedError)
+RECIPE_ERRORS = (ConfigError, SubgoalFileError, ResultsError, ChunkFailedError, BackendUnavailableError)
 
 
 def fail(exc: BaseException) -> int:

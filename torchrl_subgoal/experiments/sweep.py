@@ -27,6 +27,7 @@ import multiprocessing as mp
 import os
 import pickle
 import queue as queue_module
+import socket
 import threading
 import time
 import warnings
@@ -94,6 +95,15 @@ class ChunkFailedError(RuntimeError):
     Examples:
         >>> issubclass(ChunkFailedError, RuntimeError), str(ChunkFailedError("HRS/00000: worker died"))
         (True, 'HRS/00000: worker died')
+    """
+
+
+class BackendUnavailableError(RuntimeError):
+    """The Ray cluster ``RAY_ADDRESS`` names does not answer; raised before anything is written.
+
+    Examples:
+        >>> issubclass(BackendUnavailableError, RuntimeError)
+        True
     """
 
 
@@ -438,6 +448,35 @@ def _wait_for_exit(process: Any, grace: float = 2.0) -> None:
         time.sleep(0.01)
 
 
+def check_ray_address(timeout: float = 10.0) -> None:
+    """Refuse at once a ``RAY_ADDRESS`` (``host:port``) where nothing answers: Ray itself retries for minutes.
+
+    Raises:
+        BackendUnavailableError: naming the address, the reason and what to do.
+
+    Examples:
+        >>> from unittest import mock
+        >>> with mock.patch.dict(os.environ, {"RAY_ADDRESS": "127.0.0.1:1"}):  # nothing listens on port 1
+        ...     check_ray_address()
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.sweep.BackendUnavailableError: RAY_ADDRESS=127.0.0.1:1: no Ray cluster answers ...
+    """
+    address = os.environ.get("RAY_ADDRESS", "")
+    if not address or address in ("local", "auto") or "://" in address:
+        return
+    host, _, port = address.rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]") or "127.0.0.1", int(port)), timeout=timeout).close()
+    except (OSError, ValueError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+        raise BackendUnavailableError(
+            f"RAY_ADDRESS={address}: no Ray cluster answers there ({reason}); start it (ray start --head) or "
+            "set RAY_ADDRESS to its head's HOST:PORT (unset, the sweep uses a cluster running on this machine or "
+            "starts one)"
+        ) from None
+
+
 def _connect_ray(workers: int) -> tuple[Any, bool]:
     """Import Ray and connect; returns (ray module, whether we started the instance)."""
     try:
@@ -705,6 +744,8 @@ class Sweep:
             ChunkFailedError: ``run_chunk`` raised; finished chunks are kept. Locally, chunks
                 already running still finish and are written; on Ray the remaining tasks are
                 cancelled.
+            BackendUnavailableError: ``backend="ray"`` and nothing answers at ``RAY_ADDRESS``
+                (nothing is written).
         """
         if backend not in ("local", "ray"):
             raise ValueError(f"unknown backend {backend!r}; choose 'local' or 'ray'")
@@ -717,6 +758,8 @@ class Sweep:
                 raise TypeError(
                     "run_chunk must be picklable: define it at module level in an importable module"
                 ) from exc
+        if backend == "ray":
+            check_ray_address()  # before anything is written
         self._check_directory()  # before the lock file is created in a directory that is not ours
         with self.store.lock():
             self._open_store()
