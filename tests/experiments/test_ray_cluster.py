@@ -87,9 +87,10 @@ def ray_cluster(env: dict[str, str]) -> Iterator[str]:
     try:
         for number, args in enumerate([head, [f"--address={address}"]], start=1):
             with open(temp.with_name(f"{temp.name}-node{number}.log"), "wb") as log:
+                agent = f"--dashboard-agent-listen-port={free_port()}"  # else a fixed default: two nodes here
                 nodes.append(
                     subprocess.Popen(
-                        [str(RAY), "start", *args, *common],
+                        [str(RAY), "start", *args, *common, agent],
                         env=env,
                         stdout=log,
                         stderr=subprocess.STDOUT,
