@@ -14,6 +14,7 @@ from torchrl_subgoal.experiments.budget import (
     STEPS_PER_SECOND,
     Budget,
     check_budget,
+    check_learnings,
     memory_bytes,
 )
 from torchrl_subgoal.experiments.cli import ConfigError
@@ -142,3 +143,15 @@ def test_all_learners_on_the_local_workers_longer_than_a_year() -> None:
 def test_the_machines_memory() -> None:
     memory = memory_bytes()
     assert memory is not None and 0 < memory <= os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def test_learnings_that_cannot_fit_even_one_learner_each_are_refused_before_the_plan() -> None:
+    least = LEARNER_BYTES + RECORD_BYTES
+    check_learnings((16 * GIB) // least, memory=16 * GIB)  # to the byte
+    with pytest.raises(ConfigError) as caught:
+        check_learnings((16 * GIB) // least + 1, memory=16 * GIB)
+    assert str(caught.value) == (
+        f"--learnings {(16 * GIB) // least + 1}: the plan holds at least {(16 * GIB) // least + 1:,} learners of "
+        f"81 bytes (its place in the plan and one record), 16 GiB, more than this machine's 16 GiB of memory; at "
+        f"most {(16 * GIB) // least:,} learnings fit, and fewer with more patterns, methods or episodes"
+    )

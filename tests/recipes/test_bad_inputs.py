@@ -551,9 +551,19 @@ HUGE = str(10**12)
 # (recipe, flags, the error line's start): each count large enough that no machine's memory, nor a year
 # at 10^9 steps a second, holds it
 CANNOT_FIT = [
-    ("train", ["--learnings", HUGE], f"--learnings {HUGE}: 3e+13 learners record at least 179 PiB"),
-    ("qlearning", ["--learnings", HUGE], f"--learnings {HUGE}: 4e+13 learners record at least 123 PiB"),
-    ("four_rooms", ["--learnings", HUGE], f"--learnings {HUGE}: 5e+13 learners record at least 758 PiB"),
+    ("train", ["--learnings", HUGE], f"--learnings {HUGE}: the plan holds at least 1e+12 learners of 81 bytes"),
+    ("qlearning", ["--learnings", HUGE], f"--learnings {HUGE}: the plan holds at least 1e+12 learners of 81 bytes"),
+    ("four_rooms", ["--learnings", HUGE], f"--learnings {HUGE}: the plan holds at least 1e+12 learners of 81 bytes"),
+    (  # its plan draws a random pattern per learning
+        "pick_and_place",
+        ["--preset", "tiny", "--learnings", HUGE],
+        f"--learnings {HUGE}: the plan holds at least 1e+12 learners of 81 bytes",
+    ),
+    (  # fits before the plan (a learner each), not once it has 10 patterns x 2 methods x 10**5 episodes
+        "qlearning",
+        ["--learnings", str(10**8), "--methods", "Q,HRS", "--episodes", str(10**5)],
+        f"--learnings {10**8}: 2,000,000,000 learners record at least",
+    ),
     ("qlearning", ["--episodes", str(10**15)], f"--episodes {10**15}: one learner records 1e+15 episodes of 17 bytes"),
     ("pinball", ["--episodes", str(10**15)], f"--episodes {10**15}: one learner records 1e+15 episodes of 17 bytes"),
     ("train", ["--total-frames", str(10**30)], f"--total-frames {10**30}: one learner takes at least 1e+30 steps"),
@@ -561,8 +571,8 @@ CANNOT_FIT = [
     ("pick_and_place", [*PICK_AND_PLACE, "--epochs", str(10**15)], f"--epochs {10**15}: one learner takes at least"),
     (
         "train",
-        ["--algo", "a2c", "--seed-batch", str(10**9), "--learnings", str(10**9)],
-        f"--seed-batch {10**9}: 2 chunks at once (--workers 2) of 1,000,000,000 learners hold at least",
+        ["--algo", "a2c", "--seed-batch", str(10**9), "--learnings", str(10**7)],
+        f"--seed-batch {10**9}: 2 chunks at once (--workers 2) of 100,000,000 learners hold at least",
     ),
     ("qlearning", ["--task", "taxi", "--reward", "goal"], "--reward goal: applies to --task four_rooms only"),
 ]

@@ -2,7 +2,8 @@
 
 Every recipe's plan goes through :func:`check_budget` (from
 :func:`~torchrl_subgoal.experiments.recipe.recipe_main`) before the results
-directory is touched. It refuses only what *clearly* cannot fit, from lower
+directory is touched, and its ``--learnings`` through :func:`check_learnings`
+before the plan is made (a plan may draw a pattern per learning). It refuses only what *clearly* cannot fit, from lower
 bounds:
 
 * **memory** (this machine's, :func:`memory_bytes`): every learner's records
@@ -30,7 +31,16 @@ from pathlib import Path
 from torchrl_subgoal.experiments.cli import ConfigError
 from torchrl_subgoal.experiments.sweep import MethodSpec
 
-__all__ = ["LEARNER_BYTES", "MAX_SECONDS", "RECORD_BYTES", "STEPS_PER_SECOND", "Budget", "check_budget", "memory_bytes"]
+__all__ = [
+    "LEARNER_BYTES",
+    "MAX_SECONDS",
+    "RECORD_BYTES",
+    "STEPS_PER_SECOND",
+    "Budget",
+    "check_budget",
+    "check_learnings",
+    "memory_bytes",
+]
 
 #: One learner's record of one report column: steps (int64), return (float64), success (bool).
 RECORD_BYTES = 17
@@ -109,6 +119,32 @@ def _flag(name: str) -> str:
     return "--" + name.replace("_", "-")
 
 
+def check_learnings(learnings: int, memory: int | None = None) -> None:
+    """Refuse, before a plan is even made, a ``--learnings`` whose learners cannot fit in memory: every
+    learning is at least one learner, which the plan and the results hold (:data:`LEARNER_BYTES` and at
+    least one record of :data:`RECORD_BYTES`). :func:`check_budget` checks the plan made.
+
+    Raises:
+        ConfigError: naming ``--learnings`` and the most that fits.
+
+    Examples:
+        >>> check_learnings(100, memory=2**30)  # fits
+        >>> check_learnings(10**12, memory=2**34)
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --learnings 1000000000000: the plan holds at least ...
+    """
+    memory = memory_bytes() if memory is None else memory
+    least = LEARNER_BYTES + RECORD_BYTES
+    if memory is not None and learnings * least > memory:
+        raise ConfigError(
+            f"--learnings {learnings}: the plan holds at least {_count(learnings)} learners of {least} bytes (its "
+            f"place in the plan and one record), {_size(learnings * least)}, more than this machine's "
+            f"{_size(memory)} of memory; at most {_count(memory // least)} learnings fit, and fewer with more "
+            "patterns, methods or episodes"
+        )
+
+
 def check_budget(
     specs: Sequence[MethodSpec],
     columns: int,
@@ -167,9 +203,11 @@ def check_budget(
             f"{RECORD_BYTES} bytes, at least {_size(columns * RECORD_BYTES)}, more than this machine's "
             f"{_size(memory)} of memory; at most {_count(fits)} fit"
         )
-    chunks = sum(math.ceil(len(spec.patterns) * spec.learnings_per_pattern / chunk_size) for spec in specs)
+    per_method = [len(spec.patterns) * spec.learnings_per_pattern for spec in specs]
+    chunks = sum(math.ceil(n / chunk_size) for n in per_method)
     at_once = min(workers, chunks) if backend == "local" and workers > 0 else 1
-    held = at_once * min(chunk_size, learners) * per_learner
+    in_chunk = min(chunk_size, max(per_method, default=0))  # a chunk holds one method's learners
+    held = at_once * in_chunk * per_learner
     if memory is not None and backend == "local" and held > memory:
         fits = memory // (at_once * per_learner)
         runs = f"{at_once} chunks at once (--workers {workers}) of " if at_once > 1 else "a chunk of "
@@ -178,7 +216,7 @@ def check_budget(
         else:
             what, most = f"--workers {workers}", f"at most {memory // per_learner} chunks at once fit"
         raise ConfigError(
-            f"{what}: {runs}{_count(min(chunk_size, learners))} learners hold at least {_size(held)} "
+            f"{what}: {runs}{_count(in_chunk)} learners hold at least {_size(held)} "
             f"({_size(per_learner)} a learner), more than this machine's {_size(memory)} of memory; {most}"
         )
     total = learners * (columns * RECORD_BYTES + LEARNER_BYTES)

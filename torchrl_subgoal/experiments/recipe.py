@@ -21,7 +21,7 @@ from typing import Any, ClassVar, Literal, TypeVar
 import torch
 from torchrl.envs import EnvBase, TransformedEnv
 
-from torchrl_subgoal.experiments.budget import Budget, check_budget
+from torchrl_subgoal.experiments.budget import Budget, check_budget, check_learnings
 from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
 from torchrl_subgoal.experiments.results import Chunk, ResultsError, UnknownMethodError
 from torchrl_subgoal.experiments.sweep import (
@@ -608,6 +608,7 @@ def recipe_main(
     """
 
     def run(cfg: C) -> int:
+        check_learnings(cfg.learnings)  # before the plan, which may draw a pattern per learning
         sweep = plan(cfg)
         check_budget(
             sweep.specs,
