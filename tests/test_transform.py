@@ -978,8 +978,9 @@ def test_a_device_move_it_cannot_follow_is_a_clear_error(backend: str, potential
 
 @pytest.mark.parametrize("change", ["replaced", "moved"])
 def test_a_table_replaced_or_moved_is_followed_on_both_backends(change: str) -> None:
-    """A move that gives the potential a new parameter (``.to("meta")`` does), or new memory under the same one
-    (``.share_memory_()``, ``.to("cuda")``): both backends shape with it and train it, and agree."""
+    """A move of the transform that gives the potential new parameters (as ``.to("meta")`` does; here a
+    round trip through float64 with torch's ``overwrite_module_params_on_conversion``), or new memory under
+    the same one (``.share_memory_()``, ``.to("cuda")``): both backends shape with it, train it, and agree."""
 
     def run(backend: str) -> tuple[TensorDict, torch.Tensor, torch.Tensor]:
         v = TabularPotential(3)
@@ -987,9 +988,16 @@ def test_a_table_replaced_or_moved_is_followed_on_both_backends(change: str) -> 
         env = TransformedEnv(FourRoomsEnv(8, max_steps=30), t)
         torch.manual_seed(0)
         env.rollout(40, break_when_any_done=False)
-        new = torch.tensor([-3.0, -2.0, -1.0])
+        new, old = torch.tensor([-3.0, -2.0, -1.0]), v.table
         if change == "replaced":
-            v.table = torch.nn.Parameter(new.clone())
+            torch.__future__.set_overwrite_module_params_on_conversion(True)
+            try:
+                t.to(torch.float64).to(torch.float32)
+            finally:
+                torch.__future__.set_overwrite_module_params_on_conversion(False)
+            assert v.table is not old
+            with torch.no_grad():
+                v.table.copy_(new)
         else:
             v.table.data = new.clone()
         data = env.rollout(200, break_when_any_done=False)
