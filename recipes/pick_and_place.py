@@ -61,6 +61,7 @@ from torchrl_subgoal.experiments import (
     UnknownMethodError,
     select_methods,
 )
+from torchrl_subgoal.experiments.budget import Budget
 from torchrl_subgoal.experiments.checkpoint import (
     LearningCheckpoint,
     restore_rng_states,
@@ -510,7 +511,9 @@ def plan(cfg: Config) -> Plan:
         },
     }
     check_shaping_builds(specs, config)
-    return Plan("fetch", specs, run_chunk, config, episodes=epochs, chunk_size=1)
+    steps = epochs * preset["cycles"] * preset["cycle_steps"]
+    budget = Budget(steps, ("epochs", epochs), chunk_flag=None, unit="epoch")
+    return Plan("fetch", specs, run_chunk, config, episodes=epochs, chunk_size=1, budget=budget)
 
 
 def main(argv: list[str] | None = None) -> int:

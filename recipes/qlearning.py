@@ -45,6 +45,7 @@ from torchrl_subgoal.experiments.recipe import (
     RecipeConfig,
     check_methods,
     check_patterns,
+    check_unused,
     chunk_patterns,
     method_specs,
     pattern_sets,
@@ -139,6 +140,8 @@ class Config(RecipeConfig):
         check(self.eta >= 0.0, "eta", f"must be >= 0, got {self.eta}")
         check(self.progress_scale >= 0.0, "progress_scale", f"must be >= 0, got {self.progress_scale}")
         check(0.0 < self.expectile < 1.0, "expectile", f"must lie strictly between 0 and 1, got {self.expectile}")
+        if self.task == "taxi":
+            check_unused(self, ["reward"], "applies to --task four_rooms only (taxi's rewards are its own)")
 
 
 def make_env(config: Mapping[str, Any], n: int) -> EnvBase:

@@ -972,3 +972,67 @@ def test_stored_rows_of_learners_sharing_tables_read_their_learners_table(backen
     rows = torch.randperm(6)
     shuffled = t(data[rows].clone())
     assert torch.equal(shuffled["next", "reward"], data["next", "reward"][rows])
+
+
+# ----------------------------------------------------------------- device moves and empty samples
+
+
+@pytest.mark.parametrize(("backend", "potential"), [("compiled", "table"), ("torch", "table"), ("torch", "network")])
+def test_a_device_move_it_cannot_follow_is_a_clear_error(backend: str, potential: str) -> None:
+    """``transform.to("meta")`` left the compiled step shaping with the table from before the move."""
+    v = TabularPotential(3) if potential == "table" else NeuralPotential(torch.nn.Linear(2, 1))
+    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.9, observation_key="cell", value_update=0.1, backend=backend)
+    env = TransformedEnv(FourRoomsEnv(4, max_steps=20), t)
+    data = env.rollout(10, break_when_any_done=False)
+    t.to("meta")
+    message = "the potential is on meta but the data it shapes on cpu; keep them on one device"
+    with pytest.raises(ValueError, match=message):
+        env.rollout(10, break_when_any_done=False)
+    with pytest.raises(ValueError, match=message):
+        t(data.clone())  # stored data likewise
+
+
+@pytest.mark.parametrize("change", ["replaced", "moved"])
+def test_a_table_replaced_or_moved_is_followed_on_both_backends(change: str) -> None:
+    """A move of the transform that gives the potential new parameters (as ``.to("meta")`` does; here a
+    round trip through float64 with torch's ``overwrite_module_params_on_conversion``), or new memory under
+    the same one (``.share_memory_()``, ``.to("cuda")``): both backends shape with it, train it, and agree."""
+
+    def run(backend: str) -> tuple[TensorDict, torch.Tensor, torch.Tensor]:
+        v = TabularPotential(3)
+        t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.9, observation_key="cell", value_update=0.1, backend=backend)
+        env = TransformedEnv(FourRoomsEnv(8, max_steps=30), t)
+        torch.manual_seed(0)
+        env.rollout(40, break_when_any_done=False)
+        new, old = torch.tensor([-3.0, -2.0, -1.0]), v.table
+        if change == "replaced":
+            torch.__future__.set_overwrite_module_params_on_conversion(True)
+            try:
+                t.to(torch.float64).to(torch.float32)
+            finally:
+                torch.__future__.set_overwrite_module_params_on_conversion(False)
+            assert v.table is not old
+            with torch.no_grad():
+                v.table.copy_(new)
+        else:
+            v.table.data = new.clone()
+        data = env.rollout(200, break_when_any_done=False)
+        return data, new, v.table.detach().clone()
+
+    compiled, new, v_compiled = run("compiled")
+    eager, _, v_eager = run("torch")
+    assert not torch.equal(v_compiled, new)  # the table shaping reads now was trained
+    assert torch.allclose(v_compiled, v_eager, atol=1e-5)
+    for key in [("next", "reward"), ("next", "subgoal_index")]:
+        assert torch.allclose(compiled[key].float(), eager[key].float(), atol=1e-5), key
+
+
+@pytest.mark.parametrize("shape", [(0,), (4, 0), (0, 5)])
+def test_forward_on_an_empty_sample_returns_it_unchanged(backend: str, shape: tuple[int, ...]) -> None:
+    t = SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), gamma=0.9, observation_key="cell", backend=backend)
+    data = TransformedEnv(FourRoomsEnv(4), t).rollout(5)  # [4, 5]
+    empty = data[0, :0] if shape == (0,) else data[:, :0] if shape == (4, 0) else data[:0]
+    assert empty.batch_size == shape
+    before = empty.clone()
+    assert t(empty) is empty
+    assert (empty == before).all() and set(empty.keys(True, True)) == set(before.keys(True, True))

@@ -27,8 +27,10 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 import torch
+from torchrl.envs import EnvBase
 
 from torchrl_subgoal import TabularPotential, domains, load_patterns
+from torchrl_subgoal.experiments.budget import Budget
 from torchrl_subgoal.experiments.cli import ConfigError, check, setting
 from torchrl_subgoal.experiments.recipe import (
     PatternSets,
@@ -57,6 +59,7 @@ __all__ = [
     "LearnerRecipeConfig",
     "check_seed_batch",
     "frozen_tables",
+    "learner_budget",
     "learner_methods",
     "learner_plan",
     "learner_settings",
@@ -328,6 +331,35 @@ def learner_plan(
         episodes=iterations,
         chunk_size=cfg.seed_batch,
         results=results,
+        budget=learner_budget(settings, probe),
+    )
+
+
+def learner_budget(settings: Any, probe: EnvBase) -> Budget:
+    """What one learner costs at least: ``total_frames`` steps, and its collected batch (and replay buffer)
+    of frames at least as large as one of ``probe``'s (all its entries, ``next`` included).
+
+    Examples:
+        >>> from torchrl_subgoal.training import DQNConfig
+        >>> four_rooms = domains.part("four_rooms", LearnerDomain)
+        >>> budget = learner_budget(DQNConfig(total_frames=10_000), four_rooms.make_env(1))
+        >>> budget.steps, budget.length, budget.chunk_flag, budget.unit
+        (10000, ('total_frames', 10000), 'seed_batch', 'update')
+    """
+    fake = probe.fake_tensordict()
+    frame = sum(t.numel() * t.element_size() for t in fake.values(True, True)) // max(fake.numel(), 1)
+    frames = max(settings.frames_per_batch, settings.num_envs)
+    replayed = getattr(settings, "buffer_size", 0)
+    held = f"a batch of {frames} frames (--frames-per-batch, --num-envs)" + (
+        f" and {replayed} replayed ones" if replayed else ""
+    )
+    return Budget(
+        steps=settings.total_frames,
+        length=("total_frames", settings.total_frames),
+        learner_bytes=(frames + replayed) * frame,
+        held=f"{held}, {frame} bytes each",
+        chunk_flag="seed_batch",
+        unit="update",
     )
 
 

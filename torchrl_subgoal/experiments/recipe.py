@@ -12,6 +12,7 @@ every domain.
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -20,9 +21,11 @@ from typing import Any, ClassVar, Literal, TypeVar
 import torch
 from torchrl.envs import EnvBase, TransformedEnv
 
+from torchrl_subgoal.experiments.budget import Budget, check_budget, check_learnings
 from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
 from torchrl_subgoal.experiments.results import Chunk, ResultsError, UnknownMethodError
 from torchrl_subgoal.experiments.sweep import (
+    BackendUnavailableError,
     ChunkFailedError,
     MethodSpec,
     RunChunk,
@@ -42,6 +45,7 @@ __all__ = [
     "check_device",
     "check_methods",
     "check_patterns",
+    "check_unused",
     "chunk_patterns",
     "config_main",
     "fail",
@@ -62,7 +66,7 @@ C = TypeVar("C", bound="RecipeConfig")
 T = TypeVar("T")
 
 #: What a recipe reports as one line on stderr instead of a traceback (see :func:`fail`).
-RECIPE_ERRORS = (ConfigError, SubgoalFileError, ResultsError, ChunkFailedError)
+RECIPE_ERRORS = (ConfigError, SubgoalFileError, ResultsError, ChunkFailedError, BackendUnavailableError)
 
 
 def fail(exc: BaseException) -> int:
@@ -159,6 +163,32 @@ def check_methods(methods: Mapping[str, Method] | Sequence[str], names: Sequence
             f"--methods: {twice} {'is' if len(repeated) == 1 else 'are'} named twice; name each method once"
         )
     return list(names)
+
+
+def check_unused(cfg: Any, names: Sequence[str], reason: str) -> None:
+    """Refuse the settings ``names`` of ``cfg`` (a settings dataclass) set to anything but their defaults:
+    under the chosen settings they do not apply (``reason`` says why), and a flag is never silently ignored.
+
+    Raises:
+        ConfigError: naming the flags given, why they do not apply, and to leave them out.
+
+    Examples:
+        >>> from dataclasses import dataclass
+        >>> @dataclass
+        ... class Settings:
+        ...     task: str = "four_rooms"
+        ...     reward: str = "step-cost"
+        >>> check_unused(Settings(task="taxi"), ["reward"], "applies to --task four_rooms only")  # the default
+        >>> check_unused(Settings(task="taxi", reward="goal"), ["reward"], "applies to --task four_rooms only")
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --reward goal: applies to --task four_rooms only; leave it out
+    """
+    defaults = {f.name: f.default for f in dataclasses.fields(cfg)}
+    given = [name for name in names if getattr(cfg, name) != defaults[name]]
+    if given:
+        flags = ", ".join(f"--{name.replace('_', '-')} {getattr(cfg, name)}" for name in given)
+        raise ConfigError(f"{flags}: {reason}; leave {'it' if len(given) == 1 else 'them'} out")
 
 
 def needs_random_patterns(methods: Mapping[str, Method], names: Sequence[str]) -> bool:
@@ -537,6 +567,8 @@ class Plan:
         episodes: the report's columns per learner (episodes, updates or epochs).
         chunk_size: learners per chunk.
         results: the results directory (default: the recipe's ``--results``).
+        budget: what one learner costs at least, checked before anything runs (:func:`check_budget`);
+            default: ``episodes`` episodes (``--episodes``) of at least one step, ``--chunk-size`` learners a chunk.
 
     Examples:
         >>> Plan("four_rooms", [], print, {}, episodes=10, chunk_size=100).results is None
@@ -550,6 +582,7 @@ class Plan:
     episodes: int
     chunk_size: int
     results: str | None = None
+    budget: Budget | None = None
 
 
 def config_main(
@@ -602,8 +635,9 @@ def recipe_main(
     threads: int | None = 1,
     errors: tuple[type[BaseException], ...] = RECIPE_ERRORS,
 ) -> int:
-    """A recipe's ``main``: parse the flags into ``config_cls``, make the :class:`Plan`, run (or resume)
-    the sweep, write the report and print it; the exit code (see :func:`fail`, :func:`sweep_and_report`).
+    """A recipe's ``main``: parse the flags into ``config_cls``, make the :class:`Plan`, check that it fits
+    this machine's memory and a year (:func:`~torchrl_subgoal.experiments.budget.check_budget`), run (or
+    resume) the sweep, write the report and print it; the exit code (see :func:`fail`, :func:`sweep_and_report`).
 
     Args:
         config_cls: the recipe's settings (a :class:`RecipeConfig`).
@@ -618,7 +652,17 @@ def recipe_main(
     """
 
     def run(cfg: C) -> int:
+        check_learnings(cfg.learnings)  # before the plan, which may draw a pattern per learning
         sweep = plan(cfg)
+        check_budget(
+            sweep.specs,
+            sweep.episodes,
+            sweep.chunk_size,
+            sweep.budget or Budget(steps=sweep.episodes, length=("episodes", sweep.episodes)),
+            learnings=cfg.learnings,
+            workers=cfg.workers,
+            backend=cfg.backend,
+        )
         return sweep_and_report(
             sweep.domain,
             sweep.results or cfg.results,

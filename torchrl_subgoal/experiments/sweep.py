@@ -11,7 +11,9 @@ backend:
 * ``"ray"``: one Ray task per chunk on an existing cluster (``RAY_ADDRESS`` or a
   running local cluster), else on a local Ray instance started for the sweep. Tasks
   *return* their table to the driver, which writes it: the cluster needs no shared
-  filesystem, and the store keeps a single writer.
+  filesystem, and the store keeps a single writer. A chunk whose worker process or
+  node dies runs again, up to :data:`RAY_RETRIES` times, before the sweep stops as
+  for any failed chunk.
 
 In both cases the parent process is the only writer: it validates each table and
 writes it atomically as soon as its chunk finishes, so an interrupted sweep loses at
@@ -25,6 +27,7 @@ import multiprocessing as mp
 import os
 import pickle
 import queue as queue_module
+import socket
 import threading
 import time
 import warnings
@@ -59,6 +62,9 @@ from torchrl_subgoal.experiments.store import (
 
 Progress = Callable[[int], None]
 Backend = Literal["local", "ray"]
+#: How often Ray runs a chunk again whose worker process or node died (a ``run_chunk`` that raises is not
+#: run again: it would raise again).
+RAY_RETRIES = 3
 
 
 class RunChunk(Protocol):
@@ -89,6 +95,15 @@ class ChunkFailedError(RuntimeError):
     Examples:
         >>> issubclass(ChunkFailedError, RuntimeError), str(ChunkFailedError("HRS/00000: worker died"))
         (True, 'HRS/00000: worker died')
+    """
+
+
+class BackendUnavailableError(RuntimeError):
+    """The Ray cluster ``RAY_ADDRESS`` names does not answer; raised before anything is written.
+
+    Examples:
+        >>> issubclass(BackendUnavailableError, RuntimeError)
+        True
     """
 
 
@@ -331,10 +346,10 @@ def _execute_chunk_ray(
     return table
 
 
-def _failure(chunk: Chunk, exc: BaseException) -> ChunkFailedError:
+def _failure(chunk: Chunk, exc: BaseException, note: str = "") -> ChunkFailedError:
     """The error for a chunk whose ``run_chunk`` raised; :meth:`Sweep.run` adds what to do next."""
-    reason = " ".join(str(exc).split()) or "(no message)"  # one line, however the cause wrote it
-    return ChunkFailedError(f"chunk {chunk.name} failed: {type(exc).__name__}: {reason}.")
+    reason = " ".join(str(exc).split()).rstrip(".") or "(no message)"  # one line, however the cause wrote it
+    return ChunkFailedError(f"chunk {chunk.name} failed: {type(exc).__name__}: {reason}{note}.")
 
 
 # -- backends: each yields (chunk, table) as chunks finish ----------------------------------
@@ -433,6 +448,35 @@ def _wait_for_exit(process: Any, grace: float = 2.0) -> None:
         time.sleep(0.01)
 
 
+def check_ray_address(timeout: float = 10.0) -> None:
+    """Refuse at once a ``RAY_ADDRESS`` (``host:port``) where nothing answers: Ray itself retries for minutes.
+
+    Raises:
+        BackendUnavailableError: naming the address, the reason and what to do.
+
+    Examples:
+        >>> from unittest import mock
+        >>> with mock.patch.dict(os.environ, {"RAY_ADDRESS": "127.0.0.1:1"}):  # nothing listens on port 1
+        ...     check_ray_address()
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.sweep.BackendUnavailableError: RAY_ADDRESS=127.0.0.1:1: no Ray cluster answers ...
+    """
+    address = os.environ.get("RAY_ADDRESS", "")
+    if not address or address in ("local", "auto") or "://" in address:
+        return
+    host, _, port = address.rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]") or "127.0.0.1", int(port)), timeout=timeout).close()
+    except (OSError, ValueError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+        raise BackendUnavailableError(
+            f"RAY_ADDRESS={address}: no Ray cluster answers there ({reason}); start it (ray start --head) or "
+            "set RAY_ADDRESS to its head's HOST:PORT (unset, the sweep uses a cluster running on this machine or "
+            "starts one)"
+        ) from None
+
+
 def _connect_ray(workers: int) -> tuple[Any, bool]:
     """Import Ray and connect; returns (ray module, whether we started the instance)."""
     try:
@@ -469,7 +513,7 @@ def _run_ray(
         from ray.util.queue import Queue
 
         progress_queue = Queue(actor_options={"num_cpus": 0})  # never waits for a free CPU
-        task = ray.remote(num_cpus=1)(_execute_chunk_ray)
+        task = ray.remote(num_cpus=1, max_retries=RAY_RETRIES)(_execute_chunk_ray)
         config_ref = ray.put(dict(config))
         refs = {task.remote(run_chunk, chunk, config_ref, progress_queue): chunk for chunk in chunks}
         pending = list(refs)
@@ -487,8 +531,11 @@ def _run_ray(
                     continue
                 except ray.exceptions.RayError as exc:
                     if error is None:
-                        # a task's own exception, without Ray's wrapping traceback text
-                        error = _failure(refs[ref], getattr(exc, "cause", None) or exc)
+                        # a task's own exception, without Ray's wrapping traceback text; else its worker
+                        # or node died each time Ray ran it
+                        crashed = not isinstance(exc, ray.exceptions.RayTaskError)
+                        note = f" (Ray ran it {RAY_RETRIES + 1} times)" if crashed else ""
+                        error = _failure(refs[ref], getattr(exc, "cause", None) or exc, note)
                         error.__cause__ = exc
                         for other in pending:
                             ray.cancel(other)
@@ -697,6 +744,8 @@ class Sweep:
             ChunkFailedError: ``run_chunk`` raised; finished chunks are kept. Locally, chunks
                 already running still finish and are written; on Ray the remaining tasks are
                 cancelled.
+            BackendUnavailableError: ``backend="ray"`` and nothing answers at ``RAY_ADDRESS``
+                (nothing is written).
         """
         if backend not in ("local", "ray"):
             raise ValueError(f"unknown backend {backend!r}; choose 'local' or 'ray'")
@@ -709,6 +758,8 @@ class Sweep:
                 raise TypeError(
                     "run_chunk must be picklable: define it at module level in an importable module"
                 ) from exc
+        if backend == "ray":
+            check_ray_address()  # before anything is written
         self._check_directory()  # before the lock file is created in a directory that is not ours
         with self.store.lock():
             self._open_store()

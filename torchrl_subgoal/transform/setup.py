@@ -196,6 +196,42 @@ def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss
     return None
 
 
+def check_device(potential: TensorDictModuleBase, data: torch.Tensor | None) -> None:
+    """Refuse a potential whose parameters are not on the device of ``data`` (an entry it shapes; ``None``:
+    nothing to compare).
+
+    Examples:
+        >>> check_device(TabularPotential(3), torch.zeros(2))  # fine
+        >>> check_device(TabularPotential(3).to("meta"), torch.zeros(2))
+        Traceback (most recent call last):
+        ...
+        ValueError: SubgoalPotentialTransform: the potential is on meta but the data it shapes on cpu; ...
+    """
+    device = data.device if data is not None else None
+    for tensor in (*potential.parameters(), *potential.buffers()):
+        if device is not None and tensor.device != device:
+            raise ValueError(
+                f"SubgoalPotentialTransform: the potential is on {tensor.device} but the data it shapes on {device}; "
+                "keep them on one device: move the env with its transforms (env.to(device)), or the transform "
+                "back (transform.to(device))"
+            )
+
+
+def trained_parameters(
+    potential: TensorDictModuleBase, update: ValueUpdate | None
+) -> tuple[list[torch.nn.Parameter], torch.optim.SGD | None]:
+    """The potential's parameters as they are now, and the online update's SGD over them (plain SGD keeps no
+    state, so one made anew after a move that replaced them loses nothing).
+
+    Examples:
+        >>> parameters, optimizer = trained_parameters(TabularPotential(3), None)
+        >>> len(parameters), optimizer
+        (1, None)
+    """
+    parameters = list(potential.parameters())
+    return parameters, torch.optim.SGD(parameters, update.lr) if update else None
+
+
 def check_options(gamma: float, start: str, backend: str) -> None:
     """Refuse a discount outside ``[0, 1]``, an unknown start level or backend.
 
@@ -425,6 +461,10 @@ class BatchSetup:
     def moved(self) -> bool:
         """Whether the tabular potential's table moved since (to shared memory, another device…)."""
         return self.table is not None and self.table.data_ptr() != self.table_ptr
+
+    def stale(self, potential: TensorDictModuleBase) -> bool:
+        """Whether ``potential``'s table moved since, or is another tensor now (``.to("meta")`` replaces it)."""
+        return self.table is not None and (self.moved or self.table is not getattr(potential, "table", None))
 
 
 def check_potential(potential: TensorDictModuleBase, keys: SubgoalKeys) -> None:
