@@ -404,3 +404,19 @@ def test_try_runs_and_reports_curves_and_potential(client: FlaskClient) -> None:
     assert status["progress"] == 1.0 and result["pattern"] == "p"
     assert len(result["shaped"]["mean"]) == len(result["baseline"]["sem"]) == 6
     assert len(result["potential"]) == 3 and result["settings"]["learners"] == 3
+
+
+def test_try_it_takes_the_shaping_method(client: FlaskClient) -> None:
+    """ "Try it" runs HRS by default, or the method the page chose (SRS: its fixed prior is the table
+    shown; NRS: no table); any other method is a 400 naming the field."""
+    jobs = client.application.extensions["studio"].jobs
+    for method, table in (("SRS", [0.0, 0.333, 0.667]), ("NRS", [])):
+        started = client.post("/api/try", json=four_rooms((3, 6), (7, 9)) | {"episodes": 2, "method": method})
+        assert started.status_code == 202, started.json
+        job = jobs.wait(started.json["id"], 600)
+        assert job.state == "done", job.error
+        result = client.get(f"/api/try/{job.id}").json["result"]
+        assert result["method"] == method
+        assert [round(v, 3) for v in result["potential"]] == table
+    wrong = client.post("/api/try", json=four_rooms((3, 6)) | {"method": "PBRS"})
+    assert wrong.status_code == 400 and "method: expected one of ['HRS', 'SRS', 'NRS']" in wrong.json["error"]

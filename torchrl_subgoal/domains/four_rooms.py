@@ -89,7 +89,7 @@ def _sarsa(
     sarsa = SARSA_PRESETS["released"]
     env = four_rooms.FourRoomsEnv(num_envs=learners, max_steps=max_steps or 1000)
     agent = SoftmaxSarsa(learners, env.num_states, 4, sarsa, seed=seed)
-    return env, agent, {"gamma": sarsa.gamma, "value_lr": sarsa.value_lr, "observation_key": "cell"}
+    return env, agent, {"gamma": sarsa.gamma, "value_lr": sarsa.value_lr, "observation_key": "cell", "goal_reward": 1.0}
 
 
 def _candidates(seed: int) -> list[Predicate]:

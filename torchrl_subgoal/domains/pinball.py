@@ -89,7 +89,11 @@ def _actor_critic(
     env = pinball.PinBallEnv(learners, map_ or "simple", max_steps=max_steps or 10_000, seed=seed)
     spec = env.observation_spec["observation"]
     agent = FourierActorCritic(learners, spec.low[0], spec.high[0], 5, ac, seed=seed)
-    return env, agent, {"gamma": ac.gamma, "value_lr": ac.value_lr, "observation_key": "observation"}
+    return (
+        env,
+        agent,
+        {"gamma": ac.gamma, "value_lr": ac.value_lr, "observation_key": "observation", "goal_reward": 10_000.0},
+    )
 
 
 def _candidates(seed: int) -> list[Predicate]:

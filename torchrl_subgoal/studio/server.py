@@ -12,7 +12,7 @@ folder is gone and 507 when its disk is full; a 500 is a bug):
 ``GET /api/files/NAME``  one file as a drawing (``/files/NAME``: the file itself)
 ``PUT /api/files/NAME``  save a drawing as ``NAME`` (``.yaml`` added when no suffix);
                          ``?overwrite=1`` to replace an existing file (else 409)
-``POST /api/try``        start a "Try it" learning of one pattern: ``{..drawing, pattern,
+``POST /api/try``        start a "Try it" learning of one pattern: ``{..drawing, pattern, method,
                          episodes, learners, max_steps}``; 202 with the job
 ``GET /api/try/ID``      the job's state, progress and, when done, its result
 ``DELETE /api/try/ID``   cancel it
@@ -65,7 +65,7 @@ from torchrl_subgoal.studio.document import (
 )
 from torchrl_subgoal.studio.domains import Domain, default_domains
 from torchrl_subgoal.studio.jobs import JobError, Jobs
-from torchrl_subgoal.studio.training import TrySettings, try_pattern
+from torchrl_subgoal.studio.training import METHODS, TrySettings, try_pattern
 from torchrl_subgoal.subgoals import (
     MAX_FILE_BYTES,
     SubgoalFileError,
@@ -372,11 +372,14 @@ def create_app(
         data = _body()
         if not isinstance(data, Mapping):
             raise RequestError("request: expected a JSON object")
-        fields = {"pattern", "episodes", "learners", "max_steps"}
+        fields = {"pattern", "method", "episodes", "learners", "max_steps"}
         drawing = read_drawing({k: v for k, v in data.items() if k not in fields}, studio.domains, source=_source(data))
         name = data.get("pattern", next(iter(drawing.patterns)) if len(drawing.patterns) == 1 else None)
         if not isinstance(name, str) or name not in drawing.patterns:
             raise RequestError(f"pattern: expected one of {list(drawing.patterns)}, got {name!r}")
+        method = data.get("method", "HRS")
+        if not isinstance(method, str) or method not in METHODS:
+            raise RequestError(f"method: expected one of {list(METHODS)}, got {method!r}")
         domain = drawing.domain
         if not domain.limits:
             raise RequestError(f"Try it: {domain.try_note or 'not offered for ' + domain.title}")
@@ -390,10 +393,10 @@ def create_app(
         map_ = domain.maps.get(drawing.map)
 
         def work(progress: Any) -> dict[str, Any]:
-            result = try_pattern(domain.name, series, settings, map=map_, progress=progress).to_json()
-            return {**result, "pattern": name}
+            result = try_pattern(domain.name, series, settings, method=method, map=map_, progress=progress)
+            return {**result.to_json(), "pattern": name}
 
-        key = f"{domain.name}/{name}"
+        key = f"{domain.name}/{name}/{method}"
         job = studio.jobs.start(key, 2 * settings.learners * settings.episodes, work)
         return jsonify(job.status()), 202
 
