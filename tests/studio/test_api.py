@@ -327,7 +327,7 @@ def gated(monkeypatch: pytest.MonkeyPatch) -> Iterator[threading.Event]:
     """``try_pattern`` replaced by a job that reports progress until the gate opens (or it is cancelled)."""
     gate = threading.Event()
 
-    def blocked(domain: str, series: Any, settings: Any, *, map: Any = None, progress: Any = None) -> Any:
+    def blocked(domain: str, series: Any, settings: Any, *, method: str = "HRS", map: Any = None, progress: Any = None) -> Any:
         while not gate.wait(0.01):
             progress(0)  # raises once cancelled
         raise RuntimeError("the gate opened")
@@ -367,7 +367,7 @@ def test_one_job_per_pattern_and_a_few_at_once(client: FlaskClient, gated: threa
     assert first.status_code == 202 and first.json["state"] == "running"
     again = client.post("/api/try", json=four_rooms((7, 9), name="a"))
     assert again.status_code == 409
-    assert again.json["error"].startswith("four_rooms/a: a learning with this pattern is already running")
+    assert again.json["error"].startswith("four_rooms/a/HRS: a learning with this pattern is already running")
     second = client.post("/api/try", json=four_rooms((3, 6), name="b"))
     assert second.status_code == 202
     third = client.post("/api/try", json=four_rooms((3, 6), name="c"))
