@@ -78,7 +78,8 @@ def test_monotone_potential_reaches_the_shaped_learners_table(
     monkeypatch.setattr(learners, "shaping_parts", recording)
     cfg = LearnerRecipeConfig(methods="A2C,HRS", total_frames=256, results=str(tmp_path), monotone_potential=monotone)
     plan = learner_plan(cfg, "a2c")
-    assert ("monotone_potential" in plan.config) == monotone  # absent by default: older results still resume
+    # recorded either way: results made before the progress prior (no such entry) do not resume under it
+    assert plan.config["monotone_potential"] == monotone and plan.config["progress_scale"] == 1.0
     for spec in plan.specs:  # A2C (pattern "none"), HRS (the first participant's)
         chunk = Chunk(spec.name, 0, ((spec.patterns[0], 0),), seed=1)
         learners.run_learner_chunk(chunk, plan.config, lambda done: None)

@@ -119,7 +119,9 @@ def test_a_sweep_on_a_two_node_cluster_survives_a_killed_worker(tmp_path: Path) 
     results, log, gate = tmp_path / "results", tmp_path / "chunks.log", tmp_path / "gate"
     names = [chunk.name for chunk in make_sweep(tmp_path / "plan").chunks]
     assert VICTIM in names and len(names) == 12
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "RAY_USAGE_STATS_ENABLED": "0"}
+    # RAY_AUTH_MODE: `ray start --head` turns token authentication on by itself where a token file exists
+    # (~/.ray/auth_token) while a client does not send it unless told; this cluster is local and short-lived
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "disabled"}
     env.pop("RAY_ADDRESS", None)
     # the chunks' settings: a cluster's workers get the environment of their node, not of the sweep
     env |= {

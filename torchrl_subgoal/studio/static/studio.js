@@ -741,6 +741,8 @@ function currentValues() {
 }
 
 async function tryIt() {
+  clearTimeout(S.validateTimer);
+  S.validateSeq += 1; // a validation still in flight must not overwrite the answer to this try (the server validates it)
   const p = pattern();
   const body = Object.assign(drawing([p]), {
     pattern: p.name, method: $("method").value, episodes: Number($("episodes").value),
