@@ -62,6 +62,15 @@ class LearnerStack(nn.Module):
         base = copy.deepcopy(networks[0])
         self.params[0].data.to("meta").to_module(base)  # the architecture, without its own weights
         self.__dict__["_base"] = base  # not a submodule: its (meta) parameters are not this module's
+        # where each stacked entry goes in the architecture: the forward pass puts a learner's tensors
+        # there directly (a TensorDict's ``to_module`` costs tenths of a millisecond a call)
+        self._keys = list(self.params.keys(include_nested=True, leaves_only=True))
+        self._slots = []
+        for key in self._keys:
+            path = (key,) if isinstance(key, str) else key
+            owner = base.get_submodule(".".join(path[:-1])) if len(path) > 1 else base
+            self._slots.append((owner, path[-1], path[-1] in owner._parameters))
+        self._meta = [getattr(owner, name) for owner, name, _ in self._slots]
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor | tuple[torch.Tensor, ...]:
         return self.call(self.params, *inputs)
@@ -73,27 +82,35 @@ class LearnerStack(nn.Module):
         for x in inputs:
             if x.shape[0] % k:
                 raise ValueError(f"LearnerStack of {k} learners got {x.shape[0]} rows: not a multiple of {k}")
-        base: nn.Module = self.__dict__["_base"]
-        if k == 1:  # one learner: its network called on its own parameters, no vmap
-            with params[0].to_module(base):
-                return base(*inputs)
+        tensors = [params.get(key) for key in self._keys]
+        if k == 1:  # one learner: its network on its own parameters, no vmap
+            return self._apply_base([t[0] for t in tensors], inputs)
+        n = len(tensors)
 
-        def one(own: TensorDictBase, *xs: torch.Tensor) -> torch.Tensor:
-            with own.to_module(base):
-                return base(*xs)
+        def one(*args: torch.Tensor) -> Any:
+            return self._apply_base(args[:n], args[n:])
 
         grouped = [x.unflatten(0, (k, -1)) for x in inputs]
-        out = torch.vmap(one, (0,) * (len(inputs) + 1))(params, *grouped)
+        out = torch.vmap(one, (0,) * (n + len(inputs)))(*tensors, *grouped)
         if isinstance(out, tuple):  # several outputs (a location and a scale)
             return tuple(o.flatten(0, 1) for o in out)
         return out.flatten(0, 1)
 
+    def _apply_base(self, tensors: Sequence[torch.Tensor], inputs: Sequence[torch.Tensor]) -> Any:
+        """The architecture called on ``inputs`` with ``tensors`` (one learner's) as its parameters and buffers."""
+        for (owner, name, is_parameter), tensor in zip(self._slots, tensors, strict=True):
+            (owner._parameters if is_parameter else owner._buffers)[name] = tensor  # type: ignore[assignment]
+        try:
+            return self.__dict__["_base"](*inputs)
+        finally:  # the architecture keeps no learner's tensors (it stays picklable and copyable)
+            for (owner, name, is_parameter), meta in zip(self._slots, self._meta, strict=True):
+                (owner._parameters if is_parameter else owner._buffers)[name] = meta
+
     def learner(self, k: int) -> nn.Module:
         """Learner ``k``'s network on its own: a copy of the architecture with learner ``k``'s parameters and
         buffers (detached from the stack)."""
-        base: nn.Module = self.__dict__["_base"]
         device = next(iter(self.params.values(True, True))).device
-        network = copy.deepcopy(base).to_empty(device=device)
+        network = copy.deepcopy(self.__dict__["_base"]).to_empty(device=device)
         self.params[k].detach().to_module(network, inplace=True)
         return network
 

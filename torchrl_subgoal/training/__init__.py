@@ -37,7 +37,7 @@ from typing import Literal
 
 from torchrl.record.loggers import CSVLogger, Logger
 
-from torchrl_subgoal.training.a2c import A2CConfig, a2c_modules, actor_critic, train_a2c
+from torchrl_subgoal.training.a2c import A2CConfig, A2CUpdate, actor_critic, actor_critic_modules, train_a2c
 from torchrl_subgoal.training.batch import (
     LearnerBatch,
     LearnerReplay,
@@ -48,10 +48,10 @@ from torchrl_subgoal.training.batch import (
     per_learner,
 )
 from torchrl_subgoal.training.collection import close_collector, make_collector, seed_collector
-from torchrl_subgoal.training.config import LearnerConfig, NetworkConfig, Settings
+from torchrl_subgoal.training.config import LearnerConfig, NetworkConfig, OffPolicyConfig, Settings
 from torchrl_subgoal.training.ddpg import DDPGTrainConfig, ddpg_agent, ddpg_modules, train_ddpg
 from torchrl_subgoal.training.domains import A2CDomain, LearnerDomain
-from torchrl_subgoal.training.dqn import DQN_PRESETS, DQNConfig, dqn_modules, q_network, train_dqn
+from torchrl_subgoal.training.dqn import DQN_PRESETS, DQNConfig, DQNUpdate, dqn_modules, q_network, train_dqn
 from torchrl_subgoal.training.envs import (
     EPISODE_RETURN,
     Shaping,
@@ -64,7 +64,7 @@ from torchrl_subgoal.training.envs import (
 from torchrl_subgoal.training.learners import LEARNERS, Learner, action_kind, check_actions
 from torchrl_subgoal.training.networks import FourierFeatures, subgoal_states
 from torchrl_subgoal.training.potential import PotentialTrainer, SampleReshaper
-from torchrl_subgoal.training.ppo import PPOConfig, ppo_actor_critic, ppo_modules, train_ppo
+from torchrl_subgoal.training.ppo import PPOConfig, PPOUpdate, ppo_actor_critic, train_ppo
 from torchrl_subgoal.training.recording import CurveRecorder, EpisodeWindow, LearningCurve, SuccessSignal
 from torchrl_subgoal.training.result import Evaluation, Trained, evaluate
 from torchrl_subgoal.training.shared import EnvFactory
@@ -76,9 +76,11 @@ __all__ = [
     "LEARNERS",
     "A2CConfig",
     "A2CDomain",
+    "A2CUpdate",
     "CurveRecorder",
     "DDPGTrainConfig",
     "DQNConfig",
+    "DQNUpdate",
     "EnvFactory",
     "EpisodeWindow",
     "Evaluation",
@@ -91,16 +93,18 @@ __all__ = [
     "LearnerStack",
     "LearningCurve",
     "NetworkConfig",
+    "OffPolicyConfig",
     "PPOConfig",
+    "PPOUpdate",
     "PotentialTrainer",
     "SampleReshaper",
     "Settings",
     "Shaping",
     "SuccessSignal",
     "Trained",
-    "a2c_modules",
     "action_kind",
     "actor_critic",
+    "actor_critic_modules",
     "batch_shaping",
     "batched",
     "check_actions",
@@ -118,7 +122,6 @@ __all__ = [
     "make_collector",
     "per_learner",
     "ppo_actor_critic",
-    "ppo_modules",
     "probe_env",
     "q_network",
     "seed_collector",

@@ -24,33 +24,34 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any, Unpack
 
 import torch
-from tensordict.nn import TensorDictModule
+from tensordict import TensorDictBase
+from tensordict.nn import AddStateIndependentNormalScale, TensorDictModule
 from tensordict.utils import NestedKey
 from torch import nn
-from torchrl.data import Categorical, OneHot
+from torchrl.data import Bounded, Categorical, OneHot
 from torchrl.envs import EnvBase
-from torchrl.modules import OneHotCategorical, ProbabilisticActor, ValueOperator
+from torchrl.modules import OneHotCategorical, ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import A2CLoss
 from torchrl.objectives.value import GAE
-from torchrl.record.loggers import Logger
 
 from torchrl_subgoal.training.batch import (
     LEARNER,
     LearnerBatch,
-    ShapingArg,
+    LearnerOptions,
     clip_grad_norm_per_learner,
+    label_learners,
     learner_means,
     seeded,
     stack_actor_critic,
 )
 from torchrl_subgoal.training.config import Features, NetworkConfig
 from torchrl_subgoal.training.networks import network, subgoal_keys, trunk
-from torchrl_subgoal.training.recording import SuccessSignal
 from torchrl_subgoal.training.result import Trained
 
-__all__ = ["A2CConfig", "a2c_modules", "actor_critic", "train_a2c"]
+__all__ = ["A2CConfig", "A2CUpdate", "actor_critic", "actor_critic_modules", "train_a2c"]
 
 
 @dataclass
@@ -90,14 +91,19 @@ def actor_critic(
     fourier_order: int = 3,
     subgoal_states: int = 0,
 ) -> tuple[ProbabilisticActor, ValueOperator]:
-    """A categorical policy and a value network over ``observation_key`` for ``env``'s discrete actions.
+    """A policy and a value network over ``observation_key`` for ``env``'s actions (A2C's and PPO's).
+
+    Discrete actions (``Categorical``, ``OneHot``): a categorical policy. Bounded continuous actions:
+    a ``TanhNormal`` over the action bounds whose location is the network's output and whose scale is
+    a learned state-independent parameter (starting at 1). The output layers start at zero (a uniform
+    or centred policy, a zero value).
 
     Args:
         env: gives the observation and action specs.
         observation_key: the networks' input.
         features: ``"one_hot"`` for a categorical observation (a table lookup when
             ``hidden=()``), ``"fourier"`` for a bounded one, ``"mlp"`` otherwise.
-        hidden: hidden layer sizes.
+        hidden: hidden layer sizes (``tanh``).
         fourier_order: order of the Fourier basis.
         subgoal_states: if positive, both networks also read ``"subgoal_index"`` (``z``, one-hot
             over this many abstract states): joined to the features as their product for one-hot
@@ -112,92 +118,149 @@ def actor_critic(
         >>> actor, critic = actor_critic(FourRoomsEnv(3), features="one_hot", subgoal_states=3)
         >>> critic.in_keys
         ['observation', 'subgoal_index']
+        >>> from torchrl.envs import GymEnv
+        >>> actor, critic = actor_critic(GymEnv("Pendulum-v1"), hidden=(16,))
+        >>> td = actor(GymEnv("Pendulum-v1").reset())
+        >>> td["action"].shape, bool(td["action"].abs().max() <= 2.0)
+        (torch.Size([1]), True)
     """
     spec = env.observation_spec[observation_key]
     action_spec = env.full_action_spec[env.action_key]
-    if not isinstance(action_spec, Categorical | OneHot):
-        raise ValueError(f"A2C here needs discrete actions (Categorical or OneHot), got {type(action_spec).__name__}")
-    n_actions = int(action_spec.space.n)
+    discrete = isinstance(action_spec, Categorical | OneHot)
+    if not discrete and not isinstance(action_spec, Bounded):
+        raise ValueError(
+            f"an actor-critic here needs discrete or bounded continuous actions, got {type(action_spec).__name__}"
+        )
+    outputs = int(action_spec.space.n) if discrete else int(action_spec.shape[-1])
     policy_trunk, size = trunk(spec, features, hidden, fourier_order, subgoal_states=subgoal_states)
     value_trunk, _ = trunk(spec, features, hidden, fourier_order, subgoal_states=subgoal_states)
-    policy_head, value_head = nn.Linear(size, n_actions), nn.Linear(size, 1)
-    for last in (policy_head, value_head):  # start from a uniform policy and a zero value
+    policy_head, value_head = nn.Linear(size, outputs), nn.Linear(size, 1)
+    for last in (policy_head, value_head):  # start from a uniform (or centred) policy and a zero value
         nn.init.zeros_(last.weight)
         nn.init.zeros_(last.bias)
     in_keys = subgoal_keys(observation_key, subgoal_states)
-    distribution = OneHotCategorical if isinstance(action_spec, OneHot) else torch.distributions.Categorical
+    if discrete:
+        policy = TensorDictModule(network(policy_trunk, policy_head), in_keys=in_keys, out_keys=["logits"])
+        distribution = OneHotCategorical if isinstance(action_spec, OneHot) else torch.distributions.Categorical
+        options: dict[str, Any] = {}
+    else:
+        scale = AddStateIndependentNormalScale(outputs)
+        policy = TensorDictModule(network(policy_trunk, policy_head, scale), in_keys=in_keys, out_keys=["loc", "scale"])
+        low, high = action_spec.space.low, action_spec.space.high
+        while low.ndim > 1:
+            low, high = low[0], high[0]
+        distribution, options = TanhNormal, {"low": low, "high": high, "tanh_loc": False}
     actor = ProbabilisticActor(
-        TensorDictModule(network(policy_trunk, policy_head), in_keys=in_keys, out_keys=["logits"]),
-        in_keys=["logits"],
+        policy,
+        in_keys=policy.out_keys,
         spec=action_spec,
         distribution_class=distribution,
+        distribution_kwargs=options,
         return_log_prob=True,
     )
     critic = ValueOperator(network(value_trunk, value_head), in_keys=in_keys)
     return actor, critic
 
 
-def a2c_modules(
+def actor_critic_modules(
     env: EnvBase,
-    config: A2CConfig,
+    config: NetworkConfig,
     observation_key: NestedKey = "observation",
     subgoal_states: int = 0,
     seeds: Sequence[int] = (0,),
 ) -> dict[str, nn.Module]:
-    """The networks of ``len(seeds)`` A2C learners, each started from its seed, stacked: ``"actor"``,
-    ``"critic"`` and the greedy ``"policy"`` (the actor).
+    """The networks of ``len(seeds)`` A2C (or PPO) learners, each started from its seed, stacked:
+    ``"actor"``, ``"critic"`` and the greedy ``"policy"`` (the actor).
 
     Examples:
         >>> from torchrl_subgoal.envs import FourRoomsEnv
-        >>> modules = a2c_modules(FourRoomsEnv(1), A2CConfig(features="one_hot"), seeds=[0, 1])
+        >>> modules = actor_critic_modules(FourRoomsEnv(1), A2CConfig(features="one_hot"), seeds=[0, 1])
         >>> modules["critic"](FourRoomsEnv(4).reset())["state_value"].shape  # 2 learners x 2 envs
         torch.Size([4, 1])
     """
-
-    def make() -> tuple[ProbabilisticActor, ValueOperator]:
-        return actor_critic(
-            env,
-            observation_key,
-            features=config.features,
-            hidden=config.hidden,
-            fourier_order=config.fourier_order,
-            subgoal_states=subgoal_states,
-        )
-
-    actor, critic = stack_actor_critic(seeded(seeds, make))
+    options = config.network_options()
+    pairs = seeded(seeds, lambda: actor_critic(env, observation_key, subgoal_states=subgoal_states, **options))
+    actor, critic = stack_actor_critic(pairs)
     return {"actor": actor, "critic": critic, "policy": actor}
+
+
+class A2CUpdate:
+    """One A2C step of ``K`` learners on a collected batch: GAE advantages (standardised learner by learner
+    with ``normalize_advantage``), TorchRL's :class:`~torchrl.objectives.A2CLoss` per sample, each learner's
+    mean, its own gradient clipping and Adam state.
+
+    Args:
+        actor: the learners' stacked actor (:func:`actor_critic_modules`).
+        critic: their stacked critic.
+        config: the settings.
+        learners: ``K``.
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> config = A2CConfig(features="one_hot", hidden=())
+        >>> modules = actor_critic_modules(FourRoomsEnv(1), config, seeds=[0, 1])
+        >>> update = A2CUpdate(modules["actor"], modules["critic"], config, learners=2)
+        >>> with torch.no_grad():  # what a collector does
+        ...     data = FourRoomsEnv(4).rollout(5, modules["actor"], break_when_any_done=False)
+        >>> update(data)["loss_critic"].shape  # each learner's loss
+        torch.Size([2])
+    """
+
+    NAMES = ("loss_objective", "loss_critic", "loss_entropy")
+
+    def __init__(self, actor: ProbabilisticActor, critic: ValueOperator, config: A2CConfig, learners: int) -> None:
+        self.learners = learners
+        self.advantage = GAE(
+            gamma=config.gamma,
+            lmbda=config.gae_lambda,
+            value_network=critic,
+            average_gae=config.normalize_advantage,
+            group_key=LEARNER if learners > 1 else None,  # standardised learner by learner
+        )
+        self.loss = A2CLoss(
+            actor,
+            critic,
+            entropy_coeff=config.entropy_coeff,
+            critic_coeff=config.critic_coeff,
+            loss_critic_type="l2",
+            reduction="none",
+        )
+        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=config.lr, fused=True)  # one kernel
+        self.max_grad_norm = config.max_grad_norm
+
+    def __call__(self, data: TensorDictBase) -> dict[str, torch.Tensor]:
+        """One step on ``data`` (first dim the learners' env batch, learner-major); each learner's losses ``[K]``."""
+        k = self.learners
+        with torch.no_grad():
+            self.advantage(label_learners(data, k))
+        losses = self.loss(data)
+        means = {name: learner_means(losses[name], k) for name in self.NAMES}
+        self.optimizer.zero_grad(set_to_none=True)
+        torch.stack([m.sum() for m in means.values()]).sum().backward()
+        if self.max_grad_norm:
+            clip_grad_norm_per_learner(self.loss.parameters(), self.max_grad_norm, k)
+        self.optimizer.step()
+        return {name: m.detach() for name, m in means.items()}
 
 
 def train_a2c(
     make_env: Callable[[int], EnvBase] | Sequence[Callable[[int], EnvBase]],
     config: A2CConfig,
-    *,
-    seeds: Sequence[int] = (0,),
-    shaping: ShapingArg = None,
-    observation_key: NestedKey = "observation",
-    episode_cap: float | None = None,
-    loggers: Sequence[Logger | None] | None = None,
-    progress: Callable[[int], None] | None = None,
-    success: SuccessSignal | None = None,
+    **options: Unpack[LearnerOptions],
 ) -> Trained:
     """Train ``len(seeds)`` A2C learners as one batch on ``make_env`` (shaped by ``shaping``).
 
     Learner ``k`` has its own networks (started as alone from ``seeds[k]``), ``config.num_envs`` envs
-    and potential. Every batch: GAE advantages and one A2C step (each learner its own loss mean,
-    clipping and Adam state); then, unless the potential is trained online or fixed, one step of the
-    potential on the batch's real SMDP transitions with its own optimiser (one learner only).
+    and potential. Every batch: one :class:`A2CUpdate`; then, unless the potential is trained online or
+    fixed, one step of the potential on the batch's real SMDP transitions with its own optimiser (one
+    learner only).
 
     Args:
         make_env: ``make_env(num_envs)`` returns an env with batch size ``[num_envs]`` (every learner's
             task), or one such factory per learner (each its own task).
         config: every learner's settings.
-        seeds: one per learner; torch (sampling) and the envs are seeded with the first.
-        shaping: one for every learner (each starts from its potential) or one per learner; ``None``: plain A2C.
-        observation_key: what the policy and value network read.
-        episode_cap: what the curves record before any episode finished (default: the env's ``max_steps``).
-        loggers: one TorchRL logger (CSV, TensorBoard…) per learner for losses and episode statistics.
-        progress: called with 1 after every batch for every learner.
-        success: how an episode's success is read (default: the env's ``"is_success"``/``"success"`` entry).
+        **options: ``seeds``, ``shaping``, ``observation_key``, ``loggers``, ``progress``… (one learner,
+            unshaped, by default): :class:`~torchrl_subgoal.training.batch.LearnerOptions`.
 
     Returns:
         the curves, the stacked actor and critic, the potential (:class:`~torchrl_subgoal.training.Trained`).
@@ -212,44 +275,23 @@ def train_a2c(
         >>> len(trained.curves), trained.curves[2].frames
         (3, [64, 128, 192, 256])
     """
-    batch = LearnerBatch(
-        make_env,
-        config,
-        seeds,
-        shaping=shaping,
-        loggers=loggers,
-        progress=progress,
-        episode_cap=episode_cap,
-        success=success,
-    )
-    k = batch.learners
-    modules = batch.modules(lambda env, own: a2c_modules(env, config, observation_key, batch.subgoal_states, own))
-    actor, critic = modules["actor"], modules["critic"]
-    advantage = GAE(
-        gamma=config.gamma,
-        lmbda=config.gae_lambda,
-        value_network=critic,
-        average_gae=config.normalize_advantage,
-        group_key=LEARNER if k > 1 else None,  # standardised learner by learner
-    )
-    loss = A2CLoss(
-        actor,
-        critic,
-        entropy_coeff=config.entropy_coeff,
-        critic_coeff=config.critic_coeff,
-        loss_critic_type="l2",
-        reduction="none",
-    )
-    optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
-    names = ("loss_objective", "loss_critic", "loss_entropy")
-    for data in batch.collect(actor):
-        with torch.no_grad():
-            advantage(batch.labelled(data))
-        losses = loss(data)
-        means = {name: learner_means(losses[name], k) for name in names}
-        optimizer.zero_grad(set_to_none=True)
-        torch.stack([m.sum() for m in means.values()]).sum().backward()
-        clip_grad_norm_per_learner(loss.parameters(), config.max_grad_norm, k)
-        optimizer.step()
-        batch.record(data, means)
-    return batch.result("a2c", modules, observation_key)
+    return train_on_policy("a2c", A2CUpdate, make_env, config, options)
+
+
+def train_on_policy(
+    algo: str,
+    update: Callable[
+        [ProbabilisticActor, ValueOperator, Any, int], Callable[[TensorDictBase], dict[str, torch.Tensor]]
+    ],
+    make_env: Callable[[int], EnvBase] | Sequence[Callable[[int], EnvBase]],
+    config: NetworkConfig,
+    options: LearnerOptions,
+) -> Trained:
+    """The loop of an on-policy actor-critic (A2C, PPO): the learners' networks, and ``update(actor, critic,
+    config, K)`` on every collected batch."""
+    batch = LearnerBatch(make_env, config, **options)
+    modules = batch.modules(actor_critic_modules)
+    step = update(modules["actor"], modules["critic"], config, batch.learners)
+    for data in batch.collect(modules["actor"]):
+        batch.record(data, step(data))
+    return batch.result(algo, modules)

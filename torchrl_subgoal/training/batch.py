@@ -26,11 +26,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, Generic, TypedDict, TypeVar
 
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
+from tensordict.utils import NestedKey
 from torch import nn
 from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.envs import EnvBase
@@ -57,10 +58,12 @@ from torchrl_subgoal.training.shared import EnvFactory
 __all__ = [
     "LEARNER",
     "LearnerBatch",
+    "LearnerOptions",
     "LearnerReplay",
     "LearnerStack",
     "batch_shaping",
     "clip_grad_norm_per_learner",
+    "label_learners",
     "learner_means",
     "learner_rows",
     "per_learner",
@@ -112,6 +115,21 @@ def stack_actor_critic(
     actor.module[0].module = LearnerStack([a.module[0].module for a, _ in pairs])
     critic.module = LearnerStack([c.module for _, c in pairs])
     return actor, critic
+
+
+def label_learners(data: TensorDictBase, learners: int) -> TensorDictBase:
+    """``data`` (first dim the learners' env batch, learner-major) with each row's learner under :data:`LEARNER`
+    (e.g. a GAE's ``group_key``: advantages standardised learner by learner); unchanged for one learner.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> label_learners(TensorDict({}, [4, 2]), 2)[LEARNER].tolist()
+        [[0, 0], [0, 0], [1, 1], [1, 1]]
+    """
+    if learners > 1:
+        rows = torch.arange(learners, device=data.device).repeat_interleave(data.shape[0] // learners)
+        data.set(LEARNER, rows.view(-1, *([1] * (data.batch_dims - 1))).expand(data.batch_size))
+    return data
 
 
 def learner_rows(learners: int, rows: int) -> list[slice]:
@@ -215,6 +233,31 @@ def _shapings(shaping: ShapingArg, learners: int) -> list[Shaping | None]:
     return given
 
 
+class LearnerOptions(TypedDict, total=False):
+    """What every ``train_<algo>(make_env, config, **options)`` takes besides the envs and the settings.
+
+    Attributes:
+        seeds: one per learner: its networks' initial weights (torch's sampling and the envs are seeded with
+            the first); default ``[0]``, one learner.
+        shaping: one for every learner (each starts from its potential), or one per learner; ``None`` (the
+            default): unshaped. See :func:`batch_shaping`.
+        observation_key: what the networks read (default ``"observation"``).
+        episode_cap: what the curves record before any episode finished (default: the env's ``max_steps``).
+        loggers: one TorchRL logger (CSV, TensorBoard…) per learner, for losses and episode statistics.
+        progress: called with 1 after every batch for every learner.
+        success: how a finished episode's success is read (default: the env's ``"is_success"`` or
+            ``"success"`` entry, else not recorded).
+    """
+
+    seeds: Sequence[int]
+    shaping: ShapingArg
+    observation_key: NestedKey
+    episode_cap: float | None
+    loggers: Sequence[Logger | None] | None
+    progress: Callable[[int], None] | None
+    success: SuccessSignal | None
+
+
 class LearnerBatch(Generic[C]):
     """What a building block's batch of ``K`` learners shares: the checks, the env batch and its collector,
     the potential's training, each learner's networks started from its seed, and one
@@ -225,14 +268,7 @@ class LearnerBatch(Generic[C]):
             own task; see :func:`~torchrl_subgoal.training.learner_envs`).
         config: every learner's settings; the batch steps ``K × num_envs`` envs and collects
             ``K × frames_per_batch`` frames per batch (:attr:`config`), as many batches as one learner.
-        seeds: one per learner: its networks' initial weights (the envs and the actions are seeded with
-            the first).
-        shaping: one for every learner, or one per learner (``None``: unshaped); see :func:`batch_shaping`.
-        loggers: one TorchRL logger per learner (``None``: none).
-        progress: called with 1 after every batch for every learner.
-        episode_cap: what the curves record before any episode finished (default: the env's ``max_steps``).
-        success: how a finished episode's success is read (default: the env's ``"is_success"`` or
-            ``"success"`` entry, else not measured).
+        **options: the learners' seeds, shapings, loggers… (:class:`LearnerOptions`).
 
     Raises:
         ValueError: settings a batch of several learners cannot have (``collector_workers``, a potential
@@ -252,12 +288,13 @@ class LearnerBatch(Generic[C]):
         self,
         make_env: Callable[[int], EnvBase] | Sequence[Callable[[int], EnvBase]],
         config: C,
-        seeds: Sequence[int],
         *,
+        seeds: Sequence[int] = (0,),
         shaping: ShapingArg = None,
+        observation_key: NestedKey = "observation",
+        episode_cap: float | None = None,
         loggers: Sequence[Logger | None] | None = None,
         progress: Callable[[int], None] | None = None,
-        episode_cap: float | None = None,
         success: SuccessSignal | None = None,
     ) -> None:
         seeds = [int(s) for s in seeds]
@@ -283,7 +320,7 @@ class LearnerBatch(Generic[C]):
         trained = self.shaping is not None and self.shaping.trained
         if k > 1 and trained and not config.online_potential:
             raise ValueError("a batch of several learners trains its tables online: online_potential must be True")
-        self.seeds, self.settings = seeds, config
+        self.seeds, self.settings, self.observation_key = seeds, config, observation_key
         iterations = math.ceil(config.total_frames / config.frames_per_batch)
         self.config: C = dataclasses.replace(
             config,
@@ -328,11 +365,11 @@ class LearnerBatch(Generic[C]):
             for j in range(k)
         ]
 
-    def modules(self, build: Callable[[EnvBase, Sequence[int]], dict[str, nn.Module]]) -> dict[str, nn.Module]:
-        """The block's modules, ``build(env, seeds)`` (each learner's networks from its seed, stacked; ``env`` a
-        probe of one env for the specs), on the config's device; then torch is seeded with the first seed for
-        the batch's sampling."""
-        modules = build(self.probe, self.seeds)
+    def modules(self, build: Callable[..., dict[str, nn.Module]], **extra: Any) -> dict[str, nn.Module]:
+        """The block's modules, ``build(env, config, observation_key, subgoal_states, seeds, **extra)`` (each
+        learner's networks from its seed, stacked; ``env`` a probe of one env for the specs), on the config's
+        device; then torch is seeded with the first seed for the batch's sampling."""
+        modules = build(self.probe, self.settings, self.observation_key, self.subgoal_states, self.seeds, **extra)
         close_probe(self.probe)
         torch.manual_seed(self.seeds[0])
         return {name: module.to(self.device) for name, module in modules.items()}
@@ -343,19 +380,19 @@ class LearnerBatch(Generic[C]):
             raise ValueError("reshape_samples needs shaping: there is no potential to re-shape samples with")
         return SampleReshaper(self.shaping.transform(self.shaping.potential, self.settings.gamma, None))
 
-    def labelled(self, data: TensorDictBase) -> TensorDictBase:
-        """``data`` with each row's learner under :data:`LEARNER` (for several learners; e.g. a GAE's groups)."""
-        if self.learners > 1:
-            rows = torch.arange(self.learners, device=data.device).repeat_interleave(data.shape[0] // self.learners)
-            data.set(LEARNER, rows.view(-1, *([1] * (data.batch_dims - 1))).expand(data.batch_size))
-        return data
-
-    def result(self, algo: str, modules: dict[str, nn.Module], observation_key: Any) -> Trained:
+    def result(self, algo: str, modules: dict[str, nn.Module]) -> Trained:
         """What the block returns: the curves and its ``modules`` (:class:`~torchrl_subgoal.training.Trained`)."""
         from torchrl_subgoal.training.result import Trained
 
         return Trained(
-            algo, self.settings, self.seeds, self.curves, modules, observation_key, self.subgoal_states, self.shaping
+            algo,
+            self.settings,
+            self.seeds,
+            self.curves,
+            modules,
+            self.observation_key,
+            self.subgoal_states,
+            self.shaping,
         )
 
     def collect(self, policy: TensorDictModuleBase, *, init_random_frames: int = 0) -> Iterator[TensorDictBase]:

@@ -7,7 +7,8 @@ so a field means and refuses the same thing in whichever config it appears
 adds only its own fields, and a rule for each new name.
 :class:`LearnerConfig` adds the fields of every collector-based learner (envs,
 batches, the shaping potential's training, the records), :class:`NetworkConfig`
-the input layers and hidden sizes of the A2C, PPO and DQN networks.
+the input layers and hidden sizes of the A2C, PPO and DQN networks,
+:class:`OffPolicyConfig` the replay and warm-up of DQN and DDPG.
 
 A schedule or a warm-up (DQN's ``exploration_frames``, the off-policy learners'
 ``learning_starts``) may be given as a fraction of ``total_frames`` (a value
@@ -25,7 +26,7 @@ from typing import Any, Literal
 
 import torch
 
-__all__ = ["RULES", "LearnerConfig", "NetworkConfig", "Settings", "frames_of"]
+__all__ = ["RULES", "LearnerConfig", "NetworkConfig", "OffPolicyConfig", "Settings", "frames_of"]
 
 Features = Literal["one_hot", "fourier", "mlp"]
 
@@ -234,3 +235,38 @@ class NetworkConfig(LearnerConfig):
     """order of the Fourier basis"""
     max_grad_norm: float = 1.0
     """gradient clipping, learner by learner (0: none)"""
+
+    def network_options(self) -> dict[str, Any]:
+        """The networks' settings, as the network builders take them (``features``, ``hidden``, ``fourier_order``).
+
+        Examples:
+            >>> NetworkConfig(features="one_hot", hidden=()).network_options()
+            {'features': 'one_hot', 'hidden': (), 'fourier_order': 3}
+        """
+        return {"features": self.features, "hidden": self.hidden, "fourier_order": self.fourier_order}
+
+
+@dataclass
+class OffPolicyConfig(LearnerConfig):
+    """A learner that learns from a replay buffer (DQN, DDPG), after a warm-up of random actions."""
+
+    learning_starts: float = 0.02
+    """frames collected with uniformly random actions before the first gradient step (a value below 1:
+    that fraction of ``total_frames``)"""
+    batch_size: int = 256
+    """transitions per learner per gradient step"""
+    buffer_size: int = 1_000_000
+    """replay capacity per learner (transitions)"""
+    reshape_samples: bool = False
+    """re-shape every replay sample with the potential as it is now before the loss (else the loss reads
+    the reward shaped at collection)"""
+
+    @property
+    def warmup_frames(self) -> int:
+        """Frames of random actions before the first gradient step (``learning_starts`` resolved).
+
+        Examples:
+            >>> OffPolicyConfig(total_frames=20_000).warmup_frames, OffPolicyConfig(learning_starts=500).warmup_frames
+            (400, 500)
+        """
+        return frames_of(self.learning_starts, self.total_frames)

@@ -21,25 +21,24 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Unpack
 
 import torch
 from tensordict.utils import NestedKey
 from torch import nn
 from torchrl.data import Bounded
 from torchrl.envs import EnvBase
-from torchrl.record.loggers import Logger
 
 from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, TD3Settings
-from torchrl_subgoal.training.batch import LearnerBatch, ShapingArg
-from torchrl_subgoal.training.config import LearnerConfig, frames_of
-from torchrl_subgoal.training.recording import SuccessSignal
+from torchrl_subgoal.training.batch import LearnerBatch, LearnerOptions
+from torchrl_subgoal.training.config import OffPolicyConfig
 from torchrl_subgoal.training.result import Trained
 
 __all__ = ["DDPGTrainConfig", "ddpg_agent", "ddpg_modules", "train_ddpg"]
 
 
 @dataclass
-class DDPGTrainConfig(LearnerConfig):
+class DDPGTrainConfig(OffPolicyConfig):
     """Settings of a DDPG (or TD3) learner (the shared ones: :class:`~torchrl_subgoal.training.LearnerConfig`).
 
     The defaults are those of TorchRL's own DDPG example (``sota-implementations/ddpg``
@@ -67,14 +66,8 @@ class DDPGTrainConfig(LearnerConfig):
     total_frames: int = 1_000_000
     lr: float = 3e-4
     learning_starts: float = 0.025
-    """frames collected with uniformly random actions before the first gradient step (a value below 1:
-    that fraction of ``total_frames``)"""
     updates_per_batch: int = 1000
     """gradient steps after each collected batch (each followed by a soft target update)"""
-    batch_size: int = 256
-    """transitions per learner per gradient step"""
-    buffer_size: int = 1_000_000
-    """replay capacity per learner (transitions)"""
     polyak: float = 0.995
     """target <- polyak * target + (1 - polyak) * online, after every gradient step"""
     hidden: tuple[int, ...] = (256, 256)
@@ -96,19 +89,11 @@ class DDPGTrainConfig(LearnerConfig):
     """TD3: s.d. of the noise on the target action (action units)"""
     noise_clip: float = 0.5
     """TD3: bound of that noise"""
-    reshape_samples: bool = False
-    """re-shape every replay sample with the potential as it is now before the loss (else the loss reads
-    the reward shaped at collection)"""
 
     def check(self) -> None:
         super().check()
         if self.td3 and self.action_l2:
             raise ValueError(f"action_l2 ({self.action_l2}) is DDPG's actor penalty; TD3 here has none: set it to 0")
-
-    @property
-    def warmup_frames(self) -> int:
-        """Frames of random actions before the first gradient step (``learning_starts`` resolved)."""
-        return frames_of(self.learning_starts, self.total_frames)
 
     def agent(self) -> DDPGConfig:
         """The agent's hyper-parameters (no return clipping)."""
@@ -203,33 +188,19 @@ def ddpg_modules(
 def train_ddpg(
     make_env: Callable[[int], EnvBase] | Sequence[Callable[[int], EnvBase]],
     config: DDPGTrainConfig,
-    *,
-    seeds: Sequence[int] = (0,),
-    shaping: ShapingArg = None,
-    observation_key: NestedKey = "observation",
-    episode_cap: float | None = None,
-    loggers: Sequence[Logger | None] | None = None,
-    progress: Callable[[int], None] | None = None,
-    success: SuccessSignal | None = None,
+    **options: Unpack[LearnerOptions],
 ) -> Trained:
     """Train ``len(seeds)`` DDPG (or TD3) learners as one batch on ``make_env`` (shaped by ``shaping``).
 
     Every batch: the batch into the replay buffer (and each learner's observation normaliser); then,
     once ``learning_starts`` frames per learner are collected, ``updates_per_batch`` gradient steps on
-    replay samples (every learner its own, re-shaped with the current potential when
-    ``reshape_samples``), each followed by a soft target update; then, unless the potential is trained
-    online or fixed, one step of the potential on the batch's real SMDP transitions (one learner only).
+    replay samples (:meth:`~torchrl_subgoal.agents.ddpg.DDPGAgent.update_on`: every learner its own
+    samples, re-shaped with the current potential when ``reshape_samples``), each followed by a soft
+    target update; then, unless the potential is trained online or fixed, one step of the potential on
+    the batch's real SMDP transitions (one learner only).
 
-    Args:
-        make_env: ``make_env(num_envs)``, every learner's task, or one such factory per learner.
-        config: every learner's settings.
-        seeds: one per learner; torch (sampling, exploration) and the envs are seeded with the first.
-        shaping: one for every learner or one per learner (``None``: plain DDPG).
-        observation_key: the observation vector actor and critic read.
-        episode_cap: what the curves record before any episode finished (default: the env's ``max_steps``).
-        loggers: one TorchRL logger per learner.
-        progress: called with 1 after every batch for every learner.
-        success: how an episode's success is read.
+    ``make_env``, ``config`` and ``**options`` (``seeds``, ``shaping``…): as for
+    :func:`~torchrl_subgoal.training.train_a2c`.
 
     Examples:
         >>> import functools
@@ -241,24 +212,12 @@ def train_ddpg(
         >>> trained.curve.frames
         [50, 100]
     """
-    if config.reshape_samples and shaping is None:
+    if config.reshape_samples and options.get("shaping") is None:
         raise ValueError("reshape_samples needs shaping: there is no potential to re-shape samples with")
-    batch = LearnerBatch(
-        make_env,
-        config,
-        seeds,
-        shaping=shaping,
-        loggers=loggers,
-        progress=progress,
-        episode_cap=episode_cap,
-        success=success,
-    )
+    batch = LearnerBatch(make_env, config, **options)
     k = batch.learners
     reshaper = batch.reshaper() if config.reshape_samples else None
-    keys = tuple(reshaper.keys) if reshaper is not None else ()
-    modules = batch.modules(
-        lambda env, own: ddpg_modules(env, config, observation_key, batch.subgoal_states, own, keys)
-    )
+    modules = batch.modules(ddpg_modules, keys=tuple(reshaper.keys) if reshaper is not None else ())
     agent = modules["agent"]
     assert isinstance(agent, DDPGAgent)
     warmup = config.warmup_frames
@@ -269,11 +228,9 @@ def train_ddpg(
         if batch.frames >= warmup:
             for _ in range(config.updates_per_batch):
                 sample = agent.replay.sample()
-                if reshaper is not None:
-                    sample = reshaper(sample)
-                for name, value in agent.update_on(sample).items():
+                for name, value in agent.update_on(reshaper(sample) if reshaper is not None else sample).items():
                     sums[name] += value.cpu()
                     counts[name] += 1
                 agent.soft_update()
         batch.record(data, {name: sums[name] / counts[name] if counts[name] else float("nan") for name in sums})
-    return batch.result("ddpg", modules, observation_key)
+    return batch.result("ddpg", modules)

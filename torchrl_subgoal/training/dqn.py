@@ -21,33 +21,32 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Literal, Unpack
 
 import torch
+from tensordict import TensorDictBase
 from tensordict.nn import TensorDictSequential
 from tensordict.utils import NestedKey
 from torch import nn
-from torchrl.data import Categorical, OneHot
+from torchrl.data import Categorical, OneHot, TensorSpec
 from torchrl.envs import EnvBase
 from torchrl.modules import EGreedyModule, QValueActor
 from torchrl.objectives import DQNLoss, HardUpdate, SoftUpdate
-from torchrl.record.loggers import Logger
 
 from torchrl_subgoal.training.batch import (
     LearnerBatch,
+    LearnerOptions,
     LearnerReplay,
     LearnerStack,
-    ShapingArg,
     clip_grad_norm_per_learner,
     learner_means,
     seeded,
 )
-from torchrl_subgoal.training.config import Features, NetworkConfig, frames_of
+from torchrl_subgoal.training.config import Features, NetworkConfig, OffPolicyConfig, frames_of
 from torchrl_subgoal.training.networks import network, subgoal_keys, trunk
-from torchrl_subgoal.training.recording import SuccessSignal
 from torchrl_subgoal.training.result import Trained
 
-__all__ = ["DQN_PRESETS", "DQNConfig", "dqn_modules", "q_network", "train_dqn"]
+__all__ = ["DQN_PRESETS", "DQNConfig", "DQNUpdate", "dqn_modules", "q_network", "train_dqn"]
 
 #: Named settings (overrides of :class:`DQNConfig`'s defaults, which are TorchRL's DQN example's).
 DQN_PRESETS: dict[str, dict[str, Any]] = {
@@ -79,7 +78,7 @@ DQN_PRESETS: dict[str, dict[str, Any]] = {
 
 
 @dataclass
-class DQNConfig(NetworkConfig):
+class DQNConfig(NetworkConfig, OffPolicyConfig):
     """Settings of a DQN learner (the shared ones: :class:`~torchrl_subgoal.training.LearnerConfig`).
 
     The defaults are those of TorchRL's own DQN example (``sota-implementations/dqn``
@@ -116,15 +115,10 @@ class DQNConfig(NetworkConfig):
     shaping transform keeps it. A Q-network over ``s`` alone learns a blend of the shaped values under
     every ``z``: HRS was significantly slower than DQN without ``z`` on four-rooms and MountainCar,
     not with it (docs/does_it_help.md)"""
-    learning_starts: float = 0.02
-    """frames collected with uniformly random actions before the first gradient step (a value below 1:
-    that fraction of ``total_frames``)"""
+    batch_size: int = 128
+    buffer_size: int = 10_000
     gradient_steps: int = 100
     """gradient steps after each collected batch"""
-    batch_size: int = 128
-    """transitions per learner per gradient step"""
-    buffer_size: int = 10_000
-    """replay capacity per learner (transitions)"""
     loss_function: Literal["l2", "smooth_l1", "l1"] = "l2"
     """the TD loss"""
     double_dqn: bool = False
@@ -142,9 +136,6 @@ class DQNConfig(NetworkConfig):
     """ε after ``exploration_frames``"""
     exploration_frames: float = 0.5
     """frames over which ε decreases linearly (a value below 1: that fraction of ``total_frames``)"""
-    reshape_samples: bool = False
-    """re-shape every replay sample with the potential as it is now before the loss (else the loss reads
-    the reward shaped at collection)"""
 
     def check(self) -> None:
         super().check()
@@ -162,11 +153,6 @@ class DQNConfig(NetworkConfig):
         if name not in DQN_PRESETS:
             raise ValueError(f"unknown DQN preset {name!r}; known: {', '.join(DQN_PRESETS)}")
         return cls(**{**DQN_PRESETS[name], **overrides})
-
-    @property
-    def warmup_frames(self) -> int:
-        """Frames of random actions before the first gradient step (``learning_starts`` resolved)."""
-        return frames_of(self.learning_starts, self.total_frames)
 
     @property
     def exploration_steps(self) -> int:
@@ -232,53 +218,80 @@ def dqn_modules(
         >>> q(FourRoomsEnv(6).reset())["action_value"].shape  # 2 learners x 3 envs, 4 actions
         torch.Size([6, 4])
     """
-
-    def make() -> QValueActor:
-        return q_network(
-            env,
-            observation_key,
-            features=config.features,
-            hidden=config.hidden,
-            fourier_order=config.fourier_order,
-            subgoal_states=subgoal_states,
-        )
-
-    nets = seeded(seeds, make)
+    options = config.network_options()
+    nets = seeded(seeds, lambda: q_network(env, observation_key, subgoal_states=subgoal_states, **options))
     q = nets[0]
     q.module[0].module = LearnerStack([n.module[0].module for n in nets])
     return {"q": q, "policy": q}
 
 
+class DQNUpdate:
+    """One DQN gradient step of ``K`` learners on a replay sample: TorchRL's :class:`~torchrl.objectives.DQNLoss`
+    per sample against the target networks, each learner's mean, its own gradient clipping and Adam state,
+    then the target update (:class:`~torchrl.objectives.HardUpdate` or :class:`~torchrl.objectives.SoftUpdate`).
+
+    Args:
+        q: the learners' stacked Q-network (:func:`dqn_modules`).
+        config: the settings.
+        action_spec: the env's (unbatched) discrete action spec.
+        learners: ``K``.
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> env, config = FourRoomsEnv(4), DQNConfig(features="one_hot", hidden=())
+        >>> q = dqn_modules(env, config, seeds=[0, 1])["q"]
+        >>> update = DQNUpdate(q, config, env.full_action_spec_unbatched["action"], learners=2)
+        >>> sample = env.rollout(3, q).reshape(2, -1)  # [K, B]: each learner's transitions
+        >>> update(sample).shape  # each learner's loss
+        torch.Size([2])
+    """
+
+    def __init__(self, q: QValueActor, config: DQNConfig, action_spec: TensorSpec, learners: int) -> None:
+        self.learners, self.max_grad_norm = learners, config.max_grad_norm
+        self.loss = DQNLoss(
+            q,
+            loss_function=config.loss_function,
+            delay_value=True,
+            double_dqn=config.double_dqn,
+            action_space=action_spec,
+            reduction="none",
+        )
+        self.loss.make_value_estimator(gamma=config.gamma)
+        self.target = (
+            HardUpdate(self.loss, value_network_update_interval=config.target_update_interval)
+            if config.target_update == "hard"
+            else SoftUpdate(self.loss, tau=config.tau)
+        )
+        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=config.lr, fused=True)  # one kernel
+        self.parameters = list(self.loss.parameters())
+
+    def __call__(self, sample: TensorDictBase) -> torch.Tensor:
+        """One step on ``sample`` (``[K, B]``: learner ``k``'s transitions in row ``k``); each learner's loss."""
+        means = learner_means(self.loss(sample)["loss"], self.learners)
+        self.optimizer.zero_grad(set_to_none=True)
+        means.sum().backward()
+        if self.max_grad_norm:
+            clip_grad_norm_per_learner(self.parameters, self.max_grad_norm, self.learners)
+        self.optimizer.step()
+        self.target.step()
+        return means.detach()
+
+
 def train_dqn(
     make_env: Callable[[int], EnvBase] | Sequence[Callable[[int], EnvBase]],
     config: DQNConfig,
-    *,
-    seeds: Sequence[int] = (0,),
-    shaping: ShapingArg = None,
-    observation_key: NestedKey = "observation",
-    episode_cap: float | None = None,
-    loggers: Sequence[Logger | None] | None = None,
-    progress: Callable[[int], None] | None = None,
-    success: SuccessSignal | None = None,
+    **options: Unpack[LearnerOptions],
 ) -> Trained:
     """Train ``len(seeds)`` DQN learners as one batch on ``make_env`` (shaped by ``shaping``).
 
-    Every batch: store it in the replay buffer, anneal ε, and (once ``learning_starts`` frames per
-    learner are collected) take ``gradient_steps`` Adam steps of :class:`~torchrl.objectives.DQNLoss` on
-    replay samples (every learner its own, re-shaped with the current potential when
-    ``reshape_samples``), updating the target networks; then, unless the potential is trained online or
-    fixed, one step of the potential on the batch's real SMDP transitions (one learner only).
+    Every batch: store it in the replay buffer (every learner its own transitions), anneal ε, and (once
+    ``learning_starts`` frames per learner are collected) take ``gradient_steps`` steps of :class:`DQNUpdate`
+    on replay samples (re-shaped with the current potential when ``reshape_samples``); then, unless the
+    potential is trained online or fixed, one step of the potential on the batch's real SMDP transitions
+    (one learner only).
 
-    Args:
-        make_env: ``make_env(num_envs)``, every learner's task, or one such factory per learner.
-        config: every learner's settings.
-        seeds: one per learner; torch (sampling, exploration) and the envs are seeded with the first.
-        shaping: one for every learner or one per learner (``None``: plain DQN).
-        observation_key: what the Q-networks read.
-        episode_cap: what the curves record before any episode finished (default: the env's ``max_steps``).
-        loggers: one TorchRL logger per learner.
-        progress: called with 1 after every batch for every learner.
-        success: how an episode's success is read.
+    ``make_env``, ``config`` and ``**options`` (``seeds``, ``shaping``…): as for
+    :func:`~torchrl_subgoal.training.train_a2c`.
 
     Examples:
         >>> from torchrl_subgoal.envs import FourRoomsEnv
@@ -287,63 +300,30 @@ def train_dqn(
         >>> [c.frames for c in train_dqn(FourRoomsEnv, config, seeds=[0, 1]).curves]
         [[64, 128, 192, 256], [64, 128, 192, 256]]
     """
-    if config.reshape_samples and shaping is None:
+    if config.reshape_samples and options.get("shaping") is None:
         raise ValueError("reshape_samples needs shaping: there is no potential to re-shape samples with")
-    batch = LearnerBatch(
-        make_env,
-        config,
-        seeds,
-        shaping=shaping,
-        loggers=loggers,
-        progress=progress,
-        episode_cap=episode_cap,
-        success=success,
-    )
+    batch = LearnerBatch(make_env, config, **options)
     k = batch.learners
     action_spec = batch.probe.full_action_spec_unbatched[batch.probe.action_key]
-    modules = batch.modules(lambda env, own: dqn_modules(env, config, observation_key, batch.subgoal_states, own))
+    modules = batch.modules(dqn_modules)
     q = modules["q"]
     explore = EGreedyModule(
         action_spec, eps_init=config.eps_init, eps_end=config.eps_end, annealing_num_steps=config.exploration_steps
     ).to(batch.device)
-    loss = DQNLoss(
-        q,
-        loss_function=config.loss_function,
-        delay_value=True,
-        double_dqn=config.double_dqn,
-        action_space=action_spec,
-        reduction="none",
-    )
-    loss.make_value_estimator(gamma=config.gamma)
-    updater = (
-        HardUpdate(loss, value_network_update_interval=config.target_update_interval)
-        if config.target_update == "hard"
-        else SoftUpdate(loss, tau=config.tau)
-    )
-    optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
+    update = DQNUpdate(q, config, action_spec, k)
     reshaper = batch.reshaper() if config.reshape_samples else None
-    keys = [*loss.in_keys, *(reshaper.keys if reshaper is not None else [])]
+    keys = [*update.loss.in_keys, *(reshaper.keys if reshaper is not None else [])]
     replay = LearnerReplay(k, config.buffer_size, config.batch_size, keys, batch.device)
-    parameters = list(loss.parameters())
     warmup = config.warmup_frames
     for data in batch.collect(TensorDictSequential(q, explore), init_random_frames=warmup):
         replay.extend(data)
         explore.step(data.numel() // k)
         q_loss = torch.full((k,), float("nan"))
         if batch.frames >= warmup:
-            total = torch.zeros(k, device=batch.device)
+            q_loss = torch.zeros(k, device=batch.device)
             for _ in range(config.gradient_steps):
                 sample = replay.sample()
-                if reshaper is not None:
-                    sample = reshaper(sample)
-                means = learner_means(loss(sample)["loss"], k)
-                optimizer.zero_grad(set_to_none=True)
-                means.sum().backward()
-                if config.max_grad_norm:
-                    clip_grad_norm_per_learner(parameters, config.max_grad_norm, k)
-                optimizer.step()
-                updater.step()
-                total += means.detach()
-            q_loss = total / config.gradient_steps
+                q_loss += update(reshaper(sample) if reshaper is not None else sample)
+            q_loss /= config.gradient_steps
         batch.record(data, {"loss_q": q_loss, "epsilon": float(explore.eps)})
-    return batch.result("dqn", modules, observation_key)
+    return batch.result("dqn", modules)

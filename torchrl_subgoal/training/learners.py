@@ -17,10 +17,10 @@ from torch import nn
 from torchrl.data import Bounded, Categorical, OneHot
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal.training.a2c import A2CConfig, a2c_modules, train_a2c
+from torchrl_subgoal.training.a2c import A2CConfig, actor_critic_modules, train_a2c
 from torchrl_subgoal.training.ddpg import DDPGTrainConfig, ddpg_modules, train_ddpg
 from torchrl_subgoal.training.dqn import DQNConfig, dqn_modules, train_dqn
-from torchrl_subgoal.training.ppo import PPOConfig, ppo_modules, train_ppo
+from torchrl_subgoal.training.ppo import PPOConfig, train_ppo
 from torchrl_subgoal.training.result import Trained
 
 __all__ = ["LEARNERS", "Actions", "Learner", "action_kind", "check_actions"]
@@ -71,8 +71,8 @@ class Learner:
 LEARNERS: dict[str, Learner] = {
     learner.name: learner
     for learner in (
-        Learner("a2c", A2CConfig, train_a2c, ("discrete",), a2c_modules),
-        Learner("ppo", PPOConfig, train_ppo, ("discrete", "continuous"), ppo_modules),
+        Learner("a2c", A2CConfig, train_a2c, ("discrete",), actor_critic_modules),
+        Learner("ppo", PPOConfig, train_ppo, ("discrete", "continuous"), actor_critic_modules),
         Learner("dqn", DQNConfig, train_dqn, ("discrete",), dqn_modules),
         Learner("ddpg", DDPGTrainConfig, train_ddpg, ("continuous",), ddpg_modules),
     )
