@@ -34,14 +34,18 @@ SUCCESS_KEYS: tuple[NestedKey, ...] = ("is_success", "success")
 
 @dataclass(frozen=True)
 class SuccessSignal:
-    """How a finished episode's success is read.
+    """How a finished episode's success is read: the env's own entry, or a documented threshold.
 
     Args:
         key: the entry under ``"next"`` that says so at the episode's last step (e.g. ``"is_success"``);
             ``None``: the first of :data:`SUCCESS_KEYS` the env writes.
         min_return: where the env writes none, an episode succeeded when its env return (env units) is at
-            least this (e.g. ``1.0`` for a reward of 1 at the goal and 0 otherwise); ``None`` with no entry
-            either: success is not measured (``NaN`` in the curve).
+            least this (e.g. ``1.0`` for a reward of 1 at the goal and 0 otherwise).
+        final_reward: where the env writes none, an episode succeeded when the env reward of its last step
+            is at least this (e.g. Taxi's +20 for the delivery that ends it, which a return cannot tell
+            from a time-out after illegal moves).
+
+    With none of them and no entry, success is not measured (``NaN`` in the curves).
 
     Examples:
         >>> from tensordict import TensorDict
@@ -50,19 +54,34 @@ class SuccessSignal:
         [True, False]
         >>> SuccessSignal(min_return=1.0).read(TensorDict({}, [2]), torch.tensor([1.0, 0.0])).tolist()
         [True, False]
+        >>> last = TensorDict({"reward": torch.tensor([[20.0], [-1.0]])}, [2])
+        >>> SuccessSignal(final_reward=20.0).read(last, torch.tensor([-5.0, -200.0])).tolist()
+        [True, False]
         >>> SuccessSignal().read(TensorDict({}, [2]), torch.tensor([1.0, 0.0])) is None
         True
     """
 
     key: NestedKey | None = None
     min_return: float | None = None
+    final_reward: float | None = None
+
+    def at_end(self, last: TensorDictBase) -> torch.Tensor | None:
+        """Success read from episodes' last ``"next"`` entries ``last`` (one per row, flat), where the signal
+        is an entry or a final reward; ``None`` where it needs the return or is not measured."""
+        keys = [self.key] if self.key is not None else [k for k in SUCCESS_KEYS if k in last.keys()]  # noqa: SIM118
+        if keys:
+            return last.get(keys[0]).reshape(-1).bool()
+        if self.final_reward is not None:
+            reward = last.get("env_reward") if "env_reward" in last.keys() else last.get("reward")  # noqa: SIM118
+            return reward.reshape(-1) >= self.final_reward
+        return None
 
     def read(self, finished: TensorDictBase, returns: torch.Tensor) -> torch.Tensor | None:
         """Success of the finished episodes whose last ``"next"`` entries are ``finished`` and env returns
         ``returns``; ``None`` when not measured."""
-        keys = [self.key] if self.key is not None else [k for k in SUCCESS_KEYS if k in finished.keys()]  # noqa: SIM118 (a TensorDict)
-        if keys:
-            return finished.get(keys[0]).reshape(returns.shape).bool()
+        flags = self.at_end(finished)
+        if flags is not None:
+            return flags.reshape(returns.shape)
         return returns >= self.min_return if self.min_return is not None else None
 
 
