@@ -94,11 +94,11 @@ def test_the_shared_checks_cover_every_config_and_the_issue_s_example() -> None:
         assert issubclass(config, Settings)
         with pytest.raises(ValueError, match=r"^gamma must lie in \(0, 1\], got 2.0$"):
             config(gamma=2.0)
-    with pytest.raises(ValueError, match="^gamma"):  # the first bad field in declaration order
+    with pytest.raises(ValueError, match=r"^gamma"):  # the first bad field in declaration order
         A2CConfig(gamma=2.0, value_lr=-1, reward_scale=0)
-    with pytest.raises(ValueError, match="^value_lr"):
+    with pytest.raises(ValueError, match=r"^value_lr"):
         A2CConfig(value_lr=-1)
-    with pytest.raises(ValueError, match="^reward_scale"):
+    with pytest.raises(ValueError, match=r"^reward_scale"):
         A2CConfig(reward_scale=0)
 
 
@@ -119,7 +119,7 @@ def test_the_shared_fields_live_once_in_the_base() -> None:
 
 
 def test_a_replaced_config_is_checked_again() -> None:
-    with pytest.raises(ValueError, match="^lr"):
+    with pytest.raises(ValueError, match=r"^lr"):
         dataclasses.replace(PPOConfig(), lr=0.0)
 
 
@@ -128,9 +128,9 @@ def test_cross_field_checks_name_the_fields() -> None:
         DQNConfig(num_envs=4, frames_per_batch=30)
     with pytest.raises(ValueError, match=r"^eps_end \(0.5\) must not exceed eps_init \(0.2\)"):
         DQNConfig(eps_init=0.2, eps_end=0.5)
-    with pytest.raises(ValueError, match="^minibatch_size"):
+    with pytest.raises(ValueError, match=r"^minibatch_size"):
         PPOConfig(frames_per_batch=256, minibatch_size=100)
-    with pytest.raises(ValueError, match="^action_l2"):
+    with pytest.raises(ValueError, match=r"^action_l2"):
         DDPGTrainConfig(td3=True, action_l2=1.0)
 
 
