@@ -126,7 +126,7 @@ def per_learner(module: nn.Module, k: int) -> nn.Module:
         >>> type(one[0]).__name__, torch.equal(one[0].weight, stack.params["weight"][1])
         ('Linear', True)
     """
-    if callable(getattr(module, "learner", None)):
+    if callable(getattr(type(module), "learner", None)):  # (not TensorDictModule's, which reads its module's)
         return module.learner(k)  # type: ignore[operator]
     out = copy.copy(module)
     out._modules = {

@@ -95,7 +95,7 @@ class LearningCurve:
             over the last ``record_window`` batches (the env's episode cap when none finished).
         episode_return: mean env return of the recent finished episodes (env units).
         success: the fraction of the recent finished episodes that succeeded (:class:`SuccessSignal`;
-            0 before any finished, ``NaN`` where the env gives no success signal).
+            ``NaN`` before any finished, or where the env gives no success signal).
         episodes: episodes finished so far.
 
     Examples:
@@ -180,10 +180,10 @@ class EpisodeWindow:
         return float(np.mean(self.returns)) if self.returns else 0.0
 
     def success_rate(self) -> float:
-        """Fraction of the recent finished episodes that succeeded (0 before any, NaN when not measured)."""
-        if self.successes is None:
+        """Fraction of the recent finished episodes that succeeded (NaN before any, or when not measured)."""
+        if not self.successes:  # None (not measured) or none finished yet
             return math.nan
-        return float(np.mean(self.successes)) if self.successes else 0.0
+        return float(np.mean(self.successes))
 
 
 class CurveRecorder:
