@@ -288,7 +288,14 @@ def train_on_policy(
     options: LearnerOptions,
 ) -> Trained:
     """The loop of an on-policy actor-critic (A2C, PPO): the learners' networks, and ``update(actor, critic,
-    config, K)`` on every collected batch."""
+    config, K)`` (:class:`A2CUpdate`, :class:`~torchrl_subgoal.training.PPOUpdate`) on every collected batch.
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> config = A2CConfig(num_envs=2, frames_per_batch=8, total_frames=16, features="one_hot")
+        >>> train_on_policy("a2c", A2CUpdate, FourRoomsEnv, config, {"seeds": [0]}).curve.frames
+        [8, 16]
+    """
     batch = LearnerBatch(make_env, config, **options)
     modules = batch.modules(actor_critic_modules)
     step = update(modules["actor"], modules["critic"], config, batch.learners)

@@ -247,6 +247,14 @@ class LearnerOptions(TypedDict, total=False):
         progress: called with 1 after every batch for every learner.
         success: how a finished episode's success is read (default: the env's ``"is_success"`` or
             ``"success"`` entry, else not recorded).
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> from torchrl_subgoal.training import A2CConfig, train_a2c
+        >>> options: LearnerOptions = {"seeds": [0, 1], "observation_key": "observation"}
+        >>> config = A2CConfig(num_envs=2, frames_per_batch=8, total_frames=8, features="one_hot")
+        >>> len(train_a2c(FourRoomsEnv, config, **options).curves)
+        2
     """
 
     seeds: Sequence[int]
@@ -268,7 +276,8 @@ class LearnerBatch(Generic[C]):
             own task; see :func:`~torchrl_subgoal.training.learner_envs`).
         config: every learner's settings; the batch steps ``K × num_envs`` envs and collects
             ``K × frames_per_batch`` frames per batch (:attr:`config`), as many batches as one learner.
-        **options: the learners' seeds, shapings, loggers… (:class:`LearnerOptions`).
+
+    The keyword arguments (the learners' seeds, shapings, loggers…) are :class:`LearnerOptions`'s.
 
     Raises:
         ValueError: settings a batch of several learners cannot have (``collector_workers``, a potential

@@ -224,7 +224,17 @@ class LearnerConfig(Settings):
 
 @dataclass
 class NetworkConfig(LearnerConfig):
-    """A learner whose networks start with an input layer of its choice (A2C, PPO, DQN)."""
+    """A learner whose networks start with an input layer of its choice (A2C, PPO, DQN).
+
+    Examples:
+        >>> from torchrl_subgoal.training import A2CConfig, DQNConfig
+        >>> issubclass(A2CConfig, NetworkConfig), issubclass(DQNConfig, NetworkConfig)
+        (True, True)
+        >>> A2CConfig(features="cnn")
+        Traceback (most recent call last):
+        ...
+        ValueError: features must be one_hot, fourier or mlp, got 'cnn'
+    """
 
     features: Features = "mlp"
     """the networks' input layer: ``"one_hot"`` (a categorical observation), ``"fourier"`` (a Fourier
@@ -248,7 +258,17 @@ class NetworkConfig(LearnerConfig):
 
 @dataclass
 class OffPolicyConfig(LearnerConfig):
-    """A learner that learns from a replay buffer (DQN, DDPG), after a warm-up of random actions."""
+    """A learner that learns from a replay buffer (DQN, DDPG), after a warm-up of random actions.
+
+    Examples:
+        >>> from torchrl_subgoal.training import DDPGTrainConfig, DQNConfig
+        >>> DQNConfig().buffer_size, DDPGTrainConfig().buffer_size  # each learner's own default
+        (10000, 1000000)
+        >>> DQNConfig(batch_size=0)
+        Traceback (most recent call last):
+        ...
+        ValueError: batch_size must be >= 1, got 0
+    """
 
     learning_starts: float = 0.02
     """frames collected with uniformly random actions before the first gradient step (a value below 1:

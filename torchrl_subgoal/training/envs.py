@@ -228,12 +228,30 @@ def probe_env(make_env: Callable[[int], EnvBase], episode_cap: float | None = No
         >>> close_probe(env)
     """
     probe = make_env(1)
-    cap = episode_cap if episode_cap is not None else float(getattr(probe, "max_steps", math.nan))
-    return probe, cap
+    return probe, episode_cap if episode_cap is not None else _max_steps(probe)
+
+
+def _max_steps(env: EnvBase) -> float:
+    """The env's (or its base env's) own ``max_steps``; NaN where it has none. A batched env that was never
+    started is not asked (it would start its workers to answer)."""
+    while isinstance(env, TransformedEnv):
+        env = env.base_env
+    if isinstance(env, SerialEnv | ParallelEnv):
+        return math.nan
+    return float(getattr(env, "max_steps", None) or math.nan)
 
 
 def close_probe(probe: EnvBase) -> None:
     """Close a probe env (a batched env that was never started, a ``SerialEnv`` from :func:`batched`,
-    is closed already)."""
+    is closed already).
+
+    Examples:
+        >>> import functools
+        >>> from torchrl.envs import GymEnv
+        >>> env, cap = probe_env(batched(functools.partial(GymEnv, "CartPole-v1")))
+        >>> cap  # no max_steps attribute: not known
+        nan
+        >>> close_probe(env)  # a SerialEnv never started: nothing to close, no error
+    """
     if not probe.is_closed:
         probe.close()

@@ -163,6 +163,13 @@ class TrainedQ:
     Attributes:
         records: steps, env return and success of every learner's episodes.
         q: the tables (``[N, S, Z, A]``) and their ε-greedy policy.
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> from torchrl_subgoal.training import evaluate
+        >>> trained = train_qlearning(FourRoomsEnv(2), QLearningConfig(episodes=1, sees_subgoal=False))
+        >>> evaluate(trained.policy(1), FourRoomsEnv, 1).lengths  # greedy on learner 1's table
+        [1000]
     """
 
     records: EpisodeRecords
