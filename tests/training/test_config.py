@@ -69,6 +69,8 @@ BAD: dict[str, list[object]] = {
     "norm_clip": [0.0],
     "action_l2": [-1.0],
     "fourier_order": [-1],
+    "polyak_every": ["episode"],
+    "clip_return": [0.0, -50.0],
 }
 
 CASES = [
@@ -105,7 +107,7 @@ def test_the_shared_checks_cover_every_config_and_the_issue_s_example() -> None:
 def test_every_numeric_or_named_field_has_a_rule() -> None:
     """A field a config adds gets a rule (or is a flag / a free number by design)."""
     free = {"init", "online_potential", "sees_subgoal", "normalize_advantage", "anneal_lr", "double_dqn", "td3",
-            "reshape_samples"}  # fmt: skip
+            "reshape_samples", "clip_positive"}  # fmt: skip
     for config in CONFIGS:
         for f in dataclasses.fields(config):
             assert f.name in RULES or f.name in free, f"{config.__name__}.{f.name} has no rule"

@@ -404,9 +404,16 @@ class LearnerBatch(Generic[C]):
             self.shaping,
         )
 
-    def collect(self, policy: TensorDictModuleBase, *, init_random_frames: int = 0) -> Iterator[TensorDictBase]:
+    def collect(
+        self,
+        policy: TensorDictModuleBase,
+        *,
+        init_random_frames: int = 0,
+        start: Callable[[], None] | None = None,
+    ) -> Iterator[TensorDictBase]:
         """The batch's collected batches (collector seeded with the first seed, closed at the end);
-        :attr:`frames` counts one learner's frames so far. ``init_random_frames`` is one learner's."""
+        :attr:`frames` counts one learner's frames so far. ``init_random_frames`` is one learner's; ``start`` is
+        called once the collector is built (:attr:`collector`), before the first batch."""
         collector = make_collector(
             self.factory,
             policy,
@@ -417,6 +424,8 @@ class LearnerBatch(Generic[C]):
         self.collector = collector
         seed_collector(collector, self.seeds[0])
         try:
+            if start is not None:
+                start()
             for data in collector:
                 self.frames += data.numel() // self.learners
                 yield data

@@ -88,6 +88,8 @@ RULES: dict[str, Callable[[Any], str | None]] = {
     "loss_function": _one_of("l2", "smooth_l1", "l1"),
     "loss_critic_type": _one_of("l2", "smooth_l1", "l1"),
     "target_update": _one_of("hard", "soft"),
+    "polyak_every": _one_of("update", "batch"),
+    "clip_return": lambda v: None if v is None or v > 0 else f"must be > 0 or None, got {v}",
     **dict.fromkeys(
         ("max_grad_norm", "critic_coeff", "entropy_coeff", "noise_eps", "target_noise", "noise_clip", "action_l2"),
         _at_least(0),

@@ -19,11 +19,14 @@ sample is re-shaped with the potential as it is now
 
 from __future__ import annotations
 
+import contextlib
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Unpack
+from typing import Literal, Unpack
 
 import torch
+from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 from torch import nn
 from torchrl.data import Bounded
@@ -34,7 +37,7 @@ from torchrl_subgoal.training.batch import LearnerBatch, LearnerOptions
 from torchrl_subgoal.training.config import OffPolicyConfig
 from torchrl_subgoal.training.result import Trained
 
-__all__ = ["DDPGTrainConfig", "ddpg_agent", "ddpg_modules", "train_ddpg"]
+__all__ = ["DDPGHooks", "DDPGTrainConfig", "ddpg_agent", "ddpg_modules", "train_ddpg"]
 
 
 @dataclass
@@ -69,7 +72,10 @@ class DDPGTrainConfig(OffPolicyConfig):
     updates_per_batch: int = 1000
     """gradient steps after each collected batch (each followed by a soft target update)"""
     polyak: float = 0.995
-    """target <- polyak * target + (1 - polyak) * online, after every gradient step"""
+    """target <- polyak * target + (1 - polyak) * online, after every gradient step (or every batch)"""
+    polyak_every: Literal["update", "batch"] = "update"
+    """when the targets move: after every gradient step (TorchRL's examples) or once per collected batch,
+    after its gradient steps (the pick-and-place authors')"""
     hidden: tuple[int, ...] = (256, 256)
     """hidden layer sizes of actor and critic (ReLU)"""
     noise_eps: float = 0.1
@@ -81,6 +87,11 @@ class DDPGTrainConfig(OffPolicyConfig):
     a tanh actor off its bounds while the critic has nothing to say)"""
     norm_clip: float = 5.0
     """normalised observations are clipped to ``+-norm_clip``"""
+    clip_return: float | None = None
+    """the critic's TD targets are clipped to ``[-clip_return, ...]`` (the return range of a -1/0 reward:
+    ``1/(1-gamma)``, the pick-and-place authors'); ``None``: not clipped below"""
+    clip_positive: bool = False
+    """the critic's TD targets are clipped above at 0 (the pick-and-place authors' ``clip_pos_returns``)"""
     td3: bool = False
     """TD3 (two critics, smoothed targets, delayed actor updates) instead of DDPG"""
     policy_delay: int = 2
@@ -96,7 +107,7 @@ class DDPGTrainConfig(OffPolicyConfig):
             raise ValueError(f"action_l2 ({self.action_l2}) is DDPG's actor penalty; TD3 here has none: set it to 0")
 
     def agent(self) -> DDPGConfig:
-        """The agent's hyper-parameters (no return clipping)."""
+        """The agent's hyper-parameters."""
         return DDPGConfig(
             hidden=self.hidden,
             actor_lr=self.lr,
@@ -108,8 +119,8 @@ class DDPGTrainConfig(OffPolicyConfig):
             random_eps=self.random_eps,
             noise_eps=self.noise_eps,
             action_l2=self.action_l2,
-            clip_return=None,
-            clip_positive=False,
+            clip_return=self.clip_return,
+            clip_positive=self.clip_positive,
             norm_clip=self.norm_clip,
         )
 
@@ -185,9 +196,39 @@ def ddpg_modules(
     return {"agent": agent, "policy": agent.greedy}
 
 
+@dataclass(frozen=True)
+class DDPGHooks:
+    """Calls into :func:`train_ddpg`'s loop, for a recipe's own schedule (pick and place: a test and a
+    checkpoint after every epoch, a learning resumed from its checkpoint).
+
+    Attributes:
+        start: ``start(agent, batch)``, once the collector is built (``batch.collector``), before the first
+            batch: restore a checkpoint, seed the collector.
+        batch: ``batch(agent, batch, data)`` after every batch's update and the potential's; a true return
+            stops the learning.
+
+    Examples:
+        >>> import functools
+        >>> from torchrl.envs import GymEnv
+        >>> from torchrl_subgoal.training import batched
+        >>> config = DDPGTrainConfig(frames_per_batch=20, total_frames=100, learning_starts=0, updates_per_batch=1,
+        ...                          batch_size=8, hidden=(8,))
+        >>> seen = []
+        >>> hooks = DDPGHooks(batch=lambda agent, batch, data: seen.append(batch.frames) or batch.frames >= 40)
+        >>> _ = train_ddpg(batched(functools.partial(GymEnv, "Pendulum-v1")), config, hooks=hooks, episode_cap=200)
+        >>> seen  # stopped after the second batch
+        [20, 40]
+    """
+
+    start: Callable[[DDPGAgent, LearnerBatch[DDPGTrainConfig]], None] | None = None
+    batch: Callable[[DDPGAgent, LearnerBatch[DDPGTrainConfig], TensorDictBase], bool | None] | None = None
+
+
 def train_ddpg(
     make_env: Callable[[int], EnvBase] | Sequence[Callable[[int], EnvBase]],
     config: DDPGTrainConfig,
+    *,
+    hooks: DDPGHooks | None = None,
     **options: Unpack[LearnerOptions],
 ) -> Trained:
     """Train ``len(seeds)`` DDPG (or TD3) learners as one batch on ``make_env`` (shaped by ``shaping``).
@@ -196,11 +237,12 @@ def train_ddpg(
     once ``learning_starts`` frames per learner are collected, ``updates_per_batch`` gradient steps on
     replay samples (:meth:`~torchrl_subgoal.agents.ddpg.DDPGAgent.update_on`: every learner its own
     samples, re-shaped with the current potential when ``reshape_samples``), each followed by a soft
-    target update; then, unless the potential is trained online or fixed, one step of the potential on
-    the batch's real SMDP transitions (one learner only).
+    target update (or one after them all: ``polyak_every="batch"``); then, unless the potential is
+    trained online or fixed, one step of the potential on the batch's real SMDP transitions (one
+    learner only); then ``hooks.batch``.
 
     ``make_env``, ``config`` and ``**options`` (``seeds``, ``shaping``…): as for
-    :func:`~torchrl_subgoal.training.train_a2c`.
+    :func:`~torchrl_subgoal.training.train_a2c`; ``hooks``: :class:`DDPGHooks`.
 
     Examples:
         >>> import functools
@@ -214,23 +256,31 @@ def train_ddpg(
     """
     if config.reshape_samples and options.get("shaping") is None:
         raise ValueError("reshape_samples needs shaping: there is no potential to re-shape samples with")
+    hooks = hooks or DDPGHooks()
     batch = LearnerBatch(make_env, config, **options)
     k = batch.learners
     reshaper = batch.reshaper() if config.reshape_samples else None
     modules = batch.modules(ddpg_modules, keys=tuple(reshaper.keys) if reshaper is not None else ())
     agent = modules["agent"]
     assert isinstance(agent, DDPGAgent)
+    start = functools.partial(hooks.start, agent, batch) if hooks.start is not None else None
     warmup = config.warmup_frames
-    for data in batch.collect(agent.policy, init_random_frames=warmup):
-        agent.extend(data)
-        sums = {"loss_value": torch.zeros(k), "loss_actor": torch.zeros(k)}
-        counts = dict.fromkeys(sums, 0)
-        if batch.frames >= warmup:
-            for _ in range(config.updates_per_batch):
-                sample = agent.replay.sample()
-                for name, value in agent.update_on(reshaper(sample) if reshaper is not None else sample).items():
-                    sums[name] += value.cpu()
-                    counts[name] += 1
-                agent.soft_update()
-        batch.record(data, {name: sums[name] / counts[name] if counts[name] else float("nan") for name in sums})
+    with contextlib.closing(batch.collect(agent.policy, init_random_frames=warmup, start=start)) as batches:
+        for data in batches:
+            agent.extend(data)
+            sums = {"loss_value": torch.zeros(k), "loss_actor": torch.zeros(k)}
+            counts = dict.fromkeys(sums, 0)
+            if batch.frames >= warmup:
+                for _ in range(config.updates_per_batch):
+                    sample = agent.replay.sample()
+                    for name, value in agent.update_on(reshaper(sample) if reshaper is not None else sample).items():
+                        sums[name] += value.cpu()
+                        counts[name] += 1
+                    if config.polyak_every == "update":
+                        agent.soft_update()
+                if config.polyak_every == "batch":
+                    agent.soft_update()
+            batch.record(data, {name: sums[name] / counts[name] if counts[name] else float("nan") for name in sums})
+            if hooks.batch is not None and hooks.batch(agent, batch, data):
+                break
     return batch.result("ddpg", modules)

@@ -56,6 +56,9 @@ class Shaping:
             :class:`~torchrl_subgoal.SubgoalPotentialTransform` (``observation_key``,
             ``zero_terminal_potential``…); ``gamma`` and the online update's learning
             rate come from the learner's config.
+        loss: keyword arguments of :class:`~torchrl_subgoal.SubgoalValueLoss` where the potential is
+            trained per batch (``online_potential=False``; e.g. the paper's mean target,
+            ``{"expectile": 0.5, "bootstrap_truncated": True}``).
 
     Examples:
         >>> from torchrl_subgoal import Cell, SubgoalSeries, TabularPotential
@@ -70,6 +73,7 @@ class Shaping:
     subgoals: SubgoalSeries | Sequence[SubgoalSeries] | StateAggregation
     potential: TensorDictModuleBase
     options: dict[str, Any] = field(default_factory=dict)
+    loss: dict[str, Any] = field(default_factory=dict)
 
     @property
     def trained(self) -> bool:

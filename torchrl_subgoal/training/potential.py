@@ -56,10 +56,12 @@ class PotentialTrainer:
     def for_shaping(
         cls, shaping: Shaping, gamma: float, lr: float, optimizer: Literal["adam", "sgd"] = "adam"
     ) -> PotentialTrainer:
-        """Adam (the loss's mean reduction) or SGD (sum: the tabular update) on ``shaping.potential``."""
+        """Adam (the loss's mean reduction) or SGD (sum: the tabular update) on ``shaping.potential``, with the
+        loss's settings ``shaping.loss``."""
         sgd = optimizer == "sgd"
         opt_class = torch.optim.SGD if sgd else torch.optim.Adam
-        loss = SubgoalValueLoss(shaping.potential, reduction="sum" if sgd else "mean").make_value_estimator(gamma=gamma)
+        options = {"reduction": "sum" if sgd else "mean", **shaping.loss}
+        loss = SubgoalValueLoss(shaping.potential, **options).make_value_estimator(gamma=gamma)
         return cls(
             shaping.transform(shaping.potential, gamma, None), loss, opt_class(shaping.potential.parameters(), lr=lr)
         )
