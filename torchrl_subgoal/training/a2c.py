@@ -59,13 +59,9 @@ class A2CConfig(NetworkConfig):
     """Settings of an A2C learner (the shared ones: :class:`~torchrl_subgoal.training.LearnerConfig`).
 
     Examples:
-        >>> config = A2CConfig(num_envs=8, frames_per_batch=128, total_frames=1024)
-        >>> config.iterations
-        8
-        >>> A2CConfig(gae_lambda=1.5)
-        Traceback (most recent call last):
-        ...
-        ValueError: gae_lambda must lie in [0, 1], got 1.5
+        >>> config = A2CConfig(num_envs=8, frames_per_batch=128, total_frames=1024, features="one_hot")
+        >>> config.iterations, config.network_options()
+        (8, {'features': 'one_hot', 'hidden': (64,), 'fourier_order': 3})
     """
 
     num_envs: int = 16

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Generator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Generic, TypedDict, TypeVar
 
 import torch
@@ -410,7 +410,7 @@ class LearnerBatch(Generic[C]):
         *,
         init_random_frames: int = 0,
         start: Callable[[], None] | None = None,
-    ) -> Iterator[TensorDictBase]:
+    ) -> Generator[TensorDictBase, None, None]:
         """The batch's collected batches (collector seeded with the first seed, closed at the end);
         :attr:`frames` counts one learner's frames so far. ``init_random_frames`` is one learner's; ``start`` is
         called once the collector is built (:attr:`collector`), before the first batch."""

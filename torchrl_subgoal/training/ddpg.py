@@ -20,6 +20,7 @@ sample is re-shaped with the potential as it is now
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -107,22 +108,9 @@ class DDPGTrainConfig(OffPolicyConfig):
             raise ValueError(f"action_l2 ({self.action_l2}) is DDPG's actor penalty; TD3 here has none: set it to 0")
 
     def agent(self) -> DDPGConfig:
-        """The agent's hyper-parameters."""
-        return DDPGConfig(
-            hidden=self.hidden,
-            actor_lr=self.lr,
-            critic_lr=self.lr,
-            gamma=self.gamma,
-            polyak=self.polyak,
-            batch_size=self.batch_size,
-            buffer_size=self.buffer_size,
-            random_eps=self.random_eps,
-            noise_eps=self.noise_eps,
-            action_l2=self.action_l2,
-            clip_return=self.clip_return,
-            clip_positive=self.clip_positive,
-            norm_clip=self.norm_clip,
-        )
+        """The agent's hyper-parameters (its fields of these settings; one learning rate for actor and critic)."""
+        shared = {f.name for f in dataclasses.fields(DDPGConfig)} & {f.name for f in dataclasses.fields(self)}
+        return DDPGConfig(actor_lr=self.lr, critic_lr=self.lr, **{name: getattr(self, name) for name in shared})
 
     def td3_settings(self) -> TD3Settings | None:
         """TD3's settings, or ``None`` for DDPG."""

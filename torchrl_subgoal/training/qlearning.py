@@ -248,8 +248,8 @@ def train_qlearning(
     episodes = config.episodes
     steps = torch.zeros(n, episodes, dtype=torch.long)
     returns = torch.zeros(n, episodes)
-    success = torch.zeros(n, episodes, dtype=torch.bool)
-    outputs = (steps.numpy(), returns.numpy(), success.numpy())
+    successes = torch.zeros(n, episodes, dtype=torch.bool)
+    outputs = (steps.numpy(), returns.numpy(), successes.numpy())
     t, ret, filed = np.zeros(n, np.int64), np.zeros(n), np.zeros(n, np.int64)
     env.set_seed(seed)
     collector = Collector(env, policy, frames_per_batch=n, total_frames=-1, auto_register_policy_transforms=False)
@@ -290,5 +290,5 @@ def train_qlearning(
         for b in np.nonzero(short)[0]:
             steps[b, filed[b] :] = int(cap) if math.isfinite(cap) else frames
     if signal.min_return is not None and not flagged:  # success read from the returns
-        success.copy_(returns >= signal.min_return)
-    return TrainedQ(EpisodeRecords(steps, returns, success, frames * n), policy)
+        successes.copy_(returns >= signal.min_return)
+    return TrainedQ(EpisodeRecords(steps, returns, successes, frames * n), policy)
