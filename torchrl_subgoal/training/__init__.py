@@ -4,7 +4,8 @@ Every block trains ``len(seeds)`` learners as one program (one learner is a batc
 ``train_<algo>(make_env, config, *, seeds=[...], shaping=...) -> Trained``.
 
 * the blocks: :mod:`~torchrl_subgoal.training.a2c` (:func:`train_a2c`),
-  :mod:`~torchrl_subgoal.training.ppo` (:func:`train_ppo`),
+  :mod:`~torchrl_subgoal.training.ppo` (:func:`train_ppo`; what the two share:
+  :mod:`~torchrl_subgoal.training.on_policy`),
   :mod:`~torchrl_subgoal.training.dqn` (:func:`train_dqn`),
   :mod:`~torchrl_subgoal.training.ddpg` (:func:`train_ddpg`, DDPG or TD3) and tabular
   Q-learning (:mod:`~torchrl_subgoal.training.qlearning`);
@@ -37,7 +38,7 @@ from typing import Literal
 
 from torchrl.record.loggers import CSVLogger, Logger
 
-from torchrl_subgoal.training.a2c import A2CConfig, A2CUpdate, actor_critic, actor_critic_modules, train_a2c
+from torchrl_subgoal.training.a2c import A2CConfig, A2CUpdate, train_a2c
 from torchrl_subgoal.training.batch import (
     LearnerBatch,
     LearnerReplay,
@@ -51,7 +52,7 @@ from torchrl_subgoal.training.collection import close_collector, make_collector,
 from torchrl_subgoal.training.config import LearnerConfig, NetworkConfig, OffPolicyConfig, Settings
 from torchrl_subgoal.training.ddpg import DDPGHooks, DDPGTrainConfig, ddpg_agent, ddpg_modules, train_ddpg
 from torchrl_subgoal.training.domains import A2CDomain, LearnerDomain
-from torchrl_subgoal.training.dqn import DQN_PRESETS, DQNConfig, DQNUpdate, dqn_modules, q_network, train_dqn
+from torchrl_subgoal.training.dqn import DQN_PRESETS, DQNConfig, DQNUpdate, dqn_modules, train_dqn
 from torchrl_subgoal.training.envs import (
     EPISODE_RETURN,
     Shaping,
@@ -62,7 +63,8 @@ from torchrl_subgoal.training.envs import (
     shaped_env,
 )
 from torchrl_subgoal.training.learners import LEARNERS, Learner, action_kind, check_actions
-from torchrl_subgoal.training.networks import FourierFeatures, subgoal_states
+from torchrl_subgoal.training.networks import FourierFeatures, q_network, subgoal_states
+from torchrl_subgoal.training.on_policy import actor_critic, actor_critic_modules, train_on_policy
 from torchrl_subgoal.training.potential import PotentialTrainer, SampleReshaper
 from torchrl_subgoal.training.ppo import PPOConfig, PPOUpdate, ppo_actor_critic, train_ppo
 from torchrl_subgoal.training.recording import CurveRecorder, EpisodeWindow, LearningCurve, SuccessSignal
@@ -132,6 +134,7 @@ __all__ = [
     "train_a2c",
     "train_ddpg",
     "train_dqn",
+    "train_on_policy",
     "train_ppo",
 ]
 

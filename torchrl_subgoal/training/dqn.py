@@ -28,7 +28,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictSequential
 from tensordict.utils import NestedKey
 from torch import nn
-from torchrl.data import Categorical, OneHot, TensorSpec
+from torchrl.data import TensorSpec
 from torchrl.envs import EnvBase
 from torchrl.modules import EGreedyModule, QValueActor
 from torchrl.objectives import DQNLoss, HardUpdate, SoftUpdate
@@ -42,11 +42,11 @@ from torchrl_subgoal.training.batch import (
     learner_means,
     seeded,
 )
-from torchrl_subgoal.training.config import Features, NetworkConfig, OffPolicyConfig, frames_of
-from torchrl_subgoal.training.networks import network, subgoal_keys, trunk
+from torchrl_subgoal.training.config import NetworkConfig, OffPolicyConfig, frames_of
+from torchrl_subgoal.training.networks import q_network
 from torchrl_subgoal.training.result import Trained
 
-__all__ = ["DQN_PRESETS", "DQNConfig", "DQNUpdate", "dqn_modules", "q_network", "train_dqn"]
+__all__ = ["DQN_PRESETS", "DQNConfig", "DQNUpdate", "dqn_modules", "train_dqn"]
 
 #: Named settings (overrides of :class:`DQNConfig`'s defaults, which are TorchRL's DQN example's).
 DQN_PRESETS: dict[str, dict[str, Any]] = {
@@ -158,48 +158,6 @@ class DQNConfig(NetworkConfig, OffPolicyConfig):
     def exploration_steps(self) -> int:
         """Frames over which ε anneals (``exploration_frames`` resolved)."""
         return max(1, frames_of(self.exploration_frames, self.total_frames))
-
-
-def q_network(
-    env: EnvBase,
-    observation_key: NestedKey = "observation",
-    *,
-    features: Features = "mlp",
-    hidden: Sequence[int] = (120, 84),
-    fourier_order: int = 3,
-    subgoal_states: int = 0,
-) -> QValueActor:
-    """A Q-network over ``observation_key`` for ``env``'s discrete actions: a ReLU MLP, one output per
-    action, as TorchRL's ``QValueActor`` (writes ``"action_value"``, ``"chosen_action_value"`` and the
-    greedy ``"action"``). With one-hot features and no hidden layer it is a Q-table: the output layer has
-    no bias.
-
-    Args:
-        env: gives the observation and action specs.
-        observation_key: the network's input.
-        features: ``"one_hot"``, ``"fourier"`` or ``"mlp"`` (see :class:`DQNConfig`).
-        hidden: hidden layer sizes.
-        fourier_order: order of the Fourier basis.
-        subgoal_states: if positive, the network also reads ``"subgoal_index"`` (one-hot ``z``).
-
-    Examples:
-        >>> from torchrl.envs import GymEnv
-        >>> env = GymEnv("MountainCar-v0")
-        >>> q = q_network(env, hidden=(16,))
-        >>> td = q(env.reset())
-        >>> td["action_value"].shape, td["action"].shape
-        (torch.Size([3]), torch.Size([3]))
-    """
-    action_spec = env.full_action_spec_unbatched[env.action_key]
-    if not isinstance(action_spec, Categorical | OneHot):
-        raise ValueError(f"DQN needs discrete actions (Categorical or OneHot), got {type(action_spec).__name__}")
-    spec = env.observation_spec[observation_key]
-    body, size = trunk(spec, features, hidden, fourier_order, activation=nn.ReLU, subgoal_states=subgoal_states)
-    # one-hot features and no hidden layer: a Q-table; a bias would give every state's value of an action a
-    # shared term (four-rooms: greedy loops through rarely visited cells valued at that term)
-    table = features == "one_hot" and not hidden
-    net = network(body, nn.Linear(size, int(action_spec.space.n), bias=not table))
-    return QValueActor(net, in_keys=subgoal_keys(observation_key, subgoal_states), spec=action_spec)
 
 
 def dqn_modules(

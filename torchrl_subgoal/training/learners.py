@@ -17,9 +17,10 @@ from torch import nn
 from torchrl.data import Bounded, Categorical, OneHot
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal.training.a2c import A2CConfig, actor_critic_modules, train_a2c
+from torchrl_subgoal.training.a2c import A2CConfig, train_a2c
 from torchrl_subgoal.training.ddpg import DDPGTrainConfig, ddpg_modules, train_ddpg
 from torchrl_subgoal.training.dqn import DQNConfig, dqn_modules, train_dqn
+from torchrl_subgoal.training.on_policy import actor_critic_modules
 from torchrl_subgoal.training.ppo import PPOConfig, train_ppo
 from torchrl_subgoal.training.result import Trained
 

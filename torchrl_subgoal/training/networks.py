@@ -4,7 +4,8 @@
 * :func:`trunk`: the input layer (with the one-hot ``z`` joined when the learner sees it,
   :class:`~torchrl_subgoal.agents.subgoal_input.SubgoalInput`) and the hidden layers;
 * :func:`network`: a trunk and output layers as one module;
-* :func:`subgoal_states` and :func:`subgoal_keys`: whether a learner's networks read ``z``, and what they read.
+* :func:`subgoal_states` and :func:`subgoal_keys`: whether a learner's networks read ``z``, and what they read;
+* :func:`q_network`: a Q-network over them (DQN's).
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ import torch
 from tensordict.utils import NestedKey
 from torch import nn
 from torchrl.data import Bounded, Categorical, OneHot, TensorSpec
+from torchrl.envs import EnvBase
+from torchrl.modules import QValueActor
 
 from torchrl_subgoal.agents.subgoal_input import SUBGOAL_INDEX, SubgoalInput
 from torchrl_subgoal.training.config import Features, LearnerConfig
@@ -27,6 +30,7 @@ __all__ = [
     "FourierFeatures",
     "input_layer",
     "network",
+    "q_network",
     "subgoal_keys",
     "subgoal_states",
     "trunk",
@@ -199,3 +203,45 @@ def subgoal_keys(observation_key: NestedKey, states: int) -> list[NestedKey]:
         (['observation', 'subgoal_index'], ['observation'])
     """
     return [observation_key, SUBGOAL_INDEX] if states else [observation_key]
+
+
+def q_network(
+    env: EnvBase,
+    observation_key: NestedKey = "observation",
+    *,
+    features: Features = "mlp",
+    hidden: Sequence[int] = (120, 84),
+    fourier_order: int = 3,
+    subgoal_states: int = 0,
+) -> QValueActor:
+    """A Q-network over ``observation_key`` for ``env``'s discrete actions: a ReLU MLP, one output per
+    action, as TorchRL's ``QValueActor`` (writes ``"action_value"``, ``"chosen_action_value"`` and the
+    greedy ``"action"``). With one-hot features and no hidden layer it is a Q-table: the output layer has
+    no bias.
+
+    Args:
+        env: gives the observation and action specs.
+        observation_key: the network's input.
+        features: ``"one_hot"``, ``"fourier"`` or ``"mlp"`` (see :class:`DQNConfig`).
+        hidden: hidden layer sizes.
+        fourier_order: order of the Fourier basis.
+        subgoal_states: if positive, the network also reads ``"subgoal_index"`` (one-hot ``z``).
+
+    Examples:
+        >>> from torchrl.envs import GymEnv
+        >>> env = GymEnv("MountainCar-v0")
+        >>> q = q_network(env, hidden=(16,))
+        >>> td = q(env.reset())
+        >>> td["action_value"].shape, td["action"].shape
+        (torch.Size([3]), torch.Size([3]))
+    """
+    action_spec = env.full_action_spec_unbatched[env.action_key]
+    if not isinstance(action_spec, Categorical | OneHot):
+        raise ValueError(f"DQN needs discrete actions (Categorical or OneHot), got {type(action_spec).__name__}")
+    spec = env.observation_spec[observation_key]
+    body, size = trunk(spec, features, hidden, fourier_order, activation=nn.ReLU, subgoal_states=subgoal_states)
+    # one-hot features and no hidden layer: a Q-table; a bias would give every state's value of an action a
+    # shared term (four-rooms: greedy loops through rarely visited cells valued at that term)
+    table = features == "one_hot" and not hidden
+    net = network(body, nn.Linear(size, int(action_spec.space.n), bias=not table))
+    return QValueActor(net, in_keys=subgoal_keys(observation_key, subgoal_states), spec=action_spec)

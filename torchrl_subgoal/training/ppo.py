@@ -27,13 +27,13 @@ from torchrl.modules import ProbabilisticActor, ValueOperator
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
-from torchrl_subgoal.training.a2c import actor_critic, train_on_policy
 from torchrl_subgoal.training.batch import (
     LearnerOptions,
     clip_grad_norm_per_learner,
     learner_means,
 )
 from torchrl_subgoal.training.config import NetworkConfig
+from torchrl_subgoal.training.on_policy import actor_critic, train_on_policy
 from torchrl_subgoal.training.result import Trained
 
 __all__ = ["PPOConfig", "PPOUpdate", "ppo_actor_critic", "train_ppo"]
