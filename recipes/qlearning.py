@@ -53,6 +53,7 @@ from torchrl_subgoal.experiments.recipe import (
     sweep_entries,
 )
 from torchrl_subgoal.methods import SRS, Method, shaping_transform
+from torchrl_subgoal.training import SuccessSignal
 from torchrl_subgoal.training.qlearning import QLearningConfig, train_qlearning
 
 METHODS = {
@@ -165,6 +166,15 @@ def make_env(config: Mapping[str, Any], n: int) -> EnvBase:
     return FourRoomsEnv(num_envs=n, goal_reward=goal_reward, step_reward=step_reward)
 
 
+def task_success(config: Mapping[str, Any]) -> SuccessSignal:
+    """What a successful episode is: the goal's step, told by its reward (four-rooms: 1 with the goal reward, 0
+    against -1 under the step cost; Taxi: the delivery's +20, which a return cannot tell from a time-out after
+    illegal moves)."""
+    if config["task"] == "taxi":
+        return SuccessSignal(final_reward=20.0)
+    return SuccessSignal(final_reward=1.0 if config["reward"] == "goal" else 0.0)
+
+
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
     """One batch of learnings of one method: one Q table per env."""
     env = make_env(config, chunk.n_learners)
@@ -192,7 +202,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
         epsilon=config["epsilon"],
         sees_subgoal=config["agent_state"] == "s,z",
     )
-    records = train_qlearning(env, settings, seed=chunk.seed, progress=progress)
+    records = train_qlearning(env, settings, seed=chunk.seed, progress=progress, success=task_success(config)).records
     return EpisodeTable(records.steps, records.returns, records.success)
 
 

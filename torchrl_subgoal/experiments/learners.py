@@ -137,8 +137,8 @@ class LearnerRecipeConfig(RecipeConfig):
     )
     seed_batch: int = setting(
         1,
-        "learners of a method trained together as one batch in one process (A2C, PPO: one env batch, "
-        "stacked networks, a table per learner); 1: one learner at a time",
+        "learners of a method trained together as one batch in one process (one env batch, stacked "
+        "networks, a replay buffer and a table per learner); 1: one learner at a time",
     )
     seed: int = setting(0, "sweep seed (random patterns, learner seeds)")
     results: str = setting("", "results directory (default results/<algo>_<domain>; re-run to resume)")
@@ -368,27 +368,16 @@ def check_seed_batch(algo: str, domain: LearnerDomain, settings: Any, methods: S
 
     Examples:
         >>> from torchrl_subgoal.training import DQNConfig
-        >>> check_seed_batch("dqn", domains.part("four_rooms", LearnerDomain), DQNConfig(), [])
+        >>> check_seed_batch("dqn", domains.part("four_rooms", LearnerDomain), DQNConfig(collector_workers=1), [])
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.experiments.cli.ConfigError: --seed-batch: dqn has no batch of learners (a2c, ppo have); ...
+        torchrl_subgoal.experiments.cli.ConfigError: --seed-batch: needs --collector-workers 0 (one collector for ...
     """
-    batched = [name for name, learner in LEARNERS.items() if learner.train_batch is not None]
-    check(
-        algo in batched,
-        "seed_batch",
-        f"{algo} has no batch of learners ({', '.join(batched)} have); run it with --seed-batch 1",
-    )
-    check(
-        domain.pattern_env is None,
-        "seed_batch",
-        f"{domain.name} gives each learner its own task (start and goal), so its learners cannot share an env batch",
-    )
     check(settings.collector_workers == 0, "seed_batch", "needs --collector-workers 0 (one collector for the batch)")
     check(
-        not (algo == "a2c" and settings.normalize_advantage),
+        domain.pattern_env is None or settings.env_workers == 0,
         "seed_batch",
-        "needs A2C's normalize_advantage off (it would mix the learners)",
+        f"{domain.name} gives each learner its own task, whose envs step in the batch's process: needs --env-workers 0",
     )
     trained = any(m.shaping in ("subgoals", "aggregation") for m in methods)
     check(
@@ -449,9 +438,8 @@ def frozen_tables(path: str, methods: Sequence[Method], patterns: PatternSets) -
 
 
 def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
-    """Train the chunk's learners, one after the other (each steps its own batch of envs) or, for a chunk of
-    several (``--seed-batch``), together as one batch (the learner's ``train_batch``,
-    e.g. :func:`~torchrl_subgoal.training.train_a2c_batch`); their records.
+    """Train the chunk's learners (one, or ``--seed-batch`` of them) as one batch (the learner's ``train``,
+    e.g. :func:`~torchrl_subgoal.training.train_a2c`); their records.
 
     Examples:
         >>> import tempfile
@@ -502,31 +490,20 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
         # fresh: a learner run again after an interruption starts its log over, as its results do
         logger = experiment_logger(Path(config["log_dir"]), f"{chunk.method}_{pattern}_{learning}", fresh=True)
         runs.append((make_env, Shaping(*parts) if parts is not None else None, seed, logger))
-    if len(runs) > 1:  # a seed batch (the plan checked that the learners can share one env batch)
-        assert learner.train_batch is not None, f"{learner.name} has no batch of learners"
-        curves = learner.train_batch(
-            runs[0][0],
-            settings,
-            [seed for _, _, seed, _ in runs],
-            shapings=[shaping for _, shaping, _, _ in runs],
-            observation_key=domain.observation_key,
-            loggers=[logger for *_, logger in runs],
-            progress=progress,
-        )
-    else:
-        curves = [
-            learner.train(
-                make_env,
-                settings,
-                shaping=shaping,
-                observation_key=domain.observation_key,
-                seed=seed,
-                logger=logger,
-                progress=progress,
-            )
-            for make_env, shaping, seed, logger in runs
-        ]
+    # the chunk's learners as one batch (one learner is a batch of one); each its own task where the
+    # domain gives one per learner (the plan checked that the learners can share one env batch)
+    trained = learner.train(
+        [make_env for make_env, *_ in runs],
+        settings,
+        seeds=[seed for _, _, seed, _ in runs],
+        shaping=[shaping for _, shaping, _, _ in runs],
+        observation_key=domain.observation_key,
+        loggers=[logger for *_, logger in runs],
+        progress=progress,
+        success=domain.success,
+    )
+    curves = trained.curves
     steps = np.array([np.round(c.episode_length) for c in curves], dtype=np.int64)
     returns = np.array([c.episode_return for c in curves])
-    success = np.array([c.success for c in curves])
+    success = np.nan_to_num(np.array([c.success for c in curves], dtype=np.float64), nan=0.0)  # no signal: 0
     return EpisodeTable(steps, returns, success)
