@@ -327,7 +327,9 @@ def gated(monkeypatch: pytest.MonkeyPatch) -> Iterator[threading.Event]:
     """``try_pattern`` replaced by a job that reports progress until the gate opens (or it is cancelled)."""
     gate = threading.Event()
 
-    def blocked(domain: str, series: Any, settings: Any, *, method: str = "HRS", map: Any = None, progress: Any = None) -> Any:
+    def blocked(
+        domain: str, series: Any, settings: Any, *, method: str = "HRS", map: Any = None, progress: Any = None
+    ) -> Any:
         while not gate.wait(0.01):
             progress(0)  # raises once cancelled
         raise RuntimeError("the gate opened")

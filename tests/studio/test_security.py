@@ -49,7 +49,9 @@ def gated(monkeypatch: pytest.MonkeyPatch) -> Iterator[threading.Event]:
     """``try_pattern`` replaced by a job that waits for the gate (or its cancellation): jobs started stay visible."""
     gate = threading.Event()
 
-    def blocked(domain: str, series: Any, settings: Any, *, method: str = "HRS", map: Any = None, progress: Any = None) -> Any:
+    def blocked(
+        domain: str, series: Any, settings: Any, *, method: str = "HRS", map: Any = None, progress: Any = None
+    ) -> Any:
         while not gate.wait(0.01):
             progress(0)
         return {"ok": True}
