@@ -87,10 +87,13 @@ def test_monotone_potential_reaches_the_shaped_learners_table(
 
 
 def test_the_learner_sees_z_by_its_own_default_unless_told() -> None:
-    """DQN reads z whenever shaped (its default), the others do not; --sees-subgoal yes / no overrides."""
+    """DQN reads z whenever shaped (its default), A2C's and PPO's critics do, DDPG does not; --sees-subgoal
+    yes / no / critic overrides."""
     four_rooms = domains.part("four_rooms", LearnerDomain)
-    default = {algo: learner_settings(LearnerRecipeConfig(), algo, four_rooms).sees_subgoal for algo in ("dqn", "ppo")}
-    assert default == {"dqn": None, "ppo": False}
+    algos = ("dqn", "ppo", "a2c")
+    default = {algo: learner_settings(LearnerRecipeConfig(), algo, four_rooms).sees_subgoal for algo in algos}
+    assert default == {"dqn": None, "ppo": "critic", "a2c": "critic"}
+    assert learner_settings(LearnerRecipeConfig(sees_subgoal="critic"), "a2c", four_rooms).sees_subgoal == "critic"
     assert learner_settings(LearnerRecipeConfig(sees_subgoal="no"), "dqn", four_rooms).sees_subgoal is False
     assert learner_settings(LearnerRecipeConfig(sees_subgoal="yes"), "ppo", four_rooms).sees_subgoal is True
 

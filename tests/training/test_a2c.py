@@ -274,3 +274,25 @@ def test_a2c_learner_batch_refuses_settings_it_has_no_per_learner_version_of(set
     shapings = [Shaping(HALLWAYS, TabularPotential(3), {"observation_key": "cell"}) for _ in range(2)]
     with pytest.raises(ValueError, match=match):
         train_a2c(four_rooms_env, config, seeds=[0, 1], shaping=shapings)
+
+
+@pytest.mark.parametrize(
+    ("sees", "actor_keys", "critic_keys"),
+    [
+        ("critic", ["observation"], ["observation", "subgoal_index"]),
+        (True, ["observation", "subgoal_index"], ["observation", "subgoal_index"]),
+        (False, ["observation"], ["observation"]),
+    ],
+)
+def test_by_default_a_shaped_critic_reads_z_and_the_policy_does_not(
+    sees: bool | str, actor_keys: list[str], critic_keys: list[str]
+) -> None:
+    """The shaped return depends on z; the policy keeps the unshaped learner's inputs."""
+    from torchrl_subgoal.envs import FourRoomsEnv
+    from torchrl_subgoal.training import actor_critic_modules, subgoal_states
+
+    config = A2CConfig(features="one_hot", sees_subgoal=sees)
+    states = subgoal_states(config, Shaping(HALLWAYS, TabularPotential(3)))
+    modules = actor_critic_modules(FourRoomsEnv(1), config, subgoal_states=states, seeds=[0, 1])
+    assert modules["actor"].in_keys == actor_keys and modules["critic"].in_keys == critic_keys
+    assert subgoal_states(A2CConfig(), None) == 0  # unshaped: nothing to read

@@ -67,6 +67,10 @@ __all__ = [
 ]
 
 
+#: ``--sees-subgoal`` as the learner configs' ``sees_subgoal``
+SEES_SUBGOAL: dict[str, bool | str] = {"yes": True, "no": False, "critic": "critic"}
+
+
 @dataclass
 class LearnerRecipeConfig(RecipeConfig):
     """The settings of a learner recipe: the domain, the methods, the budget and the shaping options.
@@ -109,9 +113,9 @@ class LearnerRecipeConfig(RecipeConfig):
     )
     sees_subgoal: str = setting(
         "default",
-        "the shaped learners' networks also read the subgoal index z (one-hot): yes, no, or default "
-        "(the learner's: DQN yes, the others no)",
-        choices=["default", "yes", "no"],
+        "the shaped learners' networks also read the subgoal index z (one-hot): yes, no, critic (A2C, PPO: "
+        "the value network only), or default (the learner's: DQN yes, A2C and PPO critic, DDPG no)",
+        choices=["default", "yes", "no", "critic"],
     )
     reshape_samples: bool = setting(
         False, "the shaped learners re-shape replay samples with the potential as it is now (DQN, DDPG)"
@@ -217,7 +221,7 @@ def learner_settings(
         collector_workers=cfg.collector_workers,
         value_lr=cfg.value_lr,
         online_potential=cfg.online_potential,
-        **({} if cfg.sees_subgoal == "default" else {"sees_subgoal": cfg.sees_subgoal == "yes"}),
+        **({} if cfg.sees_subgoal == "default" else {"sees_subgoal": SEES_SUBGOAL[cfg.sees_subgoal]}),
         **(extra or {}),
     )
     if cfg.reshape_samples:

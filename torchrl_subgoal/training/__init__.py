@@ -49,7 +49,7 @@ from torchrl_subgoal.training.batch import (
     per_learner,
 )
 from torchrl_subgoal.training.collection import close_collector, make_collector, seed_collector
-from torchrl_subgoal.training.config import LearnerConfig, NetworkConfig, OffPolicyConfig, Settings
+from torchrl_subgoal.training.config import ActorCriticConfig, LearnerConfig, NetworkConfig, OffPolicyConfig, Settings
 from torchrl_subgoal.training.ddpg import DDPGHooks, DDPGTrainConfig, ddpg_agent, ddpg_modules, train_ddpg
 from torchrl_subgoal.training.domains import A2CDomain, LearnerDomain
 from torchrl_subgoal.training.dqn import DQN_PRESETS, DQNConfig, DQNUpdate, dqn_modules, train_dqn
@@ -79,6 +79,7 @@ __all__ = [
     "A2CConfig",
     "A2CDomain",
     "A2CUpdate",
+    "ActorCriticConfig",
     "CurveRecorder",
     "DDPGHooks",
     "DDPGTrainConfig",

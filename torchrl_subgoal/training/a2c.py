@@ -40,7 +40,7 @@ from torchrl_subgoal.training.batch import (
     label_learners,
     learner_means,
 )
-from torchrl_subgoal.training.config import NetworkConfig
+from torchrl_subgoal.training.config import ActorCriticConfig
 from torchrl_subgoal.training.on_policy import train_on_policy
 from torchrl_subgoal.training.result import Trained
 
@@ -48,7 +48,7 @@ __all__ = ["A2CConfig", "A2CUpdate", "train_a2c"]
 
 
 @dataclass
-class A2CConfig(NetworkConfig):
+class A2CConfig(ActorCriticConfig):
     """Settings of an A2C learner (the shared ones: :class:`~torchrl_subgoal.training.LearnerConfig`).
 
     Examples:

@@ -22,11 +22,11 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import torch
 
-__all__ = ["RULES", "LearnerConfig", "NetworkConfig", "OffPolicyConfig", "Settings", "frames_of"]
+__all__ = ["RULES", "ActorCriticConfig", "LearnerConfig", "NetworkConfig", "OffPolicyConfig", "Settings", "frames_of"]
 
 Features = Literal["one_hot", "fourier", "mlp"]
 
@@ -204,11 +204,15 @@ class LearnerConfig(Settings):
     per batch on the batch's transitions"""
     record_window: int = 8
     """batches the recorded mean episode length is estimated over"""
-    sees_subgoal: bool | None = False
+    sees_subgoal: bool | Literal["critic"] | None = False
     """the networks also read the subgoal index ``z`` (one-hot); ``None``: whenever a shaping transform
-    keeps it"""
+    keeps it (actor-critic learners also take ``"critic"``: :class:`ActorCriticConfig`)"""
+    SEES_SUBGOAL: ClassVar[tuple[object, ...]] = (True, False, None)
 
     def check(self) -> None:
+        if self.sees_subgoal not in self.SEES_SUBGOAL:
+            choices = ", ".join(repr(choice) for choice in self.SEES_SUBGOAL)
+            raise ValueError(f"sees_subgoal must be one of {choices}, got {self.sees_subgoal!r}")
         if self.env_workers and self.num_envs % self.env_workers:
             raise ValueError(f"num_envs ({self.num_envs}) must be a multiple of env_workers ({self.env_workers})")
         if self.frames_per_batch % (self.num_envs * max(1, self.collector_workers)):
@@ -256,6 +260,26 @@ class NetworkConfig(LearnerConfig):
             {'features': 'one_hot', 'hidden': (), 'fourier_order': 3}
         """
         return {"features": self.features, "hidden": self.hidden, "fourier_order": self.fourier_order}
+
+
+@dataclass
+class ActorCriticConfig(NetworkConfig):
+    """A learner with a policy and a value network (A2C, PPO).
+
+    Examples:
+        >>> from torchrl_subgoal.training import A2CConfig, PPOConfig
+        >>> A2CConfig().sees_subgoal, PPOConfig(sees_subgoal=True).sees_subgoal
+        ('critic', True)
+    """
+
+    sees_subgoal: bool | Literal["critic"] | None = "critic"
+    """which networks also read the subgoal index ``z`` (one-hot): ``"critic"`` (the default) the value
+    network whenever a shaping transform keeps ``z``, the policy never; ``True``/``None`` both; ``False``
+    neither. The shaped return depends on ``z`` (``F = γΦ(z') - Φ(z)``), so a critic blind to it learns a
+    blend of the shaped values under every ``z``; a policy over ``s`` alone keeps the unshaped learner's
+    policy class (docs/shaping_defaults.md)"""
+
+    SEES_SUBGOAL: ClassVar[tuple[object, ...]] = (True, False, None, "critic")
 
 
 @dataclass

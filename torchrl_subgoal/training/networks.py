@@ -175,7 +175,8 @@ def subgoal_states(config: LearnerConfig, shaping: Shaping | None) -> int:
     """Abstract states the networks' one-hot ``z`` input spans; 0 when they do not see ``z``.
 
     Args:
-        config: ``config.sees_subgoal`` asks for the input (``None``: whenever there is shaping).
+        config: ``config.sees_subgoal`` asks for the input (``None``, or ``"critic"`` for the value network
+            alone: whenever there is shaping).
         shaping: the shaping whose transform keeps ``z`` (``"subgoal_index"``).
 
     Raises:
@@ -188,7 +189,7 @@ def subgoal_states(config: LearnerConfig, shaping: Shaping | None) -> int:
         >>> subgoal_states(DQNConfig(), shaping), subgoal_states(DQNConfig(sees_subgoal=False), shaping)
         (3, 0)
     """
-    if config.sees_subgoal is False or (config.sees_subgoal is None and shaping is None):
+    if config.sees_subgoal is False or (config.sees_subgoal in (None, "critic") and shaping is None):
         return 0
     if shaping is None:
         raise ValueError("sees_subgoal needs shaping: the subgoal index z is kept by the shaping transform")

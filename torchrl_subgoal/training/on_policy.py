@@ -23,7 +23,7 @@ from torchrl.envs import EnvBase
 from torchrl.modules import OneHotCategorical, ProbabilisticActor, TanhNormal, ValueOperator
 
 from torchrl_subgoal.training.batch import LearnerBatch, LearnerOptions, seeded, stack_actor_critic
-from torchrl_subgoal.training.config import Features, NetworkConfig
+from torchrl_subgoal.training.config import ActorCriticConfig, Features
 from torchrl_subgoal.training.networks import network, subgoal_keys, trunk
 from torchrl_subgoal.training.result import Trained
 
@@ -38,6 +38,7 @@ def actor_critic(
     hidden: Sequence[int] = (64,),
     fourier_order: int = 3,
     subgoal_states: int = 0,
+    actor_sees_subgoal: bool = True,
 ) -> tuple[ProbabilisticActor, ValueOperator]:
     """A policy and a value network over ``observation_key`` for ``env``'s actions (A2C's and PPO's).
 
@@ -56,6 +57,7 @@ def actor_critic(
         subgoal_states: if positive, both networks also read ``"subgoal_index"`` (``z``, one-hot
             over this many abstract states): joined to the features as their product for one-hot
             features with ``hidden=()`` (a table over ``(s, z)``), else concatenated.
+        actor_sees_subgoal: ``False``: only the value network reads ``z``; the policy reads the observation.
 
     Examples:
         >>> from torchrl_subgoal.envs import FourRoomsEnv
@@ -66,6 +68,8 @@ def actor_critic(
         >>> actor, critic = actor_critic(FourRoomsEnv(3), features="one_hot", subgoal_states=3)
         >>> critic.in_keys
         ['observation', 'subgoal_index']
+        >>> actor_critic(FourRoomsEnv(3), subgoal_states=3, actor_sees_subgoal=False)[0].in_keys
+        ['observation']
         >>> from torchrl.envs import GymEnv
         >>> actor, critic = actor_critic(GymEnv("Pendulum-v1"), hidden=(16,))
         >>> td = actor(GymEnv("Pendulum-v1").reset())
@@ -80,13 +84,14 @@ def actor_critic(
             f"an actor-critic here needs discrete or bounded continuous actions, got {type(action_spec).__name__}"
         )
     outputs = int(action_spec.space.n) if discrete else int(action_spec.shape[-1])
-    policy_trunk, size = trunk(spec, features, hidden, fourier_order, subgoal_states=subgoal_states)
-    value_trunk, _ = trunk(spec, features, hidden, fourier_order, subgoal_states=subgoal_states)
-    policy_head, value_head = nn.Linear(size, outputs), nn.Linear(size, 1)
+    actor_states = subgoal_states if actor_sees_subgoal else 0
+    policy_trunk, size = trunk(spec, features, hidden, fourier_order, subgoal_states=actor_states)
+    value_trunk, value_size = trunk(spec, features, hidden, fourier_order, subgoal_states=subgoal_states)
+    policy_head, value_head = nn.Linear(size, outputs), nn.Linear(value_size, 1)
     for last in (policy_head, value_head):  # start from a uniform (or centred) policy and a zero value
         nn.init.zeros_(last.weight)
         nn.init.zeros_(last.bias)
-    in_keys = subgoal_keys(observation_key, subgoal_states)
+    in_keys = subgoal_keys(observation_key, actor_states)
     if discrete:
         policy = TensorDictModule(network(policy_trunk, policy_head), in_keys=in_keys, out_keys=["logits"])
         distribution = OneHotCategorical if isinstance(action_spec, OneHot) else torch.distributions.Categorical
@@ -106,19 +111,20 @@ def actor_critic(
         distribution_kwargs=options,
         return_log_prob=True,
     )
-    critic = ValueOperator(network(value_trunk, value_head), in_keys=in_keys)
+    critic = ValueOperator(network(value_trunk, value_head), in_keys=subgoal_keys(observation_key, subgoal_states))
     return actor, critic
 
 
 def actor_critic_modules(
     env: EnvBase,
-    config: NetworkConfig,
+    config: ActorCriticConfig,
     observation_key: NestedKey = "observation",
     subgoal_states: int = 0,
     seeds: Sequence[int] = (0,),
 ) -> dict[str, nn.Module]:
     """The networks of ``len(seeds)`` A2C (or PPO) learners, each started from its seed, stacked:
-    ``"actor"``, ``"critic"`` and the greedy ``"policy"`` (the actor).
+    ``"actor"``, ``"critic"`` and the greedy ``"policy"`` (the actor). With ``subgoal_states`` and
+    ``config.sees_subgoal == "critic"``, only the critic reads ``z``.
 
     Examples:
         >>> from torchrl_subgoal.envs import FourRoomsEnv
@@ -128,7 +134,13 @@ def actor_critic_modules(
         torch.Size([4, 1])
     """
     options = config.network_options()
-    pairs = seeded(seeds, lambda: actor_critic(env, observation_key, subgoal_states=subgoal_states, **options))
+    actor_sees = config.sees_subgoal != "critic"
+    pairs = seeded(
+        seeds,
+        lambda: actor_critic(
+            env, observation_key, subgoal_states=subgoal_states, actor_sees_subgoal=actor_sees, **options
+        ),
+    )
     actor, critic = stack_actor_critic(pairs)
     return {"actor": actor, "critic": critic, "policy": actor}
 
@@ -139,7 +151,7 @@ def train_on_policy(
         [ProbabilisticActor, ValueOperator, Any, int], Callable[[TensorDictBase], dict[str, torch.Tensor]]
     ],
     make_env: Callable[[int], EnvBase] | Sequence[Callable[[int], EnvBase]],
-    config: NetworkConfig,
+    config: ActorCriticConfig,
     options: LearnerOptions,
 ) -> Trained:
     """The loop of an on-policy actor-critic (A2C, PPO): the learners' networks, and ``update(actor, critic,

@@ -32,7 +32,7 @@ from torchrl_subgoal.training.batch import (
     clip_grad_norm_per_learner,
     learner_means,
 )
-from torchrl_subgoal.training.config import NetworkConfig
+from torchrl_subgoal.training.config import ActorCriticConfig
 from torchrl_subgoal.training.on_policy import actor_critic, train_on_policy
 from torchrl_subgoal.training.result import Trained
 
@@ -43,7 +43,7 @@ ppo_actor_critic = actor_critic
 
 
 @dataclass
-class PPOConfig(NetworkConfig):
+class PPOConfig(ActorCriticConfig):
     """Settings of a PPO learner (the shared ones: :class:`~torchrl_subgoal.training.LearnerConfig`).
 
     The PPO defaults are those of TorchRL's own PPO examples
