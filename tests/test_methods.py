@@ -97,7 +97,7 @@ def _episodes_to_success(method: str, learners: int = 16, episodes: int = 40, **
         **conventions,
     )
     shaped = TransformedEnv(env, shaping) if shaping is not None else env
-    records = train_qlearning(shaped, QLearningConfig(episodes=episodes, lr=0.25, epsilon=0.1), seed=0)
+    records = train_qlearning(shaped, QLearningConfig(episodes=episodes, lr=0.25, epsilon=0.1), seed=0).records
     found = records.steps < 60
     first = torch.where(found.any(1), found.float().argmax(1) + 1, torch.tensor(episodes + 1))
     return float(first.float().mean())
