@@ -17,8 +17,8 @@ The shaped learners' tables are over ``(s, z)`` (``--agent-state s`` for ``s``).
 destination). Results go to ``--results`` chunk by chunk (re-run to resume); the report
 gives episodes to each threshold of steps per episode, the final steps and the tests.
 
-    python recipes/qlearning.py --task four_rooms --reward step-cost    # 20 learners per method
-    python recipes/qlearning.py --task taxi --episodes 400
+    python recipes/qlearning.py --domain four_rooms --reward step-cost    # 20 learners per method
+    python recipes/qlearning.py --domain taxi --episodes 400
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ TASKS: dict[str, dict[str, Any]] = {
 class Config(RecipeConfig):
     """Tabular ε-greedy Q-learning with HRS (library defaults), HRS-mean and NRS against no shaping."""
 
-    task: str = setting("four_rooms", "four_rooms or taxi", choices=sorted(TASKS))
+    domain: str = setting("four_rooms", "four_rooms or taxi", choices=sorted(TASKS))
     reward: str = setting(
         "step-cost", "four_rooms only: step-cost (-1 per step) or goal (+1 at the goal)", choices=["step-cost", "goal"]
     )
@@ -93,7 +93,9 @@ class Config(RecipeConfig):
         "nonpositive", "HRS, HRS-mean: the level of Φ", choices=["value", "zero", "nonpositive"]
     )
     chunk_size: int = setting(100, "learners per batch (one policy seed per chunk)")
-    results: str = setting("", "results directory (default results/qlearning_<task>[_<reward>]; re-run to resume)")
+    results: str = setting(
+        "", "results directory (re-run to resume)", shown_default="results/qlearning_<domain>[_<reward>]"
+    )
 
     AT_LEAST_ONE = ("learnings", "episodes", "chunk_size")
 
@@ -149,8 +151,8 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
 def plan(cfg: Config) -> Plan:
     """The sweep of ``cfg``: every method's learners, the stored configuration, the report's thresholds."""
     check_methods(METHODS, cfg.method_names)
-    task = TASKS[cfg.task]
-    if cfg.task == "taxi":
+    task = TASKS[cfg.domain]
+    if cfg.domain == "taxi":
         from torchrl_subgoal.envs.taxi import taxi_subgoals
 
         human, subgoal_file = {"pick_up_then_drive": taxi_subgoals()}, "torchrl_subgoal.envs.taxi:taxi_subgoals"
@@ -159,10 +161,11 @@ def plan(cfg: Config) -> Plan:
     patterns = pattern_sets(human, [], 0, cfg.seed, random_needed=False)
     settings = dataclasses.asdict(cfg)
     config: dict[str, Any] = {
-        k: settings[k]
-        for k in (
-            "task",
-            "reward",
+        "task": cfg.domain,  # the key results started before the flag's renaming (--task) resume with
+        **{
+            k: settings[k]
+            for k in (
+                "reward",
             "episodes",
             "lr",
             "epsilon",
@@ -170,14 +173,15 @@ def plan(cfg: Config) -> Plan:
             "value_lr",
             "eta",
             "agent_state",
-            "zero_terminal_potential",
-            "start_potential",
-        )
+                "zero_terminal_potential",
+                "start_potential",
+            )
+        },
     }
     check_patterns(patterns, make_env(config, 1), task["subgoal_key"])
-    name = cfg.task if cfg.task == "taxi" else f"{cfg.task}_{cfg.reward.replace('-', '_')}"
+    name = cfg.domain if cfg.domain == "taxi" else f"{cfg.domain}_{cfg.reward.replace('-', '_')}"
     config.update(
-        domain=cfg.task,
+        domain=cfg.domain,
         target={"expectile": cfg.expectile, "bootstrap_truncated": cfg.bootstrap_truncated},
         **sweep_entries(cfg, subgoal_file, patterns),
         report={

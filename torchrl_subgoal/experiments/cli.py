@@ -36,6 +36,7 @@ __all__ = [
     "ConfigError",
     "OneLineParser",
     "check",
+    "flag_of",
     "load_settings",
     "parse_config",
     "setting",
@@ -106,7 +107,13 @@ def setting(default: Any, help: str, *, choices: Sequence[Any] | None = None, sh
     return dataclasses.field(default=default, metadata=metadata)
 
 
-def _flag(name: str) -> str:
+def flag_of(name: str) -> str:
+    """The flag of the field ``name``.
+
+    Examples:
+        >>> flag_of("frames_per_batch")
+        '--frames-per-batch'
+    """
     return "--" + name.replace("_", "-")
 
 
@@ -139,7 +146,8 @@ def _annotated(kind: Any, help: str, name: str, choices: Sequence[Any] | None, s
         kind = Literal.__getitem__(tuple(choices))
         marks.append(tyro.conf.arg(help=help, **hint))
     elif kind in (int, float):
-        marks += [_number(kind, name.upper()), tyro.conf.arg(help=help, metavar=name.upper(), **hint)]
+        metavar = kind.__name__.upper()
+        marks += [_number(kind, metavar), tyro.conf.arg(help=help, metavar=metavar, **hint)]
     else:
         marks.append(tyro.conf.arg(help=help, **hint))
     return Annotated[(kind, *marks)]
@@ -187,7 +195,7 @@ def _nested_flags(default: Any, group: str) -> tuple[type, Any]:
         if f.init
     ]
     flags = dataclasses.make_dataclass(f"{cls.__name__}Flags", fields)
-    flags.__doc__ = f"{group} settings"
+    flags.__doc__ = f"{cls.__name__}: the learner's settings (the defaults shown are the domain's)"
     return flags, flags(**{name: field.default for name, _, field in fields})
 
 
@@ -321,7 +329,7 @@ def _early(cls: type, argv: Sequence[str], stored: Mapping[str, Any]) -> dict[st
     fields = {f.name: f for f in dataclasses.fields(cls)}
     out = {}
     for name in getattr(cls, "EARLY", ()):
-        given = _given(argv, _flag(name))
+        given = _given(argv, flag_of(name))
         out[name] = given if given is not None else stored.get(name, fields[name].default)
     return out
 
@@ -351,7 +359,8 @@ def parse_config(
     ``config.json``, or its results directory) instead of the defaults. A class may
     name fields in ``EARLY`` and give groups of nested settings that depend on them
     (``nested_settings(early) -> {field: (group name, default dataclass instance)}``): the learner
-    recipes' ``--algo`` and ``--domain`` pick the learner whose settings are flags.
+    recipes' ``--algo`` and ``--domain`` pick the learner whose settings are flags; its
+    ``check_flags(early, flags)`` may refuse a flag first (another learner's setting).
     The dataclass's ``__post_init__`` may raise :class:`ConfigError` for other checks.
     A command line that does not parse exits with code 2 after one line on stderr,
     ``error: argument --flag: what is wrong (see PROG --help)``.
@@ -374,11 +383,16 @@ def parse_config(
     args, config_file = _take(_renamed(sys.argv[1:] if argv is None else argv), "--config")
     stored = load_settings(config_file, cls) if config_file else {}
     hints = get_type_hints(cls)
-    fields = [f for f in dataclasses.fields(cls) if f.init]  # type: ignore[arg-type]
+    early = getattr(cls, "EARLY", ())
+    fields = sorted((f for f in dataclasses.fields(cls) if f.init), key=lambda f: f.name not in early)  # type: ignore[arg-type]
     nested: dict[str, Any] = {}
     make_nested = getattr(cls, "nested_settings", None)
     if make_nested is not None:
-        nested = make_nested(_early(cls, args, stored))
+        early_values = _early(cls, args, stored)
+        nested = make_nested(early_values)
+        check_flags = getattr(cls, "check_flags", None)
+        if check_flags is not None:
+            check_flags(early_values, [a.split("=", 1)[0] for a in args if a.startswith("--")])
     columns, defaults = [], {}
     for f in fields:
         if f.name in nested:
@@ -388,7 +402,7 @@ def parse_config(
             known = {g.name for g in dataclasses.fields(flags_cls)}
             default = dataclasses.replace(default, **{k: _tuples(v) for k, v in values.items() if k in known})
             kind = Annotated[flags_cls, tyro.conf.OmitArgPrefixes, tyro.conf.arg(name=group)]
-            columns.append((f.name, kind, dataclasses.field(default=default)))
+            columns.append((f.name, kind, dataclasses.field(default_factory=lambda default=default: default)))
             defaults[f.name] = default
             continue
         if f.metadata.get("nested"):
@@ -405,7 +419,7 @@ def parse_config(
         if name in nested:
             values[name] = _build_nested(type(nested[name][1]), dataclasses.asdict(value))
         elif isinstance(value, float) and not math.isfinite(value):
-            raise ConfigError(f"{_flag(name)}: must be a finite number, got {value}")
+            raise ConfigError(f"{flag_of(name)}: must be a finite number, got {value}")
     return cls(**values)
 
 
@@ -418,14 +432,14 @@ def _build_nested(cls: type, values: Mapping[str, Any]) -> Any:
     """``cls(**values)``; its refusal (a ``ValueError`` naming a field) as a :class:`ConfigError` naming the flag."""
     for name, value in values.items():
         if isinstance(value, float) and not math.isfinite(value):
-            raise ConfigError(f"{_flag(name)}: must be a finite number, got {value}")
+            raise ConfigError(f"{flag_of(name)}: must be a finite number, got {value}")
     try:
         return cls(**values)
     except ValueError as exc:
         message = " ".join(str(exc).split())
         named = [name for name in values if re.search(rf"\b{name}\b", message)]
         first = min(named, key=lambda name: re.search(rf"\b{name}\b", message).start()) if named else None  # type: ignore[union-attr]
-        raise ConfigError(f"{_flag(first)}: {message}" if first else message) from None
+        raise ConfigError(f"{flag_of(first)}: {message}" if first else message) from None
 
 
 def check(condition: bool, field_name: str, message: str) -> None:
@@ -439,4 +453,4 @@ def check(condition: bool, field_name: str, message: str) -> None:
         torchrl_subgoal.experiments.cli.ConfigError: --learnings: must be >= 1, got 0
     """
     if not condition:
-        raise ConfigError(f"{_flag(field_name)}: {message}")
+        raise ConfigError(f"{flag_of(field_name)}: {message}")

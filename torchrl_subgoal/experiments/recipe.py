@@ -1,27 +1,33 @@
 """What the recipes share: one settings base, one ``main``, patterns, learners per method, chunk decoding,
 run + report.
 
-A recipe (``recipes/four_rooms.py``, ``recipes/pinball.py``, ``recipes/a2c.py``,
-``recipes/pick_and_place.py``) is a :class:`RecipeConfig` subclass (a paper
+A recipe (:mod:`torchrl_subgoal.recipes`: ``torchrl-subgoal reproduce four-rooms``, ``... pinball``,
+``... pick-and-place``, ``torchrl-subgoal train``; ``recipes/a2c.py`` and ``recipes/qlearning.py`` in
+the repository) is a :class:`RecipeConfig` subclass (a paper
 reproduction: a :class:`ReproductionConfig`), a ``plan`` that turns its settings
 into a :class:`Plan` (the domain's pieces: the human patterns, candidate subgoals
 for RRS, a ``run_chunk`` making an env and an agent per chunk) and
 ``main = recipe_main(Config, plan)``; these helpers do the rest the same way for
-every domain.
+every domain, and record in the results' ``config.json`` the command, its settings
+(what ``--config`` reads back) and the package's version and commit.
 """
 
 from __future__ import annotations
 
+import logging
+import os
+import shlex
 import sys
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal, TypeVar
 
 import torch
 from torchrl.envs import EnvBase, TransformedEnv
 
-from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
+from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting, settings_data
 from torchrl_subgoal.experiments.results import Chunk, ResultsError, UnknownMethodError
+from torchrl_subgoal.experiments.store import code_version
 from torchrl_subgoal.experiments.sweep import (
     ChunkFailedError,
     MethodSpec,
@@ -50,6 +56,7 @@ __all__ = [
     "pattern_config",
     "pattern_sets",
     "pattern_sources",
+    "quiet_torchrl",
     "recipe_main",
     "sweep_and_report",
     "sweep_entries",
@@ -61,6 +68,20 @@ T = TypeVar("T")
 
 #: What a recipe reports as one line on stderr instead of a traceback (see :func:`fail`).
 RECIPE_ERRORS = (ConfigError, SubgoalFileError, ResultsError, ChunkFailedError)
+
+
+def quiet_torchrl() -> None:
+    """Keep TorchRL's INFO lines (``Initialized LazyTensorStorage ...``) out of a recipe's progress bar:
+    its logger at WARNING, here and in the worker processes this one starts (``RL_LOGGING_LEVEL``,
+    which a user's own setting overrides).
+
+    Examples:
+        >>> quiet_torchrl()
+        >>> logging.getLogger("torchrl").level >= logging.WARNING or "RL_LOGGING_LEVEL" in os.environ
+        True
+    """
+    level = os.environ.setdefault("RL_LOGGING_LEVEL", "WARNING")
+    logging.getLogger("torchrl").setLevel(level)
 
 
 def fail(exc: BaseException) -> int:
@@ -315,8 +336,13 @@ def sweep_and_report(
     overwrite: bool,
     backend: Literal["local", "ray"],
     workers: int,
+    runtime: Mapping[str, Any] | None = None,
+    provenance: Mapping[str, Any] | None = None,
 ) -> int:
     """Run (or resume) the sweep, write the report, print its Markdown; the recipe's exit code.
+
+    ``runtime`` and ``provenance`` go to :class:`~torchrl_subgoal.experiments.Sweep` (how chunks run
+    without changing their results, such as the logger; what made the results).
 
     Raises:
         ConfigError: a setting the sweep cannot use, naming its flag.
@@ -353,6 +379,8 @@ def sweep_and_report(
         chunk_size=chunk_size,
         n_episodes=episodes,
         overwrite=overwrite,
+        runtime=runtime,
+        provenance=provenance,
     )
     try:
         sweep.run(backend=backend, workers=workers)
@@ -493,6 +521,8 @@ class Plan:
         episodes: the report's columns per learner (episodes, updates or epochs).
         chunk_size: learners per chunk.
         results: the results directory (default: the recipe's ``--results``).
+        runtime: settings that change how chunks run but not their results (the logger): handed to
+            ``run_chunk`` with ``config``, not part of what identifies the experiment.
 
     Examples:
         >>> Plan("four_rooms", [], print, {}, episodes=10, chunk_size=100).results is None
@@ -506,6 +536,7 @@ class Plan:
     episodes: int
     chunk_size: int
     results: str | None = None
+    runtime: Mapping[str, Any] = field(default_factory=dict)
 
 
 def config_main(
@@ -516,6 +547,7 @@ def config_main(
     description: str | None = None,
     threads: int | None = 1,
     errors: tuple[type[BaseException], ...] = RECIPE_ERRORS,
+    prog: str | None = None,
 ) -> int:
     """A script's ``main``: parse the flags into ``config_cls`` and ``run`` it; its exit code, or a
     one-line error on stderr (see :func:`fail`; a bad flag exits with code 2, as argparse does).
@@ -529,6 +561,7 @@ def config_main(
         description: the ``--help`` description (default: the settings' docstring's first line).
         threads: ``torch.set_num_threads`` first (batched small ops run fastest on one thread); ``None``: leave it.
         errors: what is reported as one line on stderr instead of a traceback.
+        prog: the command's name in its help and errors (default: the script's file name).
 
     Examples:
         >>> from dataclasses import dataclass
@@ -543,8 +576,9 @@ def config_main(
     """
     if threads is not None:
         torch.set_num_threads(threads)
+    quiet_torchrl()
     try:
-        return run(parse_config(config_cls, argv, description=description))
+        return run(parse_config(config_cls, argv, description=description, prog=prog))
     except errors as exc:
         return fail(exc)
 
@@ -557,14 +591,17 @@ def recipe_main(
     description: str | None = None,
     threads: int | None = 1,
     errors: tuple[type[BaseException], ...] = RECIPE_ERRORS,
+    prog: str | None = None,
 ) -> int:
     """A recipe's ``main``: parse the flags into ``config_cls``, make the :class:`Plan`, run (or resume)
     the sweep, write the report and print it; the exit code (see :func:`fail`, :func:`sweep_and_report`).
+    The results' ``config.json`` records the command, its settings (``--config`` reads them back) and
+    the package's version and commit.
 
     Args:
         config_cls: the recipe's settings (a :class:`RecipeConfig`).
         plan: the recipe's settings -> its sweep.
-        argv: the command line; ``description``, ``threads``, ``errors``: as in :func:`config_main`.
+        argv: the command line; ``description``, ``threads``, ``errors``, ``prog``: as in :func:`config_main`.
 
     Examples:
         >>> def plan(cfg: RecipeConfig) -> Plan:
@@ -573,8 +610,12 @@ def recipe_main(
         2
     """
 
+    args = list(sys.argv[1:] if argv is None else argv)
+    command = shlex.join([*(prog or os.path.basename(sys.argv[0])).split(), *args])
+
     def run(cfg: C) -> int:
         sweep = plan(cfg)
+        provenance = {"command": command, "settings": settings_data(cfg), **code_version()}
         return sweep_and_report(
             sweep.domain,
             sweep.results or cfg.results,
@@ -587,6 +628,8 @@ def recipe_main(
             overwrite=cfg.overwrite,
             backend=cfg.backend,
             workers=cfg.workers,
+            runtime=sweep.runtime,
+            provenance=provenance,
         )
 
-    return config_main(config_cls, run, argv, description=description, threads=threads, errors=errors)
+    return config_main(config_cls, run, args, description=description, threads=threads, errors=errors, prog=prog)

@@ -526,6 +526,11 @@ class Sweep:
             and the progress bar gets a total from the start.
         overwrite: discard results of a different experiment in ``results_dir``
             instead of raising :class:`ConfigMismatchError`.
+        runtime: JSON-serialisable settings that change how chunks run but not their results
+            (a learner recipe's ``"logger"``): ``run_chunk`` gets them with ``config``; recorded in
+            ``config.json``, but a resumed sweep may change them.
+        provenance: what made the results (a recipe's command, its settings, the code's version),
+            recorded in ``config.json`` when the sweep starts; not compared when it resumes.
 
     Re-running the same sweep resumes: finished chunks are kept, temporary files of an
     interrupted write are removed, corrupt chunks are reported
@@ -554,6 +559,8 @@ class Sweep:
         *,
         n_episodes: int | None = None,
         overwrite: bool = False,
+        runtime: Mapping[str, Any] | None = None,
+        provenance: Mapping[str, Any] | None = None,
     ) -> None:
         names = [m.name for m in methods]
         if not methods or len(set(names)) != len(names):
@@ -565,6 +572,8 @@ class Sweep:
         self.methods = list(methods)
         self.run_chunk = run_chunk
         self.config: dict[str, Any] = to_json_data(dict(config))
+        self.runtime: dict[str, Any] = to_json_data(dict(runtime or {}), "runtime")
+        self.provenance: dict[str, Any] = to_json_data(dict(provenance or {}), "provenance")
         self.seed = int(seed)
         self.chunk_size = int(chunk_size)
         self.n_episodes = n_episodes
@@ -583,6 +592,8 @@ class Sweep:
             "n_episodes": self.n_episodes,
             "chunks": [c.to_json() for c in self.chunks],
             "versions": collect_versions(),
+            **({"runtime": self.runtime} if self.runtime else {}),
+            **({"provenance": self.provenance} if self.provenance else {}),
         }
 
     def _check_directory(self) -> dict[str, Any] | None:
@@ -636,7 +647,10 @@ class Sweep:
                     stacklevel=3,
                 )
             return
-        if stored is not None and stored == requested:
+        told = ("runtime", "provenance")  # how this attempt runs, who asked: not the experiment
+        if stored is not None and {k: v for k, v in stored.items() if k not in told} == {
+            k: v for k, v in requested.items() if k not in told
+        }:
             return  # nothing finished yet, the same experiment: keep its config.json
         self.store.clear()
         self.store.write_manifest(requested)
@@ -716,13 +730,14 @@ class Sweep:
             todo = self.pending()
             if todo:
                 bar = _ProgressBar(todo, self.n_episodes, progress)
+                config = {**self.config, **self.runtime}
                 finished: Finished
                 if backend == "ray":
-                    finished = _run_ray(todo, self.run_chunk, self.config, bar, workers)
+                    finished = _run_ray(todo, self.run_chunk, config, bar, workers)
                 elif workers == 0:
-                    finished = _run_inline(todo, self.run_chunk, self.config, bar)
+                    finished = _run_inline(todo, self.run_chunk, config, bar)
                 else:
-                    finished = _run_local(todo, self.run_chunk, self.config, bar, workers)
+                    finished = _run_local(todo, self.run_chunk, config, bar, workers)
                 try:
                     for chunk, table in finished:
                         table = self._check_table(chunk, table)

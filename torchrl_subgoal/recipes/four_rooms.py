@@ -20,8 +20,8 @@ the set of learners. Results go to ``--results`` chunk by chunk (re-run the
 same command to resume), then the report prints the table beside the paper's
 and writes ``report.md``, ``summary.json`` and PNGs there.
 
-    python recipes/four_rooms.py                      # small default, about a minute
-    python recipes/four_rooms.py --learnings 100      # paper scale: 1,000 learnings per method
+    torchrl-subgoal reproduce four-rooms                      # small default, about a minute
+    torchrl-subgoal reproduce four-rooms --learnings 100      # paper scale: 1,000 learnings per method
 """
 
 from __future__ import annotations
@@ -171,8 +171,9 @@ def plan(cfg: Config) -> Plan:
     return Plan("four_rooms", specs, run_chunk, config, episodes=cfg.episodes, chunk_size=cfg.chunk_size)
 
 
-def main(argv: list[str] | None = None) -> int:
-    return recipe_main(Config, plan, argv, description=__doc__.splitlines()[0] if __doc__ else None)
+def main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    """``torchrl-subgoal reproduce four-rooms``: parse the flags, run (or resume) the sweep, print the report."""
+    return recipe_main(Config, plan, argv, description=__doc__.splitlines()[0] if __doc__ else None, prog=prog)
 
 
 if __name__ == "__main__":

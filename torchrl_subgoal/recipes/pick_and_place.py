@@ -20,8 +20,8 @@ whose final-step success gives the epoch's success rate. Every epoch is checkpoi
 mid-learning; results go through the experiment engine (one chunk per learning) and the report gives success
 curves, epochs to a success rate of 0.6 and the asymptotic success beside the paper's.
 
-    python recipes/pick_and_place.py                          # paper scale: 5 learnings x 200 epochs
-    python recipes/pick_and_place.py --preset tiny --results /tmp/pp   # plumbing check, seconds
+    torchrl-subgoal reproduce pick-and-place                      # paper scale: 5 learnings x 200 epochs
+    torchrl-subgoal reproduce pick-and-place --preset tiny --results /tmp/pp   # plumbing check, seconds
 """
 
 from __future__ import annotations
@@ -124,11 +124,11 @@ class Config(RecipeConfig):
     epochs: int = setting(0, "epochs per learning (0: the preset's; paper: 200 of 2,500 steps)")
     learnings: int = setting(5, "learnings per method (paper: 5)")
     methods: str = setting("HRS,RRS,DDPG,NRS", f"comma-separated methods among {','.join(METHODS)}")
-    envs: int = setting(0, "MuJoCo envs collecting together (0: the preset's, one episode each per cycle)")
+    num_envs: int = setting(0, "MuJoCo envs collecting together (0: the preset's, one episode each per cycle)")
     collector_workers: int = setting(
         2, "MultiSyncCollector processes the envs are spread over; 0: a Collector in this process"
     )
-    env_processes: int = setting(0, "ParallelEnv processes per collecting process (0: envs stepped in it)")
+    env_workers: int = setting(0, "ParallelEnv processes per collecting process (0: envs stepped in it)")
     subgoals: str = setting(fetch.PARTICIPANTS_FILE, "subgoal file of the human pattern (HRS, NRS)")
     value_lr: float = setting(1e-3, "Adam learning rate of the neural potential V(o; θ)")
     aggregation_lr: float = setting(0.1, "SGD learning rate of SARSA-RS's table")
@@ -158,25 +158,25 @@ class Config(RecipeConfig):
     backend: Literal["local", "ray"] = setting("local", "where learnings run")
     workers: int = setting(1, "learnings run at once (0: in this process)")
 
-    AT_LEAST_ZERO = ("epochs", "envs", "workers", "collector_workers", "env_processes")
+    AT_LEAST_ZERO = ("epochs", "num_envs", "workers", "collector_workers", "env_workers")
 
     def __post_init__(self) -> None:
         super().__post_init__()
         check(self.value_lr > 0 and self.aggregation_lr > 0, "value_lr", "learning rates must be > 0")
         cycle_steps = PRESETS[self.preset]["cycle_steps"]
-        self.envs = self.envs or cycle_steps // fetch.MAX_EPISODE_STEPS
+        self.num_envs = self.num_envs or cycle_steps // fetch.MAX_EPISODE_STEPS
         check(
-            cycle_steps % (self.envs * fetch.MAX_EPISODE_STEPS) == 0,
-            "envs",
+            cycle_steps % (self.num_envs * fetch.MAX_EPISODE_STEPS) == 0,
+            "num_envs",
             f"a cycle's {cycle_steps} steps must split into whole {fetch.MAX_EPISODE_STEPS}-step episodes "
-            f"over {self.envs} envs",
+            f"over {self.num_envs} envs",
         )
-        processes = max(self.collector_workers, 1) * max(self.env_processes, 1)
+        processes = max(self.collector_workers, 1) * max(self.env_workers, 1)
         check(
-            self.envs % processes == 0,
-            "envs",
-            f"{self.envs} envs do not split evenly over "
-            f"--collector-workers {self.collector_workers} x --env-processes {self.env_processes}",
+            self.num_envs % processes == 0,
+            "num_envs",
+            f"{self.num_envs} envs do not split evenly over "
+            f"--collector-workers {self.collector_workers} x --env-workers {self.env_workers}",
         )
         try:
             options = json.loads(self.shaping)
@@ -476,12 +476,13 @@ def plan(cfg: Config) -> Plan:
     )
     config = {
         **{k: preset[k] for k in ("cycles", "cycle_steps", "updates", "test_episodes")},
+        # stored under their former names, so that results started before the flags' renaming resume
+        "envs": cfg.num_envs,
+        "env_processes": cfg.env_workers,
         **{
             k: getattr(cfg, k)
             for k in (
-                "envs",
                 "collector_workers",
-                "env_processes",
                 "value_lr",
                 "aggregation_lr",
                 "eta",
@@ -513,14 +514,16 @@ def plan(cfg: Config) -> Plan:
     return Plan("fetch", specs, run_chunk, config, episodes=epochs, chunk_size=1)
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    """``torchrl-subgoal reproduce pick-and-place``: parse the flags, run (or resume) the sweep, print the report."""
     return recipe_main(
         Config,
         plan,
         argv,
         description=__doc__.splitlines()[0] if __doc__ else None,
-        errors=(*RECIPE_ERRORS, ValueError, ImportError),
-    )  # ImportError: the fetch extra missing
+        errors=(*RECIPE_ERRORS, ValueError, ImportError),  # ImportError: the fetch extra missing
+        prog=prog,
+    )
 
 
 if __name__ == "__main__":

@@ -19,8 +19,8 @@ Results go to ``--results`` chunk by chunk (re-run to resume); the report
 gives times to reach a 10-episode moving average of 3000/2000/1000/500 steps
 beside the paper's table.
 
-    python recipes/pinball.py                   # the paper's scale: 100 learnings per method
-    python recipes/pinball.py --learnings 2     # a quick look
+    torchrl-subgoal reproduce pinball                   # the paper's scale: 100 learnings per method
+    torchrl-subgoal reproduce pinball --learnings 2     # a quick look
 """
 
 from __future__ import annotations
@@ -192,8 +192,9 @@ def plan(cfg: Config) -> Plan:
     return Plan("pinball", specs, run_chunk, config, episodes=cfg.episodes, chunk_size=cfg.chunk_size)
 
 
-def main(argv: list[str] | None = None) -> int:
-    return recipe_main(Config, plan, argv, description=__doc__.splitlines()[0] if __doc__ else None)
+def main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    """``torchrl-subgoal reproduce pinball``: parse the flags, run (or resume) the sweep, print the report."""
+    return recipe_main(Config, plan, argv, description=__doc__.splitlines()[0] if __doc__ else None, prog=prog)
 
 
 if __name__ == "__main__":
