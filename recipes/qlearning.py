@@ -166,13 +166,13 @@ def plan(cfg: Config) -> Plan:
             k: settings[k]
             for k in (
                 "reward",
-            "episodes",
-            "lr",
-            "epsilon",
-            "gamma",
-            "value_lr",
-            "eta",
-            "agent_state",
+                "episodes",
+                "lr",
+                "epsilon",
+                "gamma",
+                "value_lr",
+                "eta",
+                "agent_state",
                 "zero_terminal_potential",
                 "start_potential",
             )

@@ -199,7 +199,9 @@ def test_kill_and_resume_equals_an_uninterrupted_learning(
 def test_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pick_and_place = recipe("pick_and_place")
     assert pick_and_place.main(["--num-envs", "4", "--results", str(tmp_path)]) == 2
-    assert "--num-envs: a cycle's 300 steps must split into whole 50-step episodes over 4 envs" in capsys.readouterr().err
+    assert (
+        "--num-envs: a cycle's 300 steps must split into whole 50-step episodes over 4 envs" in capsys.readouterr().err
+    )
     assert pick_and_place.main(["--shaping", "{bad", "--results", str(tmp_path)]) == 2
     assert "--shaping: not valid JSON" in capsys.readouterr().err
     assert pick_and_place.main(["--num-envs", "6", "--collector-workers", "4", "--results", str(tmp_path)]) == 2

@@ -27,4 +27,3 @@ from importlib.util import find_spec
 
 #: Whether numba is installed, so that the compiled kernels can be imported.
 NUMBA = find_spec("numba") is not None
-

@@ -17,8 +17,10 @@ import argparse
 import ast
 import contextlib
 import dataclasses
+import functools
 import inspect
 import io
+import itertools
 import json
 import math
 import os
@@ -141,15 +143,15 @@ def _number(kind: type, metavar: str) -> Any:
 def _annotated(kind: Any, help: str, name: str, choices: Sequence[Any] | None, shown_default: str | None) -> Any:
     """``kind`` annotated for ``tyro``: the help text, the metavar (none where the choices are listed)."""
     marks: list[Any] = []
-    hint = {"help_behavior_hint": f"(default: {shown_default})"} if shown_default is not None else {}
+    hint = f"(default: {shown_default})" if shown_default is not None else None
     if choices is not None:
         kind = Literal.__getitem__(tuple(choices))
-        marks.append(tyro.conf.arg(help=help, **hint))
+        marks.append(tyro.conf.arg(help=help, help_behavior_hint=hint))
     elif kind in (int, float):
         metavar = kind.__name__.upper()
-        marks += [_number(kind, metavar), tyro.conf.arg(help=help, metavar=metavar, **hint)]
+        marks += [_number(kind, metavar), tyro.conf.arg(help=help, metavar=metavar, help_behavior_hint=hint)]
     else:
-        marks.append(tyro.conf.arg(help=help, **hint))
+        marks.append(tyro.conf.arg(help=help, help_behavior_hint=hint))
     return Annotated[(kind, *marks)]
 
 
@@ -168,7 +170,7 @@ def field_docs(cls: type) -> dict[str, str]:
         except (OSError, TypeError, SyntaxError):
             continue
         body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
-        for first, second in zip(body, body[1:], strict=False):
+        for first, second in itertools.pairwise(body):
             if (
                 isinstance(first, ast.AnnAssign)
                 and isinstance(first.target, ast.Name)
@@ -401,8 +403,8 @@ def parse_config(
             values = stored.get(f.name) or {}
             known = {g.name for g in dataclasses.fields(flags_cls)}
             default = dataclasses.replace(default, **{k: _tuples(v) for k, v in values.items() if k in known})
-            kind = Annotated[flags_cls, tyro.conf.OmitArgPrefixes, tyro.conf.arg(name=group)]
-            columns.append((f.name, kind, dataclasses.field(default_factory=lambda default=default: default)))
+            group_kind: Any = Annotated[(flags_cls, tyro.conf.OmitArgPrefixes, tyro.conf.arg(name=group))]
+            columns.append((f.name, group_kind, dataclasses.field(default_factory=functools.partial(_same, default))))
             defaults[f.name] = default
             continue
         if f.metadata.get("nested"):
@@ -421,6 +423,10 @@ def parse_config(
         elif isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(f"{flag_of(name)}: must be a finite number, got {value}")
     return cls(**values)
+
+
+def _same(value: Any) -> Any:
+    return value
 
 
 def _tuples(value: Any) -> Any:

@@ -61,6 +61,7 @@ from torchrl_subgoal.training import (
 __all__ = [
     "LOGGERS",
     "LearnerRecipeConfig",
+    "check_learner",
     "check_seed_batch",
     "default_learner",
     "frozen_tables",
@@ -183,6 +184,11 @@ class LearnerRecipeConfig(RecipeConfig):
     AT_LEAST_ONE: ClassVar[tuple[str, ...]] = ("learnings", "random_patterns", "seed_batch")
     AT_LEAST_ZERO: ClassVar[tuple[str, ...]] = ("workers",)
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.learner is not None:
+            check_learner(self.learner)
+
     @classmethod
     def nested_settings(cls, early: Mapping[str, Any]) -> dict[str, tuple[str, Any]]:
         """The learner's settings, as the defaults of its flags: the domain's, with :attr:`LEARNER_DEFAULTS`."""
@@ -207,6 +213,35 @@ class LearnerRecipeConfig(RecipeConfig):
             ]
             if owners and not names & own:
                 raise ConfigError(f"{flag}: a setting of {' and '.join(owners)}, not of {algo}")
+
+
+#: the learner settings every recipe checks, whatever the learner: (fields, the least value, strictly above it)
+_LEARNER_BOUNDS = (
+    (("num_envs", "frames_per_batch", "total_frames"), 1, False),
+    (("env_workers", "collector_workers"), 0, False),
+    (("lr", "value_lr", "reward_scale"), 0, True),
+)
+
+
+def check_learner(settings: Any) -> None:
+    """The learner settings a recipe refuses before anything runs, whatever the learner checks itself:
+    counts below 1 (workers below 0), and learning rates or a reward scale that are not positive.
+
+    Raises:
+        ConfigError: naming the flag.
+
+    Examples:
+        >>> from torchrl_subgoal.training import A2CConfig
+        >>> check_learner(A2CConfig(value_lr=0.0))
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --value-lr: must be > 0, got 0.0
+    """
+    for names, low, strict in _LEARNER_BOUNDS:
+        for name in names:
+            value = getattr(settings, name, None)
+            if value is not None and not (value > low if strict else value >= low):
+                raise ConfigError(f"{flag_of(name)}: must be {'>' if strict else '>='} {low}, got {value}")
 
 
 def learner_methods(algo: str) -> dict[str, Method]:
@@ -236,8 +271,11 @@ def learner_settings(cfg: LearnerRecipeConfig, algo: str, domain: LearnerDomain)
         torchrl_subgoal.experiments.cli.ConfigError: --algo: the learner settings are PPOConfig's, not dqn's (DQNConfig)
     """
     learner = LEARNERS[algo]
-    settings = cfg.learner if cfg.learner is not None else default_learner(algo, domain, type(cfg).LEARNER_DEFAULTS)
-    if not isinstance(settings, learner.config):
+    settings: Any = (
+        cfg.learner if cfg.learner is not None else default_learner(algo, domain, type(cfg).LEARNER_DEFAULTS)
+    )
+    fits = isinstance(settings, learner.config)
+    if not fits:
         raise ConfigError(
             f"--algo: the learner settings are {type(settings).__name__}'s, not {algo}'s ({learner.config.__name__})"
         )

@@ -511,7 +511,9 @@ def write_report(
     _check_output_dir(out)
     summary = summarize(results, spec, n_boot=n_boot, seed=seed)
     paper = paper_results(results.domain)
-    notes, figures, files = [], {}, []
+    notes: list[str] = []
+    figures: dict[str, str] = {}
+    files: list[Path] = []
     log_scale = spec.log_scale if spec.log_scale is not None else spec.metric == "steps"
     strata = {name: res.patterns for name, res in results.methods.items()}
     curves = plot_learning_curves(

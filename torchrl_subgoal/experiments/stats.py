@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy import stats as sps
 from rliable import library, metrics
+from scipy import stats as sps
 from statsmodels.stats.multitest import multipletests
 
 FloatArray = npt.NDArray[np.float64]

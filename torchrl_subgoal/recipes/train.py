@@ -55,7 +55,9 @@ def plan(cfg: Config) -> Plan:
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     """``torchrl-subgoal train``: parse the flags, run (or resume) the sweep, print the report; the exit code."""
-    return recipe_main(Config, plan, argv, description=__doc__.splitlines()[0] if __doc__ else None, threads=None, prog=prog)
+    return recipe_main(
+        Config, plan, argv, description=__doc__.splitlines()[0] if __doc__ else None, threads=None, prog=prog
+    )
 
 
 if __name__ == "__main__":

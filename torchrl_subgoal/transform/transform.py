@@ -206,7 +206,9 @@ class SubgoalPotentialTransform(Transform):
                 self._layout = layout
         abstraction = self.subgoals.compile(learner, batch_shape, n_learners, layout, self.observation_key)
         lengths = setup.monotone_lengths(self.potential, self.subgoals, learner, n_learners)
-        batch = BatchSetup(batch_shape, abstraction, learner, compiled_search=self.backend != "torch" and NUMBA, lengths=lengths)
+        batch = BatchSetup(
+            batch_shape, abstraction, learner, compiled_search=self.backend != "torch" and NUMBA, lengths=lengths
+        )
         if setup.compiles(self.backend, self.potential, self.value_update):
             batch.use_kernels(self.potential, self._settings, self.value_update, online)
         return batch
