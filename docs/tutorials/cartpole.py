@@ -71,10 +71,12 @@ def settings(frames: int) -> PPOConfig:
     return PPOConfig(num_envs=8, frames_per_batch=1024, minibatch_size=256, epochs=4, total_frames=frames)
 
 
-def train(shaped: bool, frames: int, seed: int) -> LearningCurve:
-    """One PPO learner, shaped by the subgoals' learned potential Φ(z) or not."""
-    shaping = Shaping(series, TabularPotential(series.num_abstract_states)) if shaped else None
-    return train_ppo(make_env, settings(frames), shaping=shaping, seed=seed, episode_cap=500.0)
+def train(shaped: bool, frames: int, seed: int) -> tuple[LearningCurve, list[float]]:
+    """One PPO learner, shaped by the subgoals' learned potential Φ(z) or not: its curve, and Φ(z) at the end."""
+    potential = TabularPotential(series.num_abstract_states)  # Φ(z), learned online as the learner collects
+    shaping = Shaping(series, potential) if shaped else None
+    curve = train_ppo(make_env, settings(frames), shaping=shaping, seed=seed, episode_cap=500.0)
+    return curve, potential.table.flatten().tolist() if shaped else []
 
 
 # --8<-- [end:train]
@@ -82,8 +84,8 @@ def train(shaped: bool, frames: int, seed: int) -> LearningCurve:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--frames", type=int, default=50_000, help="frames per learner")
-    parser.add_argument("--seeds", type=int, default=4, help="learners per arm")
+    parser.add_argument("--frames", type=int, default=100_000, help="frames per learner")
+    parser.add_argument("--seeds", type=int, default=3, help="learners per arm")
     parser.add_argument("--tiny", action="store_true", help="a budget of seconds (CI)")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "output")
     args = parser.parse_args()
@@ -93,9 +95,10 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
 
     # --8<-- [start:compare]
-    curves = {
+    results = {
         arm: [train(arm == "shaped", args.frames, seed) for seed in range(args.seeds)] for arm in ("unshaped", "shaped")
     }
+    curves = {arm: [curve for curve, _ in runs] for arm, runs in results.items()}
     lines = [
         f"CartPole-v1, PPO: {args.frames} frames x {args.seeds} learners per arm",
         "arm        mean episode length at the end (per learner)     mean over learners",
@@ -110,6 +113,10 @@ def main() -> None:
             ax.plot(frames, one, color=line.get_color(), alpha=0.25, linewidth=0.8)
         final = lengths[:, -1]
         lines.append(f"{arm:10s} {', '.join(f'{v:.0f}' for v in final):48s} {final.mean():.0f}")
+    table = np.mean([v for _, v in results["shaped"]], 0)
+    names = ["start", *(series.names or ())]
+    values = ", ".join(f"V({n})={v:.1f}" for n, v in zip(names, table, strict=True))
+    lines.append(f"learned values of the shaped learners (mean): {values}")
     ax.set(xlabel="frames", ylabel="mean episode length (= return)", title="CartPole-v1, PPO")
     ax.legend(loc="upper left")
     fig.tight_layout()
