@@ -24,10 +24,8 @@ def test_roles_resolve_in_the_scope_of_their_docstring() -> None:
     assert '<autoref identifier="torchrl_subgoal.load_patterns" optional><code>load_patterns</code>' in text
     assert text.endswith("<code>nowhere</code>")  # unknown: its name in code font, no link
     titled = roles.rewrite(package["experiments"], ":attr:`the chunk's seed <torchrl_subgoal.experiments.Chunk.seed>`")
-    assert (
-        titled
-        == '<autoref identifier="torchrl_subgoal.experiments.Chunk.seed" optional><code>the chunk\'s seed</code></autoref>'
-    )
+    target = "torchrl_subgoal.experiments.Chunk.seed"
+    assert titled == f'<autoref identifier="{target}" optional><code>the chunk\'s seed</code></autoref>'
 
 
 def test_the_extension_rewrites_every_docstring_of_the_package() -> None:
