@@ -15,6 +15,7 @@ them to an ``.npz`` file. Two checkouts agree bit for bit when their files do::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import sys
 import tempfile
@@ -91,9 +92,16 @@ def fingerprint(engine: str) -> dict[str, np.ndarray]:
             return records
 
         recipe.run_episodes = capture
+        plan = recipe.plan
+
+        def no_warm_up(cfg: Any, _plan: Any = plan) -> Any:  # the fingerprint is of the sweep's chunks only
+            made = _plan(cfg)
+            return dataclasses.replace(made, warm_up=None) if hasattr(made, "warm_up") else made
+
+        recipe.plan = no_warm_up
         with tempfile.TemporaryDirectory() as results:
             code = recipe.main([*args, "--workers", "0", "--engine", engine, "--results", results])
-        recipe.run_episodes = run
+        recipe.run_episodes, recipe.plan = run, plan
         if code:
             raise SystemExit(f"{domain} recipe failed ({code})")
     return found

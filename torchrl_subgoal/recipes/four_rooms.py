@@ -53,6 +53,7 @@ from torchrl_subgoal.experiments.recipe import (
     pattern_sets,
     recipe_main,
     sweep_entries,
+    warm_up_chunks,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 from torchrl_subgoal.subgoals import Cell
@@ -74,7 +75,9 @@ class Config(ReproductionConfig):
     episodes: int = setting(1000, "episodes per learning (paper: 1000)")
     learnings: int = setting(10, "learnings per subgoal pattern (paper: 100)")
     methods: str = setting(",".join(METHODS), "comma-separated methods to run")
-    subgoals: str = setting(PARTICIPANTS, "subgoal file of the human patterns (HRS, NRS)")
+    subgoals: str = setting(
+        PARTICIPANTS, "subgoal file of the human patterns (HRS, NRS)", shown_default="the paper's ten participants'"
+    )
     eta: float = setting(1.0, "NRS potential η (paper: 1)")
     agent_state: str = setting(
         "s",
@@ -168,7 +171,15 @@ def plan(cfg: Config) -> Plan:
             "asymptotic_window": [max(0, cfg.episodes - 10), cfg.episodes],
         },
     }
-    return Plan("four_rooms", specs, run_chunk, config, episodes=cfg.episodes, chunk_size=cfg.chunk_size)
+    return Plan(
+        "four_rooms",
+        specs,
+        run_chunk,
+        config,
+        episodes=cfg.episodes,
+        chunk_size=cfg.chunk_size,
+        warm_up=warm_up_chunks(run_chunk, specs, config),
+    )
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:

@@ -129,7 +129,9 @@ class Config(RecipeConfig):
         2, "MultiSyncCollector processes the envs are spread over; 0: a Collector in this process"
     )
     env_workers: int = setting(0, "ParallelEnv processes per collecting process (0: envs stepped in it)")
-    subgoals: str = setting(fetch.PARTICIPANTS_FILE, "subgoal file of the human pattern (HRS, NRS)")
+    subgoals: str = setting(
+        fetch.PARTICIPANTS_FILE, "subgoal file of the human pattern (HRS, NRS)", shown_default="the paper's"
+    )
     value_lr: float = setting(1e-3, "Adam learning rate of the neural potential V(o; θ)")
     aggregation_lr: float = setting(0.1, "SGD learning rate of SARSA-RS's table")
     eta: float = setting(0.1, "NRS potential η (the authors' released value)")

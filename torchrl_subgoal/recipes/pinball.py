@@ -52,6 +52,7 @@ from torchrl_subgoal.experiments.recipe import (
     pattern_sets,
     recipe_main,
     sweep_entries,
+    warm_up_chunks,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 
@@ -74,7 +75,9 @@ class Config(ReproductionConfig):
     episodes: int = setting(200, "episodes per learning (paper: 200)")
     learnings: int = setting(10, "learnings per subgoal pattern (paper: 10)")
     methods: str = setting(",".join(METHODS), "comma-separated methods to run")
-    subgoals: str = setting(PARTICIPANTS, "subgoal file of the human patterns (HRS, NRS)")
+    subgoals: str = setting(
+        PARTICIPANTS, "subgoal file of the human patterns (HRS, NRS)", shown_default="the paper's ten participants'"
+    )
     eta: float = setting(10_000.0, "NRS potential η (paper: 10,000)")
     step_penalty: float = setting(0.0, "reward of a step without thrust (classic PinBall: -1; the paper: 0)")
     thrust_penalty: float = setting(0.0, "reward of a thrust (classic PinBall: -5; the paper: 0)")
@@ -189,7 +192,15 @@ def plan(cfg: Config) -> Plan:
             "map": {"config": cfg.map},
         },
     }
-    return Plan("pinball", specs, run_chunk, config, episodes=cfg.episodes, chunk_size=cfg.chunk_size)
+    return Plan(
+        "pinball",
+        specs,
+        run_chunk,
+        config,
+        episodes=cfg.episodes,
+        chunk_size=cfg.chunk_size,
+        warm_up=warm_up_chunks(run_chunk, specs, config),
+    )
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
