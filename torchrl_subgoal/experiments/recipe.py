@@ -392,6 +392,7 @@ def sweep_and_report(
             file=sys.stderr,
         )
         return 130
+    print("writing the report: statistics (rliable's bootstrap intervals), figures ...", file=sys.stderr, flush=True)
     report = write_report(results)
     print(report.markdown)
     print(f"results, report.md, summary.json and plots in {results}", file=sys.stderr)
@@ -548,8 +549,8 @@ def warm_up_chunks(
 ) -> Callable[[], object]:
     """What compiles a fused-engine recipe's numba kernels once, in the process that starts the sweep: one
     learner of each method for one episode, whose records are dropped. numba caches what it compiles on disk,
-    so the sweep's worker processes load it instead of each compiling it at 0% of the progress bar (about a
-    minute on a first run after an install; a second or two afterwards).
+    so the sweep's worker processes load it instead of each compiling it at 0% of the progress bar (some 20 s
+    of CPU on a first run after an install; a fraction of a second afterwards).
 
     Examples:
         >>> calls = []
@@ -646,8 +647,8 @@ def recipe_main(
         if sweep.warm_up is not None:
             start = time.perf_counter()
             print(
-                "compiling the engine's numba kernels (about a minute on a first run after an install; "
-                "then loaded from numba's cache) ...",
+                "compiling the engine's numba kernels (some 20 s on a first run after an install; "
+                "later runs load them from numba's cache) ...",
                 file=sys.stderr,
                 flush=True,
             )

@@ -274,6 +274,21 @@ def iqm(scores: ArrayLike) -> float:
     return float(metrics.aggregate_iqm(x))
 
 
+def _iqm_of_replicate(matrix: FloatArray) -> FloatArray:
+    """rliable's ``aggregate_iqm`` (scipy's ``trim_mean`` at 25%, over every entry) as one sort and a mean:
+    the same trimmed set, so the same number (to the last bits of the sum), for the bootstrap's thousands
+    of replicates, where ``trim_mean``'s own overhead would dominate.
+
+    Examples:
+        >>> m = np.random.default_rng(0).normal(size=(9, 3))
+        >>> bool(np.isclose(_iqm_of_replicate(m)[0], metrics.aggregate_iqm(m)))
+        True
+    """
+    x = np.sort(matrix, axis=None)
+    cut = int(0.25 * x.size)
+    return np.array([x[cut : x.size - cut].mean()])
+
+
 @contextmanager
 def _seeded(seed: int) -> Iterator[None]:
     """numpy's global random state seeded for the block, then restored: rliable's stratified bootstrap draws
@@ -345,7 +360,7 @@ def stratified_bootstrap_ci(
         return float("nan"), float("nan")
     interval = bootstrap_ci(
         runs_by_task(x, strata),
-        lambda m: np.array([metrics.aggregate_iqm(m)]),
+        _iqm_of_replicate,
         n_boot=n_boot,
         confidence=confidence,
         seed=seed,
