@@ -124,7 +124,8 @@ def plot_learning_curves(
     n_boot: int = 500,
     seed: int = 0,
 ) -> FigureFile:
-    """The mean across learners with its 95% stratified-bootstrap band, one line per method (PNG, PDF, SVG).
+    """The mean across learners with its 95% stratified-bootstrap band (at up to 100 points), one line per method
+    (PNG, PDF, SVG).
 
     Args:
         curves: method -> ``[n_learners, n_columns]``.
@@ -150,10 +151,11 @@ def plot_learning_curves(
     for k, (name, values) in enumerate(curves.items()):
         smoothed = moving_average(values, window)
         band_seed = int(np.random.SeedSequence([seed, k]).generate_state(1)[0])
-        columns, mean, band = curve_band(smoothed, (strata or {}).get(name), n_boot=n_boot, seed=band_seed)
-        x = (columns + window) * (frames_per_unit or 1)
-        (line,) = ax.plot(x, mean, label=f"{name} (n={smoothed.shape[0]})", linewidth=1.2)
-        ax.fill_between(x, band[0], band[1], color=line.get_color(), alpha=0.25, linewidth=0)
+        columns, _, band = curve_band(smoothed, (strata or {}).get(name), n_boot=n_boot, seed=band_seed)
+        scale = frames_per_unit or 1
+        x = (np.arange(smoothed.shape[1]) + window) * scale
+        (line,) = ax.plot(x, smoothed.mean(axis=0), label=f"{name} (n={smoothed.shape[0]})", linewidth=1.2)
+        ax.fill_between((columns + window) * scale, band[0], band[1], color=line.get_color(), alpha=0.25, linewidth=0)
     for threshold in thresholds:
         ax.axhline(threshold, color="grey", linestyle="--", linewidth=0.7)
     if log_scale:

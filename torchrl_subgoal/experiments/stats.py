@@ -425,7 +425,7 @@ def curve_band(
     curves: ArrayLike,
     strata: ArrayLike | None = None,
     *,
-    points: int = 200,
+    points: int = 100,
     n_boot: int = 500,
     confidence: float = 0.95,
     seed: int = 0,
