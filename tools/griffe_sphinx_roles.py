@@ -77,4 +77,4 @@ class SphinxRoles(griffe.Extension):
         for obj in _objects(pkg):
             if obj.docstring is not None:
                 scope = obj if obj.is_module or obj.is_class else (obj.parent or obj)
-                obj.docstring.value = rewrite(scope, obj.docstring.value)  # type: ignore[arg-type]
+                obj.docstring.value = rewrite(scope, obj.docstring.value)

@@ -20,7 +20,7 @@ the set of learners. Results go to ``--results`` chunk by chunk (re-run the
 same command to resume), then the report prints the table beside the paper's
 and writes ``report.md``, ``summary.json`` and PNGs there.
 
-    torchrl-subgoal reproduce four-rooms                      # small default, about a minute
+    torchrl-subgoal reproduce four-rooms                      # small default, under a minute of CPU
     torchrl-subgoal reproduce four-rooms --learnings 100      # paper scale: 1,000 learnings per method
 """
 
