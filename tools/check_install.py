@@ -135,7 +135,7 @@ def build_wheel(out: Path) -> Path:
                 (Path(copy) / name).parent.mkdir(parents=True, exist_ok=True)
                 shutil.copy2(source, Path(copy) / name)
         run(
-            [sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--no-build-isolation", copy, "-w", str(out)]
+            [sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", copy, "-w", str(out)]  # as a user builds it
         )
     (wheel,) = out.glob("torchrl_subgoal-*.whl")
     return wheel

@@ -305,6 +305,17 @@ def load_settings(path: str | os.PathLike[str], cls: type) -> dict[str, Any]:
 
     Raises:
         ConfigError: naming ``--config``, the file and what is wrong with it.
+
+    Examples:
+        >>> import tempfile
+        >>> from dataclasses import dataclass
+        >>> @dataclass
+        ... class Config:
+        ...     episodes: int = setting(1000, "episodes per learning")
+        >>> folder = Path(tempfile.mkdtemp())
+        >>> _ = (folder / "config.json").write_text('{"provenance": {"settings": {"episodes": 20}}}')
+        >>> load_settings(folder, Config)
+        {'episodes': 20}
     """
     file = Path(path)
     file = file / "config.json" if file.is_dir() else file

@@ -18,7 +18,6 @@ import logging
 import os
 import shlex
 import sys
-import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal, TypeVar
@@ -326,25 +325,18 @@ def chunk_patterns(chunk: Chunk, config: Mapping[str, Any]) -> tuple[list[Subgoa
 
 
 def sweep_and_report(
-    domain: str,
+    plan: Plan,
     results: str,
-    specs: Sequence[MethodSpec],
-    run_chunk: RunChunk,
-    config: Mapping[str, Any],
     *,
     seed: int,
-    chunk_size: int,
-    episodes: int,
     overwrite: bool,
     backend: Literal["local", "ray"],
     workers: int,
-    runtime: Mapping[str, Any] | None = None,
     provenance: Mapping[str, Any] | None = None,
 ) -> int:
-    """Run (or resume) the sweep, write the report, print its Markdown; the recipe's exit code.
-
-    ``runtime`` and ``provenance`` go to :class:`~torchrl_subgoal.experiments.Sweep` (how chunks run
-    without changing their results, such as the logger; what made the results).
+    """Run (or resume) the sweep of ``plan`` into ``results``, write the report, print its Markdown; the
+    recipe's exit code. ``provenance`` (what made the results) goes to ``config.json``, as the plan's
+    ``runtime`` does (see :class:`~torchrl_subgoal.experiments.Sweep`).
 
     Raises:
         ConfigError: a setting the sweep cannot use, naming its flag.
@@ -353,8 +345,8 @@ def sweep_and_report(
         ChunkFailedError: a chunk failed; the message says what was saved and what to do.
 
     Examples:
-        >>> sweep_and_report("four_rooms", "results/demo", [], print, {}, seed=-1, chunk_size=1, episodes=1,
-        ...                  overwrite=False, backend="local", workers=0)  # settings are checked before anything runs
+        >>> plan = Plan("four_rooms", [], print, {}, episodes=1, chunk_size=1)
+        >>> sweep_and_report(plan, "results/demo", seed=-1, overwrite=False, backend="local", workers=0)
         Traceback (most recent call last):
         ...
         torchrl_subgoal.experiments.cli.ConfigError: --seed: must be >= 0, got -1
@@ -363,8 +355,8 @@ def sweep_and_report(
 
     for flag, value, low in (
         ("seed", seed, 0),
-        ("chunk_size", chunk_size, 1),
-        ("episodes", episodes, 1),
+        ("chunk_size", plan.chunk_size, 1),
+        ("episodes", plan.episodes, 1),
         ("workers", workers, 0),
     ):
         if value < low:
@@ -372,17 +364,18 @@ def sweep_and_report(
     if not results.strip():
         raise ConfigError("--results: give a directory")
     sweep = Sweep(
-        domain,
+        plan.domain,
         results,
-        specs,
-        run_chunk,
-        config,
+        plan.specs,
+        plan.run_chunk,
+        plan.config,
         seed=seed,
-        chunk_size=chunk_size,
-        n_episodes=episodes,
+        chunk_size=plan.chunk_size,
+        n_episodes=plan.episodes,
         overwrite=overwrite,
-        runtime=runtime,
+        runtime=plan.runtime,
         provenance=provenance,
+        warm_up=plan.warm_up,
     )
     try:
         sweep.run(backend=backend, workers=workers)
@@ -526,7 +519,7 @@ class Plan:
         results: the results directory (default: the recipe's ``--results``).
         runtime: settings that change how chunks run but not their results (the logger): handed to
             ``run_chunk`` with ``config``, not part of what identifies the experiment.
-        warm_up: run before the sweep, saying so (what compiles numba kernels: see :func:`warm_up_chunks`).
+        warm_up: run before the sweep's chunks, saying so (what compiles numba kernels: :func:`warm_up_chunks`).
 
     Examples:
         >>> Plan("four_rooms", [], print, {}, episodes=10, chunk_size=100).results is None
@@ -644,30 +637,14 @@ def recipe_main(
 
     def run(cfg: C) -> int:
         sweep = plan(cfg)
-        if sweep.warm_up is not None:
-            start = time.perf_counter()
-            print(
-                "compiling the engine's numba kernels (some 20 s on a first run after an install; "
-                "later runs load them from numba's cache) ...",
-                file=sys.stderr,
-                flush=True,
-            )
-            sweep.warm_up()
-            print(f"engine ready in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
         provenance = {"command": command, "settings": settings_data(cfg), **code_version()}
         return sweep_and_report(
-            sweep.domain,
+            sweep,
             sweep.results or cfg.results,
-            sweep.specs,
-            sweep.run_chunk,
-            sweep.config,
             seed=cfg.seed,
-            chunk_size=sweep.chunk_size,
-            episodes=sweep.episodes,
             overwrite=cfg.overwrite,
             backend=cfg.backend,
             workers=cfg.workers,
-            runtime=sweep.runtime,
             provenance=provenance,
         )
 
