@@ -1,7 +1,7 @@
 # Two entry points for a fresh machine; each installs what it needs.
 #   make demo   small four-rooms reproduction: prints a table, writes plots
 #   make test   lint, type-check, the docs site, the install check and the test suite (what CI runs)
-#   make install-check   the built wheel in fresh venvs outside the repository (core alone; with extras)
+#   make install-check   the built wheel in venvs outside the repository (core alone; with extras)
 #   make test-fast   the suite without the tests marked slow
 #   make docs   the documentation site (strict: any warning fails) into site/
 #   make bench-docs   run the benchmarks at a quick scale and regenerate docs/benchmarks.md
