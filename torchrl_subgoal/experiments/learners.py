@@ -264,7 +264,7 @@ def learner_settings(cfg: LearnerRecipeConfig, algo: str, domain: LearnerDomain)
     Examples:
         >>> four_rooms = learner_domain("four_rooms")
         >>> learner_settings(LearnerRecipeConfig(), "dqn", four_rooms).total_frames
-        65536
+        100000
         >>> learner_settings(LearnerRecipeConfig(learner=default_learner("ppo", four_rooms)), "dqn", four_rooms)
         Traceback (most recent call last):
         ...
@@ -472,7 +472,8 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
 
     Examples:
         >>> import tempfile
-        >>> cfg = LearnerRecipeConfig(domain="four_rooms", methods="A2C", total_frames=512, results=tempfile.mkdtemp())
+        >>> a2c = default_learner("a2c", learner_domain("four_rooms"), {"total_frames": 512})
+        >>> cfg = LearnerRecipeConfig(domain="four_rooms", methods="A2C", learner=a2c, results=tempfile.mkdtemp())
         >>> plan = learner_plan(cfg, "a2c")
         >>> table = run_learner_chunk(Chunk("A2C", 0, (("none", 0),), seed=1), plan.config, lambda done: None)
         >>> table.n_learners, table.n_episodes  # one learner, one column per batch of 256 frames
