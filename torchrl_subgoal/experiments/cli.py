@@ -47,6 +47,12 @@ __all__ = [
 
 T = TypeVar("T")
 
+#: What ``--help`` says of ``--config`` (which every command built by :func:`parse_config` takes).
+CONFIG_HELP = (
+    "\n--config FILE starts from the settings a run recorded (its config.json, or its results directory); "
+    "flags given with it override them."
+)
+
 #: Flags that were renamed: the old name still works and says so on stderr.
 RENAMED = {"--envs": "--num-envs", "--env-processes": "--env-workers", "--task": "--domain"}
 
@@ -425,7 +431,7 @@ def parse_config(
         columns.append((f.name, kind, dataclasses.field(default=f.default)))
         defaults[f.name] = _tuples(stored.get(f.name, f.default))
     flags = dataclasses.make_dataclass(cls.__name__, columns)
-    about = description or (cls.__doc__ or "").strip().splitlines()[0]
+    about = (description or (cls.__doc__ or "").strip().splitlines()[0]) + CONFIG_HELP
     parsed = _run_tyro(flags, flags(**defaults), args, prog, about)
     values = {name: getattr(parsed, name) for name, _, _ in columns}
     for name, value in values.items():
