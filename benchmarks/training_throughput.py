@@ -11,10 +11,12 @@ trained online in the transform (the learners' default). DQN and DDPG take their
 gradient steps after the first batch (``learning_starts`` = one batch), so
 that every measured batch includes the learner's updates.
 
-Measured: frames per second of CPU time of this process (``time.process_time``)
+Measured: learner frames per second of CPU time of this process (``time.process_time``)
 over a learning's batches after the first: collection through the transforms,
 the learner's update and the potential's, everything a training loop does per
-frame, on one core. The cells run in turn, ``--repeats`` rounds (the machine
+frame, on one core. ``--learners K`` runs each cell as ``K`` learners in one batch
+(``train_<algo>(..., seeds=range(K))``, each with its own table): the rate counts
+every learner's frames. The cells run in turn, ``--repeats`` rounds (the machine
 may be shared: a round runs every cell under the same load); a cell's rate is
 its best round, and "HRS / plain" is the median over rounds of the paired
 ratios (each round's HRS rate over the same round's plain rate). Shaping
@@ -32,12 +34,14 @@ ratios of the rates.
     python benchmarks/training_throughput.py --quick       # 1 round of 3 batches
     python benchmarks/training_throughput.py --blocks ppo,ddpg --repeats 5
     python benchmarks/training_throughput.py --blocks ddpg --repeats 5 --against /tmp/before
+    python benchmarks/training_throughput.py --learners 10   # every cell as a batch of 10 learners
 """
 
 from __future__ import annotations
 
 import argparse
 import functools
+import inspect
 import json
 import os
 import statistics
@@ -122,8 +126,9 @@ CELLS = [
 ]
 
 
-def run_cell(block: str, domain: Domain, shaped: bool, batches: int) -> tuple[float, int]:
-    """One short learning; (frames per CPU second over the batches after the first, frames per batch)."""
+def run_cell(block: str, domain: Domain, shaped: bool, batches: int, learners: int = 1) -> tuple[float, int]:
+    """One short learning of ``learners`` learners; (learner frames per CPU second over the batches after the
+    first, frames per batch)."""
     config: Any
     scale = domain.reward_scale
     if block == "a2c":
@@ -153,16 +158,19 @@ def run_cell(block: str, domain: Domain, shaped: bool, batches: int) -> tuple[fl
             domain.series, TabularPotential(domain.series.num_abstract_states), {"observation_key": domain.subgoal_key}
         )
     stamps: list[float] = []
+    # a checkout from before the blocks were batched (``--against``) takes one seed
+    seeds: dict[str, Any] = {"seed": 0} if "seed" in inspect.signature(train).parameters else {"seeds": range(learners)}
     train(
         domain.make_env,
         config,
         shaping=shaping,
         observation_key=domain.observation_key,
-        seed=0,
         episode_cap=domain.episode_cap,
         progress=lambda _: stamps.append(time.process_time()),
+        **seeds,
     )
-    frames = config.frames_per_batch * (len(stamps) - 1)
+    stamps = stamps[learners - 1 :: learners]  # each batch calls progress once per learner
+    frames = learners * config.frames_per_batch * (len(stamps) - 1)
     return frames / (stamps[-1] - stamps[0]), config.frames_per_batch
 
 
@@ -185,14 +193,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repeats", type=int, default=3, help="rounds over every cell")
     parser.add_argument("--batches", type=int, default=4, help="batches per learning (the first is not timed)")
     parser.add_argument("--blocks", default=",".join(BLOCKS), help="comma-separated among " + ", ".join(BLOCKS))
+    parser.add_argument("--learners", type=int, default=1, help="learners per cell, trained as one batch")
     parser.add_argument("--quick", action="store_true", help="1 round of 3 batches")
     parser.add_argument("--against", metavar="DIR", help="also run the package of the checkout DIR, in turn")
     parser.add_argument("--cell", help=argparse.SUPPRESS)  # one cell, JSON out (internal)
     args = parser.parse_args(argv)
     if args.cell:
         torch.set_num_threads(1)
-        block, name, shaped, n = args.cell.split(",")
-        rate, fpb = run_cell(block, domains()[name], shaped == "hrs", int(n))
+        block, name, shaped, n, k = args.cell.split(",")
+        rate, fpb = run_cell(block, domains()[name], shaped == "hrs", int(n), int(k))
         print(json.dumps({"rate": rate, "frames_per_batch": fpb}))
         return
     if args.against is not None and not (Path(args.against) / "torchrl_subgoal").is_dir():
@@ -217,14 +226,16 @@ def main(argv: list[str] | None = None) -> None:
             for shaped in (False, True):
                 for side, path in sides.items():
                     if args.against is None:
-                        rate, fpb = run_cell(block, known[name], shaped, batches)
+                        rate, fpb = run_cell(block, known[name], shaped, batches, args.learners)
                     else:
-                        rate, fpb = _child(f"{block},{name},{'hrs' if shaped else 'plain'},{batches}", path)
+                        cell = f"{block},{name},{'hrs' if shaped else 'plain'},{batches},{args.learners}"
+                        rate, fpb = _child(cell, path)
                     rates.setdefault((block, name, shaped, side), []).append(rate)
                     batch_frames[block, name] = fpb
     wall = time.perf_counter() - start
     print(
-        f"Learner frames per CPU second (one core), best of {repeats} round(s) of {batches} batches "
+        f"Learner frames per CPU second (one core), {args.learners} learner(s) per cell, "
+        f"best of {repeats} round(s) of {batches} batches "
         f"(the first untimed); load average {load[0]:.1f} / {os.getloadavg()[0]:.1f} (before / after), "
         f"wall time {wall:.0f} s.\n"
     )

@@ -8,13 +8,16 @@ Q-learning update per step; :mod:`torchrl_subgoal.training.qlearning`) against:
   the 0.9-expectile target, no update on a time-out inside ``z``; ``--expectile`` and
   ``--bootstrap-truncated`` change them),
 * HRS-mean — the same with the paper's mean target, time-outs bootstrapped,
-* NRS      — naive subgoal shaping, ``Φ = η`` once a subgoal is achieved.
+* NRS      — naive subgoal shaping, ``Φ = η`` once a subgoal is achieved,
+* SRS      — a fixed potential rising with each subgoal achieved (the progress prior).
 
 The shaped learners' tables are over ``(s, z)`` (``--agent-state s`` for ``s``). Tasks:
 ``four_rooms`` (the participants' subgoal series; ``--reward step-cost``: −1 per step and
-0 at the goal, or ``goal``: +1 at the goal) and ``taxi`` (gymnasium's Taxi: −1 per step,
-−10 per illegal action, +20 at delivery; subgoals: passenger in the taxi, then at the
-destination). Results go to ``--results`` chunk by chunk (re-run to resume); the report
+0 at the goal, or ``goal``: +1 at the goal), ``sparse_rooms`` (four 9 × 9 rooms, the goal
+35 steps away in the far corner by either of two routes, 500 steps per episode, so a random
+walk seldom finds it; subgoals: the two doorways of one route) and ``taxi`` (gymnasium's
+Taxi: −1 per step, −10 per illegal action, +20 at delivery; subgoals: passenger in the taxi,
+then at the destination). Results go to ``--results`` chunk by chunk (re-run to resume); the report
 gives episodes to each threshold of steps per episode, the final steps and the tests.
 
     python recipes/qlearning.py --domain four_rooms --reward step-cost    # 20 learners per method
@@ -33,9 +36,7 @@ from typing import Any
 import torch
 from torchrl.envs import EnvBase, TransformedEnv
 
-from torchrl_subgoal import (
-    load_patterns,
-)
+from torchrl_subgoal import Cell, SubgoalSeries, load_patterns
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.experiments import Chunk, EpisodeTable
 from torchrl_subgoal.experiments.cli import check, setting
@@ -44,13 +45,15 @@ from torchrl_subgoal.experiments.recipe import (
     RecipeConfig,
     check_methods,
     check_patterns,
+    check_unused,
     chunk_patterns,
     method_specs,
     pattern_sets,
     recipe_main,
     sweep_entries,
 )
-from torchrl_subgoal.methods import Method, shaping_transform
+from torchrl_subgoal.methods import SRS, Method, shaping_transform
+from torchrl_subgoal.training import SuccessSignal
 from torchrl_subgoal.training.qlearning import QLearningConfig, train_qlearning
 
 METHODS = {
@@ -58,6 +61,7 @@ METHODS = {
     "HRS": Method("HRS", "subgoals", "human"),
     "HRS-mean": Method("HRS-mean", "subgoals", "human"),
     "NRS": Method("NRS", "naive", "human"),
+    "SRS": SRS,
 }
 #: the paper's target (HRS-mean); HRS's comes from the flags (default: the library's)
 MEAN_TARGET = {"expectile": 0.5, "bootstrap_truncated": True}
@@ -65,19 +69,46 @@ PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "four_rooms_participants.
 #: per task: the env's subgoal-read key, the report's thresholds and moving-average window
 TASKS: dict[str, dict[str, Any]] = {
     "four_rooms": {"subgoal_key": "cell", "thresholds": [100, 50], "window": 1},
+    "sparse_rooms": {"subgoal_key": "cell", "thresholds": [200, 60], "window": 1},
     "taxi": {"subgoal_key": "observation", "thresholds": [100, 50, 25], "window": 20},
 }
+#: sparse_rooms: four 9 x 9 rooms; start top-left, goal bottom-right, 35 steps by either route
+SPARSE_ROOMS = """\
+wwwwwwwwwwwwwwwwwwwww
+w         w         w
+w         w         w
+w         w         w
+w         w         w
+w                   w
+w         w         w
+w         w         w
+w         w         w
+wwwwww wwwwwwww wwwww
+w         w         w
+w         w         w
+w         w         w
+w         w         w
+w                   w
+w         w         w
+w         w         w
+w         w         w
+w         w         w
+wwwwwwwwwwwwwwwwwwwww"""
+#: sparse_rooms' subgoals: the doorways of the route through the top-right room
+SPARSE_ROOMS_ROUTE = SubgoalSeries([Cell(5, 10), Cell(9, 15)], name="through_the_top_right")
 
 
 @dataclass
 class Config(RecipeConfig):
     """Tabular ε-greedy Q-learning with HRS (library defaults), HRS-mean and NRS against no shaping."""
 
-    domain: str = setting("four_rooms", "four_rooms or taxi", choices=sorted(TASKS))
+    domain: str = setting("four_rooms", "four_rooms, sparse_rooms or taxi", choices=sorted(TASKS))
     reward: str = setting(
-        "step-cost", "four_rooms only: step-cost (-1 per step) or goal (+1 at the goal)", choices=["step-cost", "goal"]
+        "step-cost",
+        "four_rooms and sparse_rooms: step-cost (-1 per step) or goal (+1 at the goal)",
+        choices=["step-cost", "goal"],
     )
-    methods: str = setting(",".join(METHODS), "comma-separated methods to run")
+    methods: str = setting("Q,HRS,HRS-mean,NRS", f"comma-separated methods to run, of {', '.join(METHODS)}")
     learnings: int = setting(2, "learnings per subgoal pattern (four_rooms has 10 patterns, taxi 1)")
     episodes: int = setting(200, "episodes per learning")
     lr: float = setting(0.25, "Q-learning step size alpha")
@@ -85,6 +116,10 @@ class Config(RecipeConfig):
     gamma: float = setting(0.99, "discount gamma (of the learner and of the shaping term)")
     value_lr: float = setting(0.1, "alpha_v of the learned potentials' online update")
     eta: float = setting(1.0, "NRS potential η")
+    progress_scale: float = setting(
+        1.0, "HRS's table starts at the subgoals' progress prior of this scale (0: at 0); SRS shapes with the prior"
+    )
+    monotone_potential: bool = setting(True, "HRS, HRS-mean: shape with the table non-decreasing along the series")
     agent_state: str = setting("s,z", "what the shaped learners' tables are over", choices=["s,z", "s"])
     expectile: float = setting(0.9, "HRS: τ of the potential's target (HRS-mean: 0.5)")
     bootstrap_truncated: bool = setting(False, "HRS: train V(z) on a time-out inside z (HRS-mean: true)")
@@ -106,7 +141,12 @@ class Config(RecipeConfig):
         check(0.0 <= self.epsilon <= 1.0, "epsilon", f"must lie in [0, 1], got {self.epsilon}")
         check(0.0 <= self.gamma <= 1.0, "gamma", f"must lie in [0, 1], got {self.gamma}")
         check(self.eta >= 0.0, "eta", f"must be >= 0, got {self.eta}")
+        check(self.progress_scale >= 0.0, "progress_scale", f"must be >= 0, got {self.progress_scale}")
         check(0.0 < self.expectile < 1.0, "expectile", f"must lie strictly between 0 and 1, got {self.expectile}")
+        if self.domain == "taxi":
+            check_unused(
+                self, ["reward"], "applies to --domain four_rooms and sparse_rooms only (taxi's rewards are its own)"
+            )
 
 
 def make_env(config: Mapping[str, Any], n: int) -> EnvBase:
@@ -116,7 +156,27 @@ def make_env(config: Mapping[str, Any], n: int) -> EnvBase:
 
         return make_taxi(n)
     goal = config["reward"] == "goal"
-    return FourRoomsEnv(num_envs=n, goal_reward=1.0 if goal else 0.0, step_reward=0.0 if goal else -1.0)
+    goal_reward, step_reward = (1.0, 0.0) if goal else (0.0, -1.0)
+    if config["task"] == "sparse_rooms":
+        return FourRoomsEnv(
+            n,
+            layout=SPARSE_ROOMS,
+            start=(1, 1),
+            goal=(18, 19),
+            max_steps=500,
+            goal_reward=goal_reward,
+            step_reward=step_reward,
+        )
+    return FourRoomsEnv(num_envs=n, goal_reward=goal_reward, step_reward=step_reward)
+
+
+def task_success(config: Mapping[str, Any]) -> SuccessSignal:
+    """What a successful episode is: the goal's step, told by its reward (four-rooms: 1 with the goal reward, 0
+    against -1 under the step cost; Taxi: the delivery's +20, which a return cannot tell from a time-out after
+    illegal moves)."""
+    if config["task"] == "taxi":
+        return SuccessSignal(final_reward=20.0)
+    return SuccessSignal(final_reward=1.0 if config["reward"] == "goal" else 0.0)
 
 
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
@@ -134,6 +194,8 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
         observation_key=TASKS[config["task"]]["subgoal_key"],
         zero_terminal_potential=config["zero_terminal_potential"],
         start_potential=config["start_potential"],
+        progress_scale=config.get("progress_scale", 0.0),
+        monotone_potential=config.get("monotone_potential", False),
         **(MEAN_TARGET if chunk.method == "HRS-mean" else config["target"]),
     )
     env = TransformedEnv(env, shaping) if shaping is not None else env
@@ -144,7 +206,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
         epsilon=config["epsilon"],
         sees_subgoal=config["agent_state"] == "s,z",
     )
-    records = train_qlearning(env, settings, seed=chunk.seed, progress=progress)
+    records = train_qlearning(env, settings, seed=chunk.seed, progress=progress, success=task_success(config)).records
     return EpisodeTable(records.steps, records.returns, records.success)
 
 
@@ -156,6 +218,8 @@ def plan(cfg: Config) -> Plan:
         from torchrl_subgoal.envs.taxi import taxi_subgoals
 
         human, subgoal_file = {"pick_up_then_drive": taxi_subgoals()}, "torchrl_subgoal.envs.taxi:taxi_subgoals"
+    elif cfg.domain == "sparse_rooms":
+        human, subgoal_file = {SPARSE_ROOMS_ROUTE.name: SPARSE_ROOMS_ROUTE}, "recipes/qlearning.py:SPARSE_ROOMS_ROUTE"
     else:
         human, subgoal_file = load_patterns(PARTICIPANTS, domain="four_rooms"), PARTICIPANTS
     patterns = pattern_sets(human, [], 0, cfg.seed, random_needed=False)
@@ -175,6 +239,8 @@ def plan(cfg: Config) -> Plan:
                 "agent_state",
                 "zero_terminal_potential",
                 "start_potential",
+                "progress_scale",
+                "monotone_potential",
             )
         },
     }

@@ -38,6 +38,7 @@ LAYERS: dict[str, int] = {
     "torchrl_subgoal.agents.sarsa": 6,
     "torchrl_subgoal.agents.actor_critic": 6,
     "torchrl_subgoal.agents.ddpg": 6,
+    "torchrl_subgoal.agents.stack": 6,
     "torchrl_subgoal.agents.subgoal_input": 6,
     "torchrl_subgoal._kernels.grid": 6,
     "torchrl_subgoal._kernels.sarsa": 6,

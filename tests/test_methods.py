@@ -58,3 +58,97 @@ def test_missing_pieces_are_errors() -> None:
         shaping_transform(paper_methods("SARSA")["HRS"], torch.Size([2]), gamma=0.9, value_lr=0.1)
     with pytest.raises(ValueError, match="needs an aggregation"):
         shaping_transform(paper_methods("SARSA")["SARSA-RS"], torch.Size([2]), gamma=0.9, value_lr=0.1)
+
+
+# --------------------------------------------------------------- the default potential under a sparse goal reward
+
+CORRIDOR = "w" * 17 + "\nw" + " " * 15 + "w\n" + "w" * 17  # 15 cells in a row: start at one end, goal at the other
+TWO_ROUTES = "\n".join(  # from (3, 1) to (3, 11): 14 steps along the top corridor or along the bottom one
+    [
+        "wwwwwwwwwwwww",
+        "w           w",
+        "w wwwwwwwww w",
+        "w wwwwwwwww w",
+        "w wwwwwwwww w",
+        "w           w",
+        "wwwwwwwwwwwww",
+    ]
+)
+
+
+def _episodes_to_success(method: str, learners: int = 16, episodes: int = 40, **conventions: object) -> float:
+    """Tabular Q over (s, z) on the corridor (+1 at the goal only, 60 steps per episode): the mean episode in
+    which each learner first reaches the goal (``episodes + 1`` if it never does)."""
+    from torchrl.envs import TransformedEnv
+
+    from torchrl_subgoal.envs import FourRoomsEnv
+    from torchrl_subgoal.methods import all_methods
+    from torchrl_subgoal.training.qlearning import QLearningConfig, train_qlearning
+
+    env = FourRoomsEnv(learners, layout=CORRIDOR, start=(1, 1), goal=(1, 15), max_steps=60)
+    series = SubgoalSeries([Cell(1, 5), Cell(1, 10)])
+    shaping = shaping_transform(
+        all_methods("Q")[method],
+        env.batch_size,
+        gamma=0.99,
+        value_lr=0.1,
+        patterns=[series],
+        observation_key="cell",
+        **conventions,
+    )
+    shaped = TransformedEnv(env, shaping) if shaping is not None else env
+    records = train_qlearning(shaped, QLearningConfig(episodes=episodes, lr=0.25, epsilon=0.1), seed=0)
+    found = records.steps < 60
+    first = torch.where(found.any(1), found.float().argmax(1) + 1, torch.tensor(episodes + 1))
+    return float(first.float().mean())
+
+
+def test_under_a_sparse_goal_reward_the_default_potential_finds_the_goal_sooner() -> None:
+    """Before the first success every return is 0, so a potential learned from zero stays 0 and cannot guide
+    (the previous default); the default table starts at the subgoals' progress prior and guides from the first
+    episode. A random walk needs about 15² = 225 steps to cross the corridor; an episode has 60."""
+    torch.set_num_threads(1)
+    unshaped = _episodes_to_success("Q")
+    default = _episodes_to_success("HRS")
+    from_zero = _episodes_to_success("HRS", progress_scale=0.0, monotone_potential=False)
+    assert default < 0.5 * unshaped
+    assert from_zero > 0.8 * unshaped  # the zero table gives nothing to follow
+
+
+def test_a_learner_on_the_other_route_is_never_charged_for_entering_a_subgoal() -> None:
+    """Subgoals on the top corridor; the learner goes along the bottom one, so only ``V(z_0)`` learns (from the
+    goal's reward) while ``z_1`` and ``z_2`` keep their initial values. Entering the first subgoal afterwards is
+    not charged with the default potential (a monotone table); with the previous default (a zero table shaped
+    as it is) it cost almost the goal's whole value."""
+    from torchrl.envs import TransformedEnv
+    from torchrl.envs.utils import step_mdp
+
+    from torchrl_subgoal.envs import FourRoomsEnv
+
+    series = SubgoalSeries([Cell(1, 4), Cell(1, 8)])
+    bottom, top = [0, 0] + [1] * 10 + [2, 2], [2, 2] + [1] * 10 + [0, 0]  # down, right, up, left = 0, 1, 2, 3
+
+    def entering_cost(**conventions: object) -> float:
+        env = FourRoomsEnv(1, layout=TWO_ROUTES, start=(3, 1), goal=(3, 11), max_steps=50)
+        shaping = shaping_transform(
+            paper_methods("Q")["HRS"],
+            env.batch_size,
+            gamma=0.99,
+            value_lr=0.25,
+            patterns=[series],
+            observation_key="cell",
+            **conventions,
+        )
+        shaped = TransformedEnv(env, shaping)
+        for route in [bottom] * 30 + [top]:
+            td = shaped.reset()
+            for action in route:
+                td = shaped.step(td.set("action", torch.tensor([action])))
+                entered = bool((td["next", "subgoal_index"] == 1).all() and (td["subgoal_index"] == 0).all())
+                if route is top and entered:
+                    return float(td["next", "reward"] - td["next", "env_reward"])
+                td = step_mdp(td)
+        raise AssertionError("the top route never entered the first subgoal")
+
+    assert entering_cost() >= -1e-6
+    assert entering_cost(progress_scale=0.0, monotone_potential=False) < -0.5

@@ -251,13 +251,14 @@ def test_infinite_observations_compare_as_numbers() -> None:
 def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> None:
     """``_kernels.shaping.shape_step`` against the torch functions of ``transform.shaping`` and one SGD step of
     ``SubgoalValueLoss`` (reduction "sum"): the SMDP return, the online update (a table per row, one shared
-    table, or a table per group of rows), the start level and the terminal potential."""
+    table, or a table per group of rows), the start level, a monotone table and the terminal potential."""
     from torchrl_subgoal import SubgoalValueLoss
     from torchrl_subgoal._kernels.shaping import shape_step
     from torchrl_subgoal.transform.setup import PotentialKernelState
     from torchrl_subgoal.transform.shaping import (
         START_MODES,
         accumulate,
+        ancestral_max,
         closes,
         restart,
         shaped_reward,
@@ -274,6 +275,14 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
     gamma, value_gamma = data.draw(st.sampled_from([0.9, 0.99, 1.0])), data.draw(st.sampled_from([0.5, 0.95]))
     expectile, bootstrap = data.draw(st.sampled_from([0.5, 0.9, 0.3])), data.draw(st.booleans())
     col = (n, 1)
+    ancestors = None
+    if data.draw(st.booleans()):  # a monotone table: each row's series a chain or a diamond-like random order
+        ancestors = torch.eye(states, dtype=torch.bool).repeat(n, 1, 1)
+        for row in range(n):
+            for zz in range(1, states):
+                before = data.draw(st.lists(st.integers(0, zz - 1), min_size=1, max_size=zz))
+                ancestors[row, zz, before] = True
+                ancestors[row, zz] |= ancestors[row, before].any(0)  # what comes before those comes before zz
 
     def ints(high: int) -> torch.Tensor:
         return torch.tensor(data.draw(st.lists(st.integers(0, high), min_size=n, max_size=n))).reshape(col)
@@ -304,7 +313,16 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
         np.empty(col, np.bool_),
     ]
     potential = PotentialKernelState(
-        kernel_table, 0.0, gamma, value_gamma, lr, zero_terminal, START_MODES[start], expectile, bootstrap
+        kernel_table,
+        0.0,
+        gamma,
+        value_gamma,
+        lr,
+        zero_terminal,
+        START_MODES[start],
+        expectile,
+        bootstrap,
+        *(() if ancestors is None else (ancestors.numpy(),)),
     )
     shape_step(
         potential,
@@ -348,6 +366,8 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
             v.table -= lr * v.table.grad
     rows = torch.zeros(n, dtype=torch.long) if shared else torch.arange(n) // group
     values = v.table.detach().reshape(-1, states)[rows]
+    if ancestors is not None:
+        values = ancestral_max(values, ancestors)
     level = start_level(values[:, :1], start)  # z_0 = 0: every subgoal series starts there
     phi, phi_next = values.gather(1, z), values.gather(1, z_next)
     if level is not None:
@@ -399,27 +419,27 @@ def test_conditions_advance_alike_compiled_and_in_torch(case: tuple, data: st.Da
 @given(
     st.integers(1, 6).flatmap(
         lambda n: st.tuples(
-            st.lists(
-                st.tuples(st.lists(st.floats(-50, 50, allow_nan=False), min_size=n, max_size=n), st.integers(1, n)),
-                min_size=1,
-                max_size=4,
-            )
+            st.lists(st.floats(-50, 50, allow_nan=False), min_size=n, max_size=n),
+            st.lists(st.lists(st.booleans(), min_size=n, max_size=n), min_size=n, max_size=n),
         )
     )
 )
-def test_nondecreasing_is_the_least_squares_isotonic_fit(case: tuple) -> None:
-    """Each row's first ``length`` entries become scipy's isotonic regression of them; the rest stay."""
-    from scipy.optimize import isotonic_regression
+def test_ancestral_max_lifts_each_state_to_what_comes_before_it(case: tuple) -> None:
+    """Entry ``z`` becomes the largest value among ``z`` and its ancestors: never lower than before,
+    never below an ancestor's lifted value, and applying it again changes nothing."""
+    from torchrl_subgoal.transform.shaping import ancestral_max
 
-    from torchrl_subgoal.transform.shaping import nondecreasing
-
-    (rows,) = case
-    values = torch.tensor([r for r, _ in rows], dtype=torch.float64)
-    lengths = torch.tensor([n for _, n in rows])
-    out = nondecreasing(values, lengths)
-    for row, (entries, n) in enumerate(rows):
-        expected = isotonic_regression(np.array(entries[:n])).x
-        assert np.allclose(out[row, :n].numpy(), expected, atol=1e-9)
-        assert out[row, n:].tolist() == entries[n:]
-        assert (out[row, 1:n] >= out[row, : n - 1] - 1e-12).all()
-    assert torch.allclose(nondecreasing(out, lengths), out)  # a projection: applying it again changes nothing
+    entries, before = case
+    n = len(entries)
+    ancestors = torch.tensor(before).tril(-1) | torch.eye(n, dtype=torch.bool)  # a order in which a < z
+    for z in range(n):  # closed under "comes before"
+        for a in range(z):
+            if ancestors[z, a]:
+                ancestors[z] |= ancestors[a]
+    values = torch.tensor([entries], dtype=torch.float64)
+    out = ancestral_max(values, ancestors[None])
+    for z in range(n):
+        assert out[0, z] == max(entries[a] for a in range(n) if ancestors[z, a])
+        assert all(out[0, z] >= out[0, a] for a in range(n) if ancestors[z, a])
+    assert (out >= values).all()
+    assert torch.equal(ancestral_max(out, ancestors[None]), out)

@@ -110,8 +110,8 @@ def run(
                 else dataclasses.replace(config, sees_subgoal=sees == "yes" and shaping is not None),
                 shaping=shaping,
                 observation_key=domain.observation_key,
-                seed=1000 + i,
-            )
+                seeds=[1000 + i],
+            ).curve
             final = max(1, len(curve.frames) // 20)
             results[condition].append(
                 {

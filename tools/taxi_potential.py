@@ -32,6 +32,7 @@ from torchrl_subgoal import (
 )
 from torchrl_subgoal.envs.gym_batch import require_gymnasium
 from torchrl_subgoal.envs.taxi import ENV_ID, STANDS, make_taxi, taxi_subgoals
+from torchrl_subgoal.training import SuccessSignal
 from torchrl_subgoal.training.qlearning import QLearningConfig, train_qlearning
 
 TARGETS = {
@@ -104,8 +105,11 @@ def main(argv: list[str] | None = None) -> int:
             SubgoalPotentialTransform(series, potential, gamma=gamma, value_update=ValueUpdate(opts.value_lr, loss)),
         )
         records = train_qlearning(
-            env, QLearningConfig(episodes=opts.episodes, lr=0.25, epsilon=0.1, gamma=gamma), seed=opts.seed
-        )
+            env,
+            QLearningConfig(episodes=opts.episodes, lr=0.25, epsilon=0.1, gamma=gamma),
+            seed=opts.seed,
+            success=SuccessSignal(final_reward=20.0),  # the delivery's reward
+        ).records
         table = potential.table.detach()
         level = table[:, :1].clamp(min=0.0)  # "nonpositive": Φ = V − max(V(z_0), 0)
         phi = table - level

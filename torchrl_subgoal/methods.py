@@ -6,9 +6,14 @@ method     shaping                                              subgoals
 HRS        learned potential over the subgoal series (ours)     people's
 RRS        the same, with random subgoals                       random
 NRS        fixed potential ``η`` on achieving a subgoal          people's
+SRS        fixed potential rising with each subgoal achieved     people's
 SARSA-RS   learned potential over a hand-given ``z = g(s)``     — (aggregation)
 baseline   none (SARSA, actor-critic, DDPG)                     —
 =========  ==================================================  ===============
+
+SRS is Okudo & Yamada's follow-up ("Subgoal-based Reward Shaping to Improve Efficiency in
+Reinforcement Learning", 2021): ``Φ(z) = η·z``. Here its scale is the progress prior's
+(:meth:`~torchrl_subgoal.SubgoalSeries.progress`): each subgoal adds ``scale / (n + 1)``.
 
 Recipes call :func:`shaping_transform` with the domain's pieces and append the
 result to their env; nothing else differs between methods.
@@ -28,9 +33,9 @@ from torchrl_subgoal.potentials import NaivePotential, Potential, TabularPotenti
 from torchrl_subgoal.subgoals import Predicate, StateAggregation, SubgoalSeries
 from torchrl_subgoal.transform import StartPotential, SubgoalPotentialTransform
 
-__all__ = ["Method", "paper_methods", "random_patterns", "shaping_parts", "shaping_transform"]
+__all__ = ["SRS", "Method", "all_methods", "paper_methods", "random_patterns", "shaping_parts", "shaping_transform"]
 
-Shaping = Literal["none", "subgoals", "naive", "aggregation"]
+Shaping = Literal["none", "subgoals", "naive", "progress", "aggregation"]
 
 
 @dataclass(frozen=True)
@@ -40,8 +45,8 @@ class Method:
     Attributes:
         name: as in the paper's tables (``"HRS"``, ``"RRS"``, ``"NRS"``, ``"SARSA-RS"``, …).
         shaping: ``"subgoals"`` (learned potential over a subgoal series),
-            ``"naive"`` (fixed ``η``), ``"aggregation"`` (learned over ``g(s)``)
-            or ``"none"``.
+            ``"naive"`` (fixed ``η``), ``"progress"`` (fixed, rising with each subgoal),
+            ``"aggregation"`` (learned over ``g(s)``) or ``"none"``.
         subgoals: which patterns it uses: ``"human"``, ``"random"`` or ``"none"``.
 
     Examples:
@@ -70,6 +75,20 @@ def paper_methods(baseline: str) -> dict[str, Method]:
         Method("SARSA-RS", "aggregation", "none"),
     ]
     return {m.name: m for m in methods}
+
+
+#: subgoal-based reward shaping with a fixed potential (Okudo & Yamada's SRS)
+SRS = Method("SRS", "progress", "human")
+
+
+def all_methods(baseline: str) -> dict[str, Method]:
+    """The paper's methods and SRS.
+
+    Examples:
+        >>> list(all_methods("PPO"))
+        ['HRS', 'RRS', 'PPO', 'NRS', 'SARSA-RS', 'SRS']
+    """
+    return {**paper_methods(baseline), SRS.name: SRS}
 
 
 def random_patterns(
@@ -104,7 +123,8 @@ def shaping_parts(
     aggregation_key: NestedKey = "observation",
     zero_terminal_potential: bool = True,
     start_potential: StartPotential = "nonpositive",
-    monotone_potential: bool = False,
+    monotone_potential: bool = True,
+    progress_scale: float = 1.0,
 ) -> tuple[SubgoalSeries | list[SubgoalSeries] | StateAggregation, Potential, dict[str, Any]] | None:
     """What :class:`SubgoalPotentialTransform` needs for ``method``: the subgoals (or aggregation),
     the potential and the other keyword arguments; ``None`` for the unshaped baseline.
@@ -115,9 +135,11 @@ def shaping_parts(
     learner per env, as the SARSA recipes), ``()`` for one table shared by every
     env (one learner stepping many envs, as A2C).
 
-    ``monotone_potential`` makes the learned tables over subgoal series (HRS, RRS) shape
-    non-decreasing along ``z`` (``TabularPotential(monotone=True)``); the naive potential and an
-    aggregation's table are shaped as they are.
+    The learned tables over subgoal series (HRS, RRS) start at each series' progress prior
+    (:meth:`~torchrl_subgoal.SubgoalSeries.progress` of ``progress_scale``, in reward units: what
+    reaching the goal is worth; 0 starts them at 0, as the paper) and, with ``monotone_potential``,
+    shape non-decreasing along the series (``TabularPotential(monotone=True)``). SRS's fixed tables
+    are the prior itself. The naive potential and an aggregation's table are shaped as they are.
 
     Examples:
         >>> from torchrl_subgoal.subgoals import Cell
@@ -145,8 +167,18 @@ def shaping_parts(
     per_env = list(patterns) if pattern_index is None else [patterns[i] for i in pattern_index.reshape(-1).tolist()]
     if method.shaping == "naive":
         return per_env, NaivePotential(eta), options
-    num_states = max(len(p) for p in patterns) + 1
-    return per_env, TabularPotential(num_states, batch_shape, monotone=monotone_potential), options
+    if method.shaping == "progress" and progress_scale <= 0:
+        raise ValueError(
+            f"{method.name} shapes with the progress prior: progress_scale must be > 0, got {progress_scale}"
+        )
+    shape = torch.Size(batch_shape)
+    series = per_env if shape.numel() == len(per_env) else per_env[:1]  # a table per env's series, or shared
+    potential = TabularPotential.for_subgoals(
+        series, progress_scale, shape, monotone=monotone_potential and method.shaping == "subgoals"
+    )
+    if method.shaping == "progress":
+        potential.table.requires_grad_(False)  # SRS: the prior itself, fixed
+    return per_env, potential, options
 
 
 #: the keyword arguments of :func:`shaping_transform` that configure the learned potential's loss

@@ -27,12 +27,15 @@ order: ``potential(z)`` returns the values.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule, TensorDictModuleBase
 from tensordict.utils import NestedKey
 from torch import nn
+
+from torchrl_subgoal.subgoals import SubgoalSeries
 
 __all__ = ["NaivePotential", "NeuralPotential", "Potential", "TabularPotential", "check_value"]
 
@@ -135,7 +138,9 @@ class TabularPotential(Potential):
             or the aggregation's ``num_states``).
         batch_shape: shape of the learner batch (the env's batch size, or with ``envs_per_table``
             the number of tables); ``()`` for one table shared by every env.
-        init: initial value of every entry.
+        init: initial values: one for every entry, one per abstract state (``[num_states]``, e.g. a
+            series' progress prior :meth:`~torchrl_subgoal.SubgoalSeries.progress`), or every table's
+            (``[*batch_shape, num_states]``).
 
     Keyword Args:
         envs_per_table: envs that share each table of a batch: table ``t`` serves the envs
@@ -177,7 +182,7 @@ class TabularPotential(Potential):
         self,
         num_states: int,
         batch_shape: tuple[int, ...] | torch.Size = (),
-        init: float = 0.0,
+        init: float | Sequence[float] | torch.Tensor = 0.0,
         *,
         monotone: bool = False,
         envs_per_table: int = 1,
@@ -197,7 +202,76 @@ class TabularPotential(Potential):
             raise ValueError(f"envs_per_table must be >= 1, got {envs_per_table}")
         if self.envs_per_table > 1 and not self.batch_shape:
             raise ValueError("envs_per_table needs a batch of tables (batch_shape); one shared table serves every env")
-        self.table = nn.Parameter(torch.full((*self.batch_shape, self.num_states), float(init)))
+        shape = (*self.batch_shape, self.num_states)
+        values = torch.as_tensor(init, dtype=torch.get_default_dtype())
+        try:
+            table = values.expand(shape).clone()
+        except RuntimeError:
+            raise ValueError(
+                f"init of shape {tuple(values.shape)} does not fit tables of shape {shape}: give one value, "
+                f"one per abstract state ({self.num_states}) or one per table entry"
+            ) from None
+        if not torch.isfinite(table).all():
+            raise ValueError(f"init must be finite, got {values.tolist()}")
+        self.table = nn.Parameter(table)
+
+    @classmethod
+    def for_subgoals(
+        cls,
+        subgoals: SubgoalSeries | Sequence[SubgoalSeries],
+        scale: float = 1.0,
+        batch_shape: tuple[int, ...] | torch.Size | None = None,
+        **kwargs: Any,
+    ) -> TabularPotential:
+        """The library's default potential over ``subgoals``: a table that starts at the series' progress
+        prior (:meth:`~torchrl_subgoal.SubgoalSeries.progress`) and is shaped non-decreasing along the
+        series (``monotone=True``), to be learned online by the shaping transform.
+
+        Before the first success under a sparse goal reward every return is 0, so a table learned from 0
+        stays 0 and cannot guide; this one rises with each subgoal from the first step and becomes the
+        learned value as the transitions come in (docs/shaping_defaults.md).
+
+        Args:
+            subgoals: one series (one table, or the same prior in every table of ``batch_shape``), or one
+                series per table.
+            scale: what reaching the goal is worth, in the learner's reward units; each subgoal's share
+                is ``scale / (n + 1)``.
+            batch_shape: the tables' batch shape (default: one per series given as a sequence, else shared).
+            **kwargs: the other arguments of :class:`TabularPotential` (``envs_per_table``, keys...).
+
+        Examples:
+            >>> from torchrl_subgoal import Cell, SubgoalSeries
+            >>> series = SubgoalSeries([Cell(3, 6), Cell(7, 9)])
+            >>> v = TabularPotential.for_subgoals(series, scale=3.0)
+            >>> v.table.tolist(), v.monotone
+            ([0.0, 1.0, 2.0], True)
+            >>> TabularPotential.for_subgoals([series, SubgoalSeries([Cell(3, 6)])], scale=2.0).table.tolist()
+            [[0.0, 0.6666666865348816, 1.3333333730697632], [0.0, 1.0, 1.0]]
+        """
+        many = not isinstance(subgoals, SubgoalSeries)
+        series: list[SubgoalSeries] = [subgoals] if isinstance(subgoals, SubgoalSeries) else list(subgoals)
+        if not series:
+            raise ValueError("for_subgoals needs at least one subgoal series")
+        if not scale >= 0:
+            raise ValueError(f"scale must be >= 0 (what reaching the goal is worth), got {scale}")
+        num_states = max(s.num_abstract_states for s in series)
+        rows = []
+        for s in series:  # past a shorter series' last state, its last value
+            prior = list(s.progress(scale))
+            rows.append(prior + prior[-1:] * (num_states - len(prior)))
+        priors = torch.tensor(rows, dtype=torch.get_default_dtype())
+        shape = torch.Size(batch_shape if batch_shape is not None else ((len(series),) if many else ()))
+        if len(series) == 1 or len({tuple(r) for r in rows}) == 1:
+            init = priors[0]
+        elif len(series) == shape.numel():
+            init = priors.reshape(*shape, num_states)
+        else:
+            raise ValueError(
+                f"{len(series)} subgoal series for tables of batch shape {tuple(shape)}: give one series, or one "
+                "per table"
+            )
+        kwargs.setdefault("monotone", True)
+        return cls(num_states, shape, init, **kwargs)
 
     @property
     def tables(self) -> int:

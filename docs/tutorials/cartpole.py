@@ -75,8 +75,9 @@ def train(shaped: bool, frames: int, seed: int) -> tuple[LearningCurve, list[flo
     """One PPO learner, shaped by the subgoals' learned potential Φ(z) or not: its curve, and Φ(z) at the end."""
     potential = TabularPotential(series.num_abstract_states)  # Φ(z), learned online as the learner collects
     shaping = Shaping(series, potential) if shaped else None
-    curve = train_ppo(make_env, settings(frames), shaping=shaping, seed=seed, episode_cap=500.0)
-    return curve, potential.table.flatten().tolist() if shaped else []
+    trained = train_ppo(make_env, settings(frames), shaping=shaping, seeds=[seed], episode_cap=500.0)
+    learned = trained.potential()  # the learner's table at the end (None unshaped)
+    return trained.curve, learned.table.flatten().tolist() if isinstance(learned, TabularPotential) else []
 
 
 # --8<-- [end:train]

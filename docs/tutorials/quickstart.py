@@ -38,7 +38,7 @@ if __name__ == "__main__":
         online_potential=True,
     )
     for name, arm in (("unshaped", None), ("shaped", shaping)):
-        curve = train_a2c(batched(make_single), config, shaping=arm, seed=0, episode_cap=5000)
+        curve = train_a2c(batched(make_single), config, shaping=arm, seeds=[0], episode_cap=5000).curve
         print(
             f"{name}: {curve.episodes[-1]} episodes, mean length of the last ones {curve.episode_length[-1]:.0f} "
             f"steps (the shortest path takes 13)"

@@ -111,3 +111,20 @@ def test_the_readme_snippet_shapes_a_collector_and_learns_the_potential(
         collector.shutdown()
     assert shaping.value_update is not None and potential.table.detach().abs().sum() > 0
     assert any(shaped)
+
+
+def test_every_test_the_reliability_page_names_exists() -> None:
+    """docs/reliability.md states each promise with the tests that check it: ``tests/x.py::test_y``,
+    ``test_x.py::test_y`` (found under tests/) or ``::test_y`` (of the file named last)."""
+    text = (ROOT / "docs" / "reliability.md").read_text()
+    named, current, missing = 0, None, []
+    for file, name in re.findall(r"`((?:tests/)?[\w/]*test_\w+\.py)?::(test_\w+)", text):
+        if file:
+            found = [ROOT / file] if file.startswith("tests/") else sorted((ROOT / "tests").rglob(file))
+            assert len(found) == 1 and found[0].exists(), f"{file}: no such test file (or several)"
+            current = found[0]
+        assert current is not None, f"::{name} follows no test file"
+        named += 1
+        if not re.search(rf"^def {name}\(", current.read_text(), re.MULTILINE):
+            missing.append(f"{current.relative_to(ROOT)}::{name}")
+    assert named >= 20 and not missing, missing

@@ -20,7 +20,7 @@ def test_dqn_defaults_find_the_shortest_path_and_keep_it() -> None:
     torch.set_num_threads(1)
     domain = domains.part("four_rooms", LearnerDomain)
     config = dataclasses.replace(domain.defaults["dqn"], total_frames=60_160)
-    curve = train_dqn(domain.make_env, config, seed=0)
+    curve = train_dqn(domain.make_env, config).curve
     found = curve.frames_to(50)
     assert found is not None and found < 40_000
     after = [length for frames, length in zip(curve.frames, curve.episode_length, strict=True) if frames > found]

@@ -91,7 +91,7 @@ def test_nested_settings_are_flags_whose_defaults_follow_the_early_ones(capsys: 
     assert parse_config(Outer, []).inner == Inner(0.1)
     assert parse_config(Outer, ["--kind", "fast"]).inner == Inner(0.9)
     assert parse_config(Outer, ["--kind=fast", "--sizes", "8", "--rate", "0.5"]).inner == Inner(0.5, (8,))
-    with pytest.raises(ConfigError, match=r"^--rate: rate must be > 0, got -1.0$"):
+    with pytest.raises(ConfigError, match=r"^--rate: must be > 0, got -1.0$"):
         parse_config(Outer, ["--rate", "-1"])
     with pytest.raises(SystemExit):
         parse_config(Outer, ["--kind", "fast", "--help"])

@@ -3,17 +3,19 @@
 ``run_chunk`` fabricates deterministic learning curves from the chunk seed, so a
 sweep's results depend only on (seed, chunk layout), never on the backend or on
 the order chunks run in. Environment variables steer it from outside the process
-(spawn workers and Ray tasks inherit them):
+(spawn workers and a Ray instance the sweep starts inherit them; a running cluster's workers get those
+of the `ray start` of their node):
 
 * ``TOY_SLEEP``: seconds each chunk sleeps (default 0);
-* ``TOY_LOG``: a file each chunk appends ``<TOY_TAG> <chunk name>`` to when it starts;
+* ``TOY_LOG``: a file each chunk appends ``<TOY_TAG> <chunk name> <pid> <Ray node or ->`` to when it starts;
 * ``TOY_FAIL``: a chunk name (``HRS/00001``) that raises instead of finishing;
 * ``TOY_GATE`` and ``TOY_FREE``: a file path and comma-separated chunk names; every
   chunk not named waits until the file exists (at most 10 minutes), so a test can
   interrupt a sweep at a known point without depending on timing.
 
-Run as a module it runs a sweep (``sweep DIR``) or writes a synthetic paper-scale
-results directory (``paper-scale DIR``: 5 methods x 1000 learners x 1000 episodes).
+Run as a module it runs a sweep (``sweep DIR [--backend ray]``; a failed chunk is one line on stderr and
+exit code 1, as in the recipes) or writes a synthetic paper-scale results directory (``paper-scale DIR``:
+5 methods x 1000 learners x 1000 episodes).
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from torchrl_subgoal.experiments import Chunk, EpisodeTable, MethodSpec, Sweep
+from torchrl_subgoal.experiments import Chunk, ChunkFailedError, EpisodeTable, MethodSpec, Sweep
+from torchrl_subgoal.experiments.recipe import fail
 
 DOMAIN = "toy"
 PATTERNS = {
@@ -66,7 +69,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Any) -> Episode
     """Fake learners: steps decay like 1000 exp(-episode / scale) plus noise."""
     if os.environ.get("TOY_LOG"):
         with open(os.environ["TOY_LOG"], "a") as log:
-            log.write(f"{os.environ.get('TOY_TAG', '')} {chunk.name}\n")
+            log.write(f"{os.environ.get('TOY_TAG', '')} {chunk.name} {os.getpid()} {_ray_node()}\n")
     if os.environ.get("TOY_FAIL") == chunk.name:
         raise RuntimeError(f"toy failure in {chunk.name}")
     gate = os.environ.get("TOY_GATE")
@@ -89,6 +92,16 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Any) -> Episode
     return EpisodeTable(steps, returns, success)
 
 
+def _ray_node() -> str:
+    """The Ray node this process is a worker of, or ``-``."""
+    import sys
+
+    ray = sys.modules.get("ray")
+    if ray is None or not ray.is_initialized():
+        return "-"
+    return str(ray.get_runtime_context().get_node_id())
+
+
 def paper_scale(results_dir: Path) -> None:
     """5 methods x 1000 learners x 1000 episodes = 5M rows."""
     names = ("HRS", "RRS", "SARSA", "NRS", "SARSA-RS")
@@ -106,7 +119,7 @@ def paper_scale(results_dir: Path) -> None:
     )
 
 
-def main(argv: Sequence[str] | None = None) -> None:
+def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("command", choices=["sweep", "paper-scale"])
     parser.add_argument("results_dir", type=Path)
@@ -114,11 +127,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--learnings", type=int, default=3)
     parser.add_argument("--chunk-size", type=int, default=1)
     parser.add_argument("--episodes", type=int, default=30)
+    parser.add_argument("--backend", choices=["local", "ray"], default="local")
     args = parser.parse_args(argv)
     if args.command == "paper-scale":
         paper_scale(args.results_dir)
-        return
-    Sweep(
+        return 0
+    sweep = Sweep(
         DOMAIN,
         args.results_dir,
         toy_methods(args.learnings),
@@ -127,8 +141,13 @@ def main(argv: Sequence[str] | None = None) -> None:
         seed=7,
         chunk_size=args.chunk_size,
         n_episodes=args.episodes,
-    ).run(workers=args.workers, progress=False)
+    )
+    try:
+        sweep.run(backend=args.backend, workers=args.workers, progress=False)
+    except ChunkFailedError as exc:
+        return fail(exc)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

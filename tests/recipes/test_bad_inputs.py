@@ -543,3 +543,76 @@ def test_the_report_refuses_a_directory_a_sweep_is_writing_into(
         assert (res / "report.md").exists()
     assert report_main([str(res), "--n-boot", "10"]) == 0  # the sweep is over: no word about it
     assert "sweep is running" not in capsys.readouterr().err
+
+
+# -- plans that cannot fit: refused before the sweep is even built --------------------------------
+
+HUGE = str(10**12)
+# (recipe, flags, the error line's start): each count large enough that no machine's memory, nor a year
+# at 10^9 steps a second, holds it
+CANNOT_FIT = [
+    ("train", ["--learnings", HUGE], f"--learnings {HUGE}: the plan holds at least 1e+12 learners of 81 bytes"),
+    ("qlearning", ["--learnings", HUGE], f"--learnings {HUGE}: the plan holds at least 1e+12 learners of 81 bytes"),
+    ("four_rooms", ["--learnings", HUGE], f"--learnings {HUGE}: the plan holds at least 1e+12 learners of 81 bytes"),
+    (  # its plan draws a random pattern per learning
+        "pick_and_place",
+        ["--preset", "tiny", "--learnings", HUGE],
+        f"--learnings {HUGE}: the plan holds at least 1e+12 learners of 81 bytes",
+    ),
+    (  # fits before the plan (a learner each), not once it has 10 patterns x 2 methods x 10**5 episodes
+        "qlearning",
+        ["--learnings", str(10**8), "--methods", "Q,HRS", "--episodes", str(10**5)],
+        f"--learnings {10**8}: 2,000,000,000 learners record at least",
+    ),
+    ("qlearning", ["--episodes", str(10**15)], f"--episodes {10**15}: one learner records 1e+15 episodes of 17 bytes"),
+    ("pinball", ["--episodes", str(10**15)], f"--episodes {10**15}: one learner records 1e+15 episodes of 17 bytes"),
+    ("train", ["--total-frames", str(10**30)], f"--total-frames {10**30}: one learner takes at least 1e+30 steps"),
+    ("a2c", ["--total-frames", str(10**30)], f"--total-frames {10**30}: one learner takes at least 1e+30 steps"),
+    ("pick_and_place", [*PICK_AND_PLACE, "--epochs", str(10**15)], f"--epochs {10**15}: one learner takes at least"),
+    (
+        "train",
+        ["--algo", "a2c", "--seed-batch", str(10**9), "--learnings", str(10**7)],
+        f"--seed-batch {10**9}: 2 chunks at once (--workers 2) of 100,000,000 learners hold at least",
+    ),
+    (
+        "qlearning",
+        ["--domain", "taxi", "--reward", "goal"],
+        "--reward goal: applies to --domain four_rooms and sparse_rooms only",
+    ),
+]
+
+
+@pytest.mark.parametrize(("name", "flags", "message"), CANNOT_FIT, ids=[f"{c[0]} {' '.join(c[1])}" for c in CANNOT_FIT])
+def test_a_plan_that_cannot_fit_is_one_line_before_anything_is_built(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, name: str, flags: list[str],
+    message: str,
+) -> None:  # fmt: skip
+    """Counts and sizes are checked before the sweep enumerates its learners (``--learnings 10**12`` grew
+    to 13.7 GB there) or writes ``config.json``; a flag that does not apply to the task is refused, not ignored."""
+    from torchrl_subgoal.experiments import recipe as recipe_module
+
+    def built(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the sweep was built: the plan was not refused first")
+
+    monkeypatch.setattr(recipe_module, "Sweep", built)
+    code = recipe(name).main([*flags, "--results", str(tmp_path / "r")])
+    line = one_error_line(code, capsys)
+    assert line.startswith(f"error: {message}"), line
+    assert "fit" in line or "leave it out" in line  # what would fit, or what to do
+    assert not (tmp_path / "r").exists()
+
+
+def test_a_ray_address_where_nothing_answers_is_one_line_before_anything_is_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ray itself retries such an address for minutes (over five, with ``config.json`` already written)."""
+    import socket
+
+    with socket.socket() as sock:  # a port nothing listens on: bound, never listening
+        sock.bind(("127.0.0.1", 0))
+        address = f"127.0.0.1:{sock.getsockname()[1]}"
+        monkeypatch.setenv("RAY_ADDRESS", address)
+        code = recipe("qlearning").main(["--episodes", "2", "--backend", "ray", "--results", str(tmp_path / "r")])
+    line = one_error_line(code, capsys)
+    assert line.startswith(f"error: RAY_ADDRESS={address}: no Ray cluster answers there (Connection refused); ")
+    assert not (tmp_path / "r").exists()

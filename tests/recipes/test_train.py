@@ -46,13 +46,14 @@ def test_on_policy_learners_on_four_rooms(tmp_path: Path, algo: str) -> None:
         "--total-frames",
         "512",
         "--sees-subgoal",
+        "True",
     ]
     assert run(tmp_path, *args) == 0
     summary = json.loads((tmp_path / "res" / "summary.json").read_text())
     assert summary["methods"]["HRS"]["learners"] == 10 and summary["n_episodes"] == 2  # 10 patterns; 2 x 256
 
 
-@pytest.mark.parametrize("algo", ["a2c", "ppo"])
+@pytest.mark.parametrize("algo", ["a2c", "ppo", "dqn"])
 def test_learners_as_seed_batches_report_and_resume(tmp_path: Path, algo: str) -> None:
     """``--seed-batch 4``: each method's learners train four at a time in one process; every learner reported and
     logged; a re-run resumes; another batch size is another experiment."""
@@ -71,10 +72,11 @@ def test_learners_as_seed_batches_report_and_resume(tmp_path: Path, algo: str) -
     assert run(tmp_path, *args[:-1], "2") == 2  # chunks of 2 learners are another experiment's
 
 
-@pytest.mark.parametrize("algo", ["ppo", "ddpg"])
-def test_continuous_learners_on_point_maze(tmp_path: Path, algo: str) -> None:
+@pytest.mark.parametrize(("algo", "batch"), [("ppo", "1"), ("ddpg", "1"), ("ddpg", "2")])
+def test_continuous_learners_on_point_maze(tmp_path: Path, algo: str, batch: str) -> None:
     """Each pattern of the maze is one direction of its route: HRS runs one learner per pattern, the unshaped
-    learner as many, the directions picked by learning number."""
+    learner as many, the directions picked by learning number; as a seed batch, each learner of the batch
+    runs its own task."""
     args = [
         "--algo",
         algo,
@@ -88,6 +90,8 @@ def test_continuous_learners_on_point_maze(tmp_path: Path, algo: str) -> None:
         "128",
         "--num-envs",
         "2",
+        "--seed-batch",
+        batch,
         *(["--reshape-samples"] if algo == "ddpg" else []),
     ]
     assert run(tmp_path, *args) == 0
@@ -131,8 +135,10 @@ def test_continuous_learners_on_point_maze(tmp_path: Path, algo: str) -> None:
         (["--logger", "mlflow"], "argument --logger: invalid choice: 'mlflow'"),
         (["--algo", "dqn", "--learnings", "0"], "--learnings: must be >= 1, got 0"),
         (["--algo", "sac"], "argument --algo: invalid choice: 'sac'"),
-        (["--algo", "dqn", "--seed-batch", "2"], "--seed-batch: dqn has no batch of learners (a2c, ppo have)"),
-        (["--algo", "ppo", "--domain", "point_maze_umaze", "--seed-batch", "2"], "its own task"),
+        (
+            ["--algo", "ppo", "--domain", "point_maze_umaze", "--seed-batch", "2", "--env-workers", "2"],
+            "--seed-batch: point_maze_umaze gives each learner its own task",
+        ),
         (["--seed-batch", "0"], "--seed-batch: must be >= 1, got 0"),
         (["--algo", "a2c", "--seed-batch", "2", "--no-online-potential"], "--seed-batch: trains each learner's table"),
         (

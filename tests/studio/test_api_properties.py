@@ -213,3 +213,95 @@ def test_a_save_succeeds_exactly_when_host_origin_and_content_type_are_the_studi
         expected = served and same_origin and content_type.startswith("application/json")
         assert (response.status_code == 200) == expected, (response.status_code, response.json)
         assert (folder / "h.yaml").exists() == expected
+
+
+# valid requests of every route that reads JSON; the property below puts a value of the wrong type
+# (or nothing) at one place in one of them
+FOUR_ROOMS = {
+    "domain": "four_rooms",
+    "map": "",
+    "file": "a.yaml",
+    "description": "hallways",
+    "patterns": [
+        {
+            "name": "p",
+            "subgoals": [{"name": "a", "cell": [3, 6]}, {"name": "b", "cell": [7, 9]}],
+            "order": [["a", "b"]],
+            "description": "one",
+        },
+        {"name": "q", "subgoals": [{"state": 5}], "order": None},
+    ],
+}
+PINBALL = {
+    "domain": "pinball",
+    "map": "simple",
+    "patterns": [{"name": "p", "subgoals": [{"circle": {"centre": [0.5, 0.1], "radius": 0.04}}], "order": None}],
+}
+PICK_AND_PLACE = {
+    "domain": "pick_and_place",
+    "patterns": [
+        {
+            "name": "p",
+            "subgoals": [
+                {"box": {"components": ["object_relative_position"], "centre": [0.0, 0.0, 0.0], "margin": 0.01}},
+                {"box": {"components": ["object_position"], "centre": [1.3, 0.7, 0.6], "margin": [0.02, 0.02, 0.05]}},
+            ],
+        }
+    ],
+}
+TRY = {"pattern": "p", "episodes": 5, "learners": 2, "max_steps": 50}
+REQUESTS = [
+    (method, url, body)
+    for body in (FOUR_ROOMS, PINBALL, PICK_AND_PLACE)
+    for method, url in (("post", "/api/validate"), ("put", "/api/files/h.yaml?overwrite=1"))
+] + [("post", "/api/try", {**FOUR_ROOMS, **TRY}), ("post", "/api/try", {**PINBALL, **TRY})]
+#: a value of each JSON type (a place that expects one type gets every other one)
+KINDS = {
+    "null": st.none(),
+    "boolean": st.booleans(),
+    "integer": st.integers(),
+    "number": st.floats(allow_nan=False, allow_infinity=False),
+    "string": st.text(max_size=8),
+    "list": st.lists(LEAVES, max_size=3),
+    "object": st.dictionaries(st.sampled_from(KEYS[:-2]) | st.text(max_size=4), LEAVES, max_size=3),
+}
+MISSING = object()
+
+
+def places(value: Any, path: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
+    """Every place in a JSON value: the keys and indices that lead to each member, at every depth."""
+    inner = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else []
+    return [found for key, member in inner for found in [(*path, key), *places(member, (*path, key))]]
+
+
+def put_at(value: Any, path: tuple[Any, ...], new: Any) -> Any:
+    """A copy of ``value`` with ``new`` at ``path`` (:data:`MISSING`: the member removed)."""
+    copy = json.loads(json.dumps(value))
+    *parents, last = path
+    holder = copy
+    for key in parents:
+        holder = holder[key]
+    if new is MISSING:
+        del holder[last]
+    else:
+        holder[last] = new
+    return copy
+
+
+@pytest.mark.parametrize("kind", [*KINDS, "missing"])
+@settings(PROPERTY, max_examples=4)
+@given(data=st.data())
+def test_every_field_of_every_route_with_a_wrong_type_gets_a_4xx_or_an_answer(kind: str, data: st.DataObject) -> None:
+    """Every place of every route's request gets a value of ``kind`` (or loses its member): a list or an
+    object where a name is expected (``"pattern": ["p"]`` was a 500), a number where a list is. Each
+    route answers with a 2xx or a 4xx saying what is wrong, and a refused save writes nothing."""
+    new = MISSING if kind == "missing" else data.draw(KINDS[kind], label="value")
+    with studio() as (client, folder):
+        for method, url, valid in REQUESTS:
+            for path in places(valid):
+                body = json.dumps(put_at(valid, path, new))
+                before = sorted(p.name for p in folder.iterdir())
+                response = getattr(client, method)(url, data=body, content_type="application/json")
+                check_answer(response)
+                if response.status_code >= 400 and method == "put":
+                    assert sorted(p.name for p in folder.iterdir()) == before, (url, path)

@@ -4,7 +4,9 @@ requests, a missing token, malformed bodies. Every refusal is a 4xx that changes
 
 from __future__ import annotations
 
+import json
 import os
+import socket
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -14,6 +16,7 @@ import pytest
 from flask import Flask
 from flask.testing import FlaskClient
 
+from tests.studio.browser import live_studio
 from torchrl_subgoal import load_patterns
 from torchrl_subgoal.studio import server
 from torchrl_subgoal.studio.document import MAX_REQUEST_BYTES
@@ -46,7 +49,9 @@ def gated(monkeypatch: pytest.MonkeyPatch) -> Iterator[threading.Event]:
     """``try_pattern`` replaced by a job that waits for the gate (or its cancellation): jobs started stay visible."""
     gate = threading.Event()
 
-    def blocked(domain: str, series: Any, settings: Any, *, map: Any = None, progress: Any = None) -> Any:
+    def blocked(
+        domain: str, series: Any, settings: Any, *, method: str = "HRS", map: Any = None, progress: Any = None
+    ) -> Any:
         while not gate.wait(0.01):
             progress(0)
         return {"ok": True}
@@ -181,6 +186,51 @@ def test_a_foreign_host_is_refused_and_changes_nothing(
     assert snapshot(folder) == before
     jobs = app.extensions["studio"].jobs
     assert [j.id for j in jobs.running()] == [job]  # no job started, the running one not cancelled
+
+
+def raw_request(port: int, method: str, path: str, headers: dict[str, str], body: bytes = b"") -> tuple[int, bytes]:
+    """One HTTP/1.1 request written byte by byte on a socket (no client adds a ``Host``): status, body."""
+    lines = [f"{method} {path} HTTP/1.1", *(f"{k}: {v}" for k, v in headers.items())]
+    lines += [f"Content-Length: {len(body)}", "Connection: close"]
+    with socket.create_connection(("127.0.0.1", port), timeout=120) as sock:
+        sock.sendall(("\r\n".join(lines) + "\r\n\r\n").encode() + body)
+        answer = b""
+        while chunk := sock.recv(65536):
+            answer += chunk
+    head, _, content = answer.partition(b"\r\n\r\n")
+    return int(head.split()[1]), content
+
+
+def test_a_request_without_a_host_header_is_refused_and_changes_nothing(tmp_path: Path) -> None:
+    """Browsers always send ``Host``; a request without one (HTTP/1.1, the right token) names no studio: 403."""
+    folder = tmp_path / "files"
+    with live_studio(folder) as (url, app):
+        port, token = int(url.split(":")[2].split("/")[0]), url.split("token=")[1]
+        (folder / "kept.yaml").write_text("patterns: {p: {subgoals: [{cell: [3, 6]}]}}\n")
+        before = snapshot(folder)
+        auth = {"X-Studio-Token": token}
+        as_json = {**auth, "Content-Type": "application/json"}
+        body = json.dumps(DRAWING).encode()
+        requests = [
+            ("GET", "/", auth, b""),
+            ("GET", "/api/files", auth, b""),
+            ("GET", "/api/files/kept.yaml", auth, b""),
+            ("GET", "/files/kept.yaml", auth, b""),
+            ("POST", "/api/validate", as_json, body),
+            ("PUT", "/api/files/new.yaml", as_json, body),
+            ("PUT", "/api/files/kept.yaml?overwrite=1", as_json, body),
+            ("POST", "/api/try", as_json, body),
+            ("DELETE", "/api/try/nope", auth, b""),
+        ]
+        answers = {
+            (method, path): raw_request(port, method, path, headers, data) for method, path, headers, data in requests
+        }
+        assert {key: status for key, (status, _) in answers.items()} == {key: 403 for key in answers}
+        assert b"no Host header" in answers[("GET", "/api/files")][1]
+        assert snapshot(folder) == before
+        assert app.extensions["studio"].jobs.running() == []
+        served = raw_request(port, "GET", "/api/files", {**auth, "Host": f"127.0.0.1:{port}"})
+        assert served[0] == 200 and b"kept.yaml" in served[1]  # the same request naming the studio is served
 
 
 @pytest.mark.parametrize(

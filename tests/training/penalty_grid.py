@@ -5,7 +5,7 @@ return of the agent's own early episodes pays it to wander.
 four moves (clamped at the walls) cost −1; the fifth, "idle", stays and costs ``penalty``. Episodes are
 truncated after ``max_steps``. The observation is the cell number ``row · width + col``. A random policy
 idles a fifth of the time, so its early returns are far below the optimal ones (the optimum takes
-``2 (width − 1)`` steps).
+``2 (width − 1)`` steps). ``"success"`` says an episode reached the goal (its only termination).
 """
 
 from __future__ import annotations
@@ -27,7 +27,11 @@ class PenaltyGrid(EnvBase):
         super().__init__(batch_size=torch.Size([num_envs]))
         self.width, self.max_steps, self.penalty = width, max_steps, penalty
         n = (num_envs,)
-        self.observation_spec = Composite(observation=Categorical(width * width, shape=n, dtype=torch.long), shape=n)
+        self.observation_spec = Composite(
+            observation=Categorical(width * width, shape=n, dtype=torch.long),
+            success=Categorical(2, (*n, 1), dtype=torch.bool),
+            shape=n,
+        )
         self.action_spec = Categorical(5, shape=n, dtype=torch.long)
         self.reward_spec = Unbounded(shape=(*n, 1))
         self.done_spec = Composite(
@@ -50,7 +54,13 @@ class PenaltyGrid(EnvBase):
         self.steps.masked_fill_(mask, 0)
         false = torch.zeros(*self.batch_size, 1, dtype=torch.bool)
         return TensorDict(
-            {"observation": self._obs(), "done": false, "terminated": false.clone(), "truncated": false.clone()},
+            {
+                "observation": self._obs(),
+                "success": false.clone(),
+                "done": false,
+                "terminated": false.clone(),
+                "truncated": false.clone(),
+            },
             self.batch_size,
         )
 
@@ -64,6 +74,7 @@ class PenaltyGrid(EnvBase):
         return TensorDict(
             {
                 "observation": self._obs(),
+                "success": terminated.clone(),
                 "reward": reward,
                 "done": terminated | truncated,
                 "terminated": terminated,

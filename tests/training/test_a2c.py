@@ -25,7 +25,6 @@ from torchrl_subgoal.training import (
     experiment_logger,
     shaped_env,
     train_a2c,
-    train_a2c_batch,
 )
 
 from ..line_env import LineEnv
@@ -83,7 +82,7 @@ def test_a2c_learns_four_rooms_and_trains_the_potential(tmp_path: Path) -> None:
     shaping = Shaping(HALLWAYS, potential, {"observation_key": "cell"})
     config = A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=40_960, online_potential=False)
     logger = experiment_logger(tmp_path, "HRS_test")
-    curve = train_a2c(four_rooms_env, config, shaping=shaping, seed=0, logger=logger)
+    curve = train_a2c(four_rooms_env, config, shaping=shaping, seeds=[0], loggers=[logger]).curve
     assert len(curve.frames) == config.iterations == 160 and curve.frames[-1] == 40_960
     assert curve.episode_length[0] == 1000.0  # the cap until an episode finished
     assert curve.episodes[-1] > 100 and min(curve.episode_length) < 150  # it learns
@@ -100,7 +99,7 @@ def test_the_default_trains_the_potential_online_and_logs_its_table(tmp_path: Pa
     shaping = Shaping(HALLWAYS, potential, {"observation_key": "cell"})
     config = A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=20_480)
     assert config.online_potential
-    train_a2c(four_rooms_env, config, shaping=shaping, seed=0, logger=experiment_logger(tmp_path, "HRS_online"))
+    train_a2c(four_rooms_env, config, shaping=shaping, seeds=[0], loggers=[experiment_logger(tmp_path, "HRS_online")])
     logged = {p.stem: p for p in tmp_path.rglob("*.csv")}
     assert "loss_potential" not in logged
     last = [float(logged[f"potential_z{z}"].read_text().split()[-1].split(",")[-1]) for z in range(3)]
@@ -118,7 +117,7 @@ def test_a2c_with_envs_in_worker_processes(online: bool, workers: dict[str, int]
     config = A2CConfig(
         features="one_hot", hidden=(), total_frames=2048, online_potential=online, value_lr=0.1, **workers
     )
-    curve = train_a2c(lambda n: LineEnv(n, length=4), config, shaping=shaping, seed=1, episode_cap=100)
+    curve = train_a2c(lambda n: LineEnv(n, length=4), config, shaping=shaping, seeds=[1], episode_cap=100).curve
     assert len(curve.frames) == 8
     assert curve.episodes[-1] > 0 and bool((potential.table.detach() > 0.5).all())
 
@@ -130,7 +129,7 @@ def test_a_frozen_potential_stays_frozen_in_worker_processes(workers: dict[str, 
     potential = TabularPotential(3).freeze([0.25, 0.5, 0.75])
     shaping = Shaping(SubgoalSeries([State(1), State(3)]), potential)
     config = A2CConfig(features="one_hot", hidden=(), total_frames=2048, value_lr=0.1, **workers)
-    curve = train_a2c(lambda n: LineEnv(n, length=4), config, shaping=shaping, seed=1, episode_cap=100)
+    curve = train_a2c(lambda n: LineEnv(n, length=4), config, shaping=shaping, seeds=[1], episode_cap=100).curve
     assert curve.episodes[-1] > 0 and potential.table.tolist() == [0.25, 0.5, 0.75]
 
 
@@ -140,7 +139,7 @@ def test_a2c_with_two_collector_workers_takes_a_sweep_seed() -> None:
     config = A2CConfig(
         features="one_hot", hidden=(), num_envs=4, frames_per_batch=64, total_frames=256, collector_workers=2
     )
-    curve = train_a2c(lambda n: LineEnv(n, length=4), config, seed=2**62 + 5, episode_cap=100)
+    curve = train_a2c(lambda n: LineEnv(n, length=4), config, seeds=[2**62 + 5], episode_cap=100).curve
     assert len(curve.frames) == config.iterations == 4
     assert curve.frames == [64, 128, 192, 256]
     with pytest.raises(ValueError, match=r"multiple of num_envs x collector_workers \(4 x 3\)"):
@@ -177,7 +176,7 @@ def test_a_process_exits_after_close_collector(tmp_path: Path) -> None:
 def test_naive_potential_is_not_trained() -> None:
     shaping = Shaping(HALLWAYS, NaivePotential(1.0), {"observation_key": "cell"})
     assert not shaping.trained
-    curve = train_a2c(four_rooms_env, A2CConfig(features="one_hot", hidden=(), total_frames=512), shaping=shaping)
+    curve = train_a2c(four_rooms_env, A2CConfig(features="one_hot", hidden=(), total_frames=512), shaping=shaping).curve
     assert len(curve.frames) == 2
 
 
@@ -237,7 +236,7 @@ def test_train_a2c_on_a_single_env_batched_by_serial_env() -> None:
     series = SubgoalSeries([State(24)])
     shaping = Shaping(series, TabularPotential(2), {"observation_key": "observation"})
     config = A2CConfig(num_envs=2, frames_per_batch=32, total_frames=64, features="one_hot", hidden=())
-    curve = train_a2c(batched(make_single), config, shaping=shaping, seed=0, episode_cap=100)
+    curve = train_a2c(batched(make_single), config, shaping=shaping, seeds=[0], episode_cap=100).curve
     assert curve.frames == [32, 64]
 
 
@@ -249,9 +248,9 @@ def test_a2c_learners_as_a_batch_each_learn_with_their_own_table(tmp_path: Path)
     config = A2CConfig(features="one_hot", hidden=(), lr=1e-2, total_frames=40_960)
     ticks: list[int] = []
     loggers = [experiment_logger(tmp_path, f"HRS_{k}") for k in range(3)]
-    curves = train_a2c_batch(
-        four_rooms_env, config, [0, 1, 2], shapings=shapings, loggers=loggers, progress=ticks.append
-    )
+    curves = train_a2c(
+        four_rooms_env, config, seeds=[0, 1, 2], shaping=shapings, loggers=loggers, progress=ticks.append
+    ).curves
     assert len(ticks) == 3 * config.iterations
     for k, curve in enumerate(curves):
         assert curve.frames[-1] == 40_960 and len(curve.frames) == config.iterations
@@ -266,8 +265,7 @@ def test_a2c_learners_as_a_batch_each_learn_with_their_own_table(tmp_path: Path)
 @pytest.mark.parametrize(
     ("settings", "match"),
     [
-        ({"collector_workers": 1}, "collector_workers off"),
-        ({"normalize_advantage": True}, "normalize_advantage off"),
+        ({"collector_workers": 1}, "collector_workers 0"),
         ({"online_potential": False}, "online_potential must be True"),
     ],
 )
@@ -275,4 +273,4 @@ def test_a2c_learner_batch_refuses_settings_it_has_no_per_learner_version_of(set
     config = A2CConfig(features="one_hot", hidden=(), total_frames=512, **settings)
     shapings = [Shaping(HALLWAYS, TabularPotential(3), {"observation_key": "cell"}) for _ in range(2)]
     with pytest.raises(ValueError, match=match):
-        train_a2c_batch(four_rooms_env, config, [0, 1], shapings=shapings)
+        train_a2c(four_rooms_env, config, seeds=[0, 1], shaping=shapings)

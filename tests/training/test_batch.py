@@ -135,7 +135,10 @@ def test_batch_shaping_gives_each_learner_its_table_and_series() -> None:
         ([Shaping(HALLWAYS, TabularPotential(3)), Shaping(HALLWAYS, TabularPotential(3), {"gamma": 0.5})], "options"),
         ([Shaping(HALLWAYS, NaivePotential(0.5)), Shaping(HALLWAYS, NaivePotential(1.0))], "different eta"),
         ([Shaping(HALLWAYS, TabularPotential(3)), Shaping(HALLWAYS, NaivePotential(1.0))], "one TabularPotential"),
-        ([Shaping([HALLWAYS, HALLWAYS, HALLWAYS], TabularPotential(3))], "given 3 subgoal series"),
+        (
+            [Shaping([HALLWAYS, HALLWAYS, HALLWAYS], TabularPotential(3)), Shaping(HALLWAYS, TabularPotential(3))],
+            "given 3 subgoal series",
+        ),
     ],
 )
 def test_batch_shaping_refuses_learners_it_cannot_batch(shapings: list, match: str) -> None:

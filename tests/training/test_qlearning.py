@@ -33,7 +33,8 @@ def _shaped(grid: PenaltyGrid, **target: object) -> tuple[TransformedEnv, Tabula
 
 
 def _success(env: TransformedEnv | PenaltyGrid) -> float:
-    records = train_qlearning(env, QLearningConfig(episodes=EPISODES, lr=0.25, epsilon=0.1, gamma=GAMMA), seed=0)
+    config = QLearningConfig(episodes=EPISODES, lr=0.25, epsilon=0.1, gamma=GAMMA)
+    records = train_qlearning(env, config, seed=0).records  # success: the grid's own "success" entry
     return float(records.success[:, -20:].float().mean())
 
 
@@ -79,3 +80,21 @@ def test_bad_settings_and_observations_are_refused() -> None:
 
     with pytest.raises(ValueError, match="categorical observation 'cell'"):
         train_qlearning(FourRoomsEnv(2), QLearningConfig(episodes=1), observation_key="cell")
+
+
+def test_an_episode_that_ends_in_a_hole_is_no_success() -> None:
+    """FrozenLake ends an episode in a hole as in the goal; success is the goal's reward of 1, not the end."""
+    import functools
+
+    import gymnasium
+
+    from torchrl_subgoal.envs.gym_batch import gym_batch
+    from torchrl_subgoal.training import SuccessSignal
+
+    env = gym_batch([functools.partial(gymnasium.make, "FrozenLake-v1", is_slippery=False)] * 8, max_steps=100)
+    trained = train_qlearning(env, QLearningConfig(episodes=20, epsilon=1.0), success=SuccessSignal(final_reward=1.0))
+    records = trained.records
+    ended = records.steps < 100  # terminated: a hole or the goal
+    assert bool(ended.all()) and bool(torch.equal(records.success, records.returns >= 1.0))
+    assert 0 < int(records.success.sum()) < int(ended.sum())  # most random walks fall into a hole
+    assert trained.policy(3).table.shape == (1, 16, 1, 4)

@@ -48,18 +48,33 @@ def _expectile_weight(expectile, delta):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _table_value(table, ancestors, row, b, z):
+    """``V(z)`` as the shaping reads it from ``table[row]``: the entry, or with a monotone table
+    (``ancestors`` not empty) the largest entry of ``z`` and of the states before it in row ``b``'s
+    series (``ancestors[b, z, a]``; :func:`torchrl_subgoal.transform.shaping.ancestral_max`)."""
+    if ancestors.shape[0] == 0:
+        return table[row, z]
+    best = -np.inf
+    for a in range(ancestors.shape[2]):
+        if ancestors[b, z, a] and table[row, a] > best:
+            best = table[row, a]
+    return best
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _shaped_reward(
-    table, row, zb, znb, achieved_prev, terminated, z_start, reward, eta, gamma, zero_terminal, start_mode
+    table, ancestors, row, b, zb, znb, achieved_prev, terminated, z_start, reward, eta, gamma, zero_terminal, start_mode
 ):
-    """``r + γ Φ(z') − Φ(z)`` with the potential as it is now (see :func:`shape_step`)."""
+    """``r + γ Φ(z') − Φ(z)`` with the potential as it is now (see :func:`shape_step`); ``row`` is the
+    table's row, ``b`` the batch row (whose series ``ancestors`` describes)."""
     if table.shape[0] == 0:
         phi = eta if achieved_prev else 0.0
         phi_next = eta if znb != zb else 0.0
     else:
-        phi = table[row, zb]
-        phi_next = table[row, znb]
+        phi = _table_value(table, ancestors, row, b, zb)
+        phi_next = _table_value(table, ancestors, row, b, znb)
         if start_mode != START_VALUE:  # shift Φ so that the start's potential is 0 or ≤ 0
-            v0 = table[row, z_start]
+            v0 = _table_value(table, ancestors, row, b, z_start)
             c = v0 if start_mode == START_ZERO else max(v0, 0.0)
             phi -= c
             phi_next -= c
@@ -94,6 +109,8 @@ def _shape_learner(potential, row, zb, znb, achieved_prev, r_h, k, reward, done,
             table[row, zb] += potential.value_lr * _expectile_weight(potential.expectile, delta) * delta
     shaped = _shaped_reward(
         table,
+        potential.ancestors,
+        row,
         row,
         zb,
         znb,
@@ -244,7 +261,9 @@ def _shape_shared(
     for b in range(n):
         reward_out[b, 0] = _shaped_reward(
             table,
+            potential.ancestors,
             b // group,
+            b,
             z[b, 0],
             z_next[b, 0],
             achieved_prev[b, 0],

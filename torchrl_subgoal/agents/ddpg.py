@@ -15,7 +15,9 @@
   per-step spec work);
 * a TorchRL :class:`~torchrl.data.ReplayBuffer` of the DDPG keys only.
 
-:class:`DDPGAgent` holds them all and exposes what a training loop needs:
+:class:`DDPGAgent` holds them all, for one learner or a batch of ``K`` (stacked networks,
+per-learner normalisers and replay: :mod:`torchrl_subgoal.agents.stack`), and exposes what a
+training loop needs:
 ``policy`` (exploring) and ``greedy`` (for evaluation), ``extend`` (store a
 collected batch and update the normaliser), ``update`` (one gradient step
 of critic and actor) and ``soft_update``; its ``state_dict`` covers networks,
@@ -34,13 +36,13 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule, TensorDictSequential
 from tensordict.utils import NestedKey
 from torch import nn
-from torchrl.data import Bounded, LazyTensorStorage, ReplayBuffer
-from torchrl.data.replay_buffers import RandomSampler
+from torchrl.data import Bounded
 from torchrl.envs.utils import ExplorationType, exploration_type
 from torchrl.modules import MLP, Actor, ValueOperator
 from torchrl.objectives import DDPGLoss, SoftUpdate, TD3Loss
 from torchrl.objectives.value import TD0Estimator
 
+from torchrl_subgoal.agents.stack import LearnerReplay, LearnerStack, learner_means
 from torchrl_subgoal.agents.subgoal_input import SUBGOAL_INDEX, SubgoalInput
 
 __all__ = ["ClippedTD0Estimator", "DDPGAgent", "DDPGConfig", "GaussianOrRandom", "RunningNorm", "TD3Settings", "mlp"]
@@ -124,20 +126,28 @@ def mlp(in_features: int, out_features: int, hidden: Sequence[int]) -> MLP:
 
 
 class RunningNorm(nn.Module):
-    """``clip((x − mean) / max(std, eps), ±clip)`` with mean and s.d. of all data seen so far.
+    """``clip((x − mean) / max(std, eps), ±clip)`` with mean and s.d. of all data seen so far, one set of
+    statistics per learner of a batch.
 
-    The statistics are buffers (saved in ``state_dict``) changed only by :meth:`update`.
+    The statistics are buffers (saved in ``state_dict``) changed only by :meth:`update`. With ``learners``
+    ``K``, the inputs' first dim is learner-major (``K·M`` rows, or ``K`` rows of samples), each learner's
+    rows normalised by, and added to, its own statistics.
 
     Args:
         size: features of ``x``.
         eps: the smallest standard deviation.
         clip: bound of the normalised values.
+        learners: ``K``.
 
     Examples:
         >>> norm = RunningNorm(2)
         >>> norm.update(torch.tensor([[0.0, 1.0], [2.0, 1.0]]))
         >>> norm(torch.tensor([[2.0, 1.0]]))
         tensor([[1., 0.]])
+        >>> two = RunningNorm(1, learners=2)
+        >>> two.update(torch.tensor([[0.0], [2.0], [10.0], [30.0]]))  # learner 0: 0, 2; learner 1: 10, 30
+        >>> two(torch.tensor([[1.0], [20.0]])).flatten().tolist(), float(two.learner(1).mean)
+        ([0.0, 0.0], 20.0)
     """
 
     total: torch.Tensor
@@ -146,29 +156,37 @@ class RunningNorm(nn.Module):
     mean: torch.Tensor
     std: torch.Tensor
 
-    def __init__(self, size: int, eps: float = 0.01, clip: float = 5.0) -> None:
+    def __init__(self, size: int, eps: float = 0.01, clip: float = 5.0, learners: int = 1) -> None:
         super().__init__()
-        self.eps, self.clip = float(eps), float(clip)
-        self.register_buffer("total", torch.zeros(size, dtype=torch.float64))
-        self.register_buffer("total_sq", torch.zeros(size, dtype=torch.float64))
-        self.register_buffer("count", torch.zeros((), dtype=torch.float64))
-        self.register_buffer("mean", torch.zeros(size))
-        self.register_buffer("std", torch.ones(size))
+        self.eps, self.clip, self.learners = float(eps), float(clip), int(learners)
+        self.register_buffer("total", torch.zeros(learners, size, dtype=torch.float64))
+        self.register_buffer("total_sq", torch.zeros(learners, size, dtype=torch.float64))
+        self.register_buffer("count", torch.zeros(learners, 1, dtype=torch.float64))
+        self.register_buffer("mean", torch.zeros(learners, size))
+        self.register_buffer("std", torch.ones(learners, size))
 
     @torch.no_grad()
     def update(self, x: torch.Tensor) -> None:
-        """Add a batch ``[..., size]`` to the statistics."""
-        flat = x.reshape(-1, x.shape[-1]).to(torch.float64)
-        self.total += flat.sum(0)
-        self.total_sq += flat.square().sum(0)
-        self.count += flat.shape[0]
+        """Add a batch ``[K·rows, ..., size]`` (learner-major) to each learner's statistics."""
+        own = x.reshape(self.learners, -1, x.shape[-1]).to(torch.float64)
+        self.total += own.sum(1)
+        self.total_sq += own.square().sum(1)
+        self.count += own.shape[1]
         mean = self.total / self.count
         var = (self.total_sq / self.count - mean.square()).clamp_min(self.eps**2)
         self.mean.copy_(mean)
         self.std.copy_(var.sqrt())
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return ((x - self.mean) / self.std).clamp(-self.clip, self.clip)
+        own = x.reshape(self.learners, -1, x.shape[-1])
+        return ((own - self.mean.unsqueeze(1)) / self.std.unsqueeze(1)).clamp(-self.clip, self.clip).reshape(x.shape)
+
+    def learner(self, k: int) -> RunningNorm:
+        """Learner ``k``'s statistics, as a normaliser of its own."""
+        own = RunningNorm(self.mean.shape[-1], self.eps, self.clip).to(self.mean.device)
+        for name, buffer in own.named_buffers():
+            buffer.copy_(getattr(self, name)[k : k + 1])
+        return own
 
 
 class GaussianOrRandom(nn.Module):
@@ -265,7 +283,16 @@ class TD3Settings:
 
 
 class DDPGAgent(nn.Module):
-    """Actor, critic, their optimisers, target networks, exploration and replay buffer.
+    """Actor, critic, their optimisers, target networks, exploration and replay buffer of ``K`` learners.
+
+    One learner is a batch of one. With several (``seeds``), every network is a
+    :class:`~torchrl_subgoal.agents.stack.LearnerStack` of the learners' own (each
+    started from its seed), the normaliser keeps each learner's statistics, the
+    replay buffer has a learner dim (:class:`~torchrl_subgoal.agents.stack.LearnerReplay`:
+    each learner samples its own transitions), and each learner's losses are its own
+    means over its own samples: what Adam, the target updates and the exploration do
+    is each learner's alone. The acting inputs' first dim is the learners' env batch,
+    learner-major.
 
     Args:
         observation_size: entries of the observation vector.
@@ -280,6 +307,8 @@ class DDPGAgent(nn.Module):
             normalised observation (:class:`~torchrl_subgoal.agents.subgoal_input.SubgoalInput`).
         td3: TD3 instead of DDPG (``config.action_l2`` must then be 0).
         keys: more entries the replay buffer keeps (e.g. what re-shaping a sample reads).
+        seeds: one per learner: torch is seeded with it before the learner's actor and critic are built
+            (``None``: one learner, built from torch's current state).
 
     Examples:
         >>> from torchrl.data import Bounded
@@ -297,6 +326,10 @@ class DDPGAgent(nn.Module):
         >>> td3.extend(data)
         >>> sorted(td3.update())
         ['loss_value']
+        >>> two = DDPGAgent(25, spec, DDPGConfig(hidden=(32,), batch_size=8), seeds=[0, 1])
+        >>> two.extend(data)  # rows 0-7 learner 0's, 8-15 learner 1's
+        >>> two.update()["loss_value"].shape  # each learner's loss
+        torch.Size([2])
     """
 
     def __init__(
@@ -310,6 +343,7 @@ class DDPGAgent(nn.Module):
         subgoal_states: int = 0,
         td3: TD3Settings | None = None,
         keys: Sequence[NestedKey] = (),
+        seeds: Sequence[int] | None = None,
     ) -> None:
         super().__init__()
         if td3 is not None and config.action_l2:
@@ -319,6 +353,7 @@ class DDPGAgent(nn.Module):
         self.config, self.td3 = config, td3
         self.device = torch.device(device)
         self.observation_key = observation_key
+        self.learners = k = len(seeds) if seeds is not None else 1
         action_size = int(action_spec.shape[-1])
         z = [SUBGOAL_INDEX] if subgoal_states else []
         self.keys: tuple[NestedKey, ...] = tuple(
@@ -331,23 +366,26 @@ class DDPGAgent(nn.Module):
                     ("next", "done"),
                     ("next", "terminated"),
                     *z,
-                    *(("next", k) for k in z),
+                    *(("next", key) for key in z),
                     *keys,
                 ]
             )
         )
-        self.norm = RunningNorm(observation_size, config.norm_eps, config.norm_clip)
+        self.norm = RunningNorm(observation_size, config.norm_eps, config.norm_clip, learners=k)
         normalize = TensorDictModule(self.norm, in_keys=[observation_key], out_keys=[NORMALIZED])
-        actor_net: nn.Module = nn.Sequential(
-            mlp(observation_size + subgoal_states, action_size, config.hidden), nn.Tanh()
-        )
-        if subgoal_states:
-            actor_net = SubgoalInput(subgoal_states, body=actor_net)
-        self.actor = Actor(actor_net, in_keys=[NORMALIZED, *z], spec=action_spec)
-        self.critic = ValueOperator(
-            _QNet(mlp(observation_size + action_size + subgoal_states, 1, config.hidden), subgoal_states),
-            in_keys=[NORMALIZED, "action", *z],
-        )
+        actors, critics = [], []
+        for seed in seeds if seeds is not None else [None]:
+            if seed is not None:
+                torch.manual_seed(seed)
+            actor_net: nn.Module = nn.Sequential(
+                mlp(observation_size + subgoal_states, action_size, config.hidden), nn.Tanh()
+            )
+            actors.append(SubgoalInput(subgoal_states, body=actor_net) if subgoal_states else actor_net)
+            critics.append(
+                _QNet(mlp(observation_size + action_size + subgoal_states, 1, config.hidden), subgoal_states)
+            )
+        self.actor = Actor(LearnerStack(actors), in_keys=[NORMALIZED, *z], spec=action_spec)
+        self.critic = ValueOperator(LearnerStack(critics), in_keys=[NORMALIZED, "action", *z])
         self.greedy = TensorDictSequential(normalize, self.actor)
         # one module call per step: normaliser, actor network and exploration on the observation
         explore = GaussianOrRandom(action_spec.space.low, action_spec.space.high, config.noise_eps, config.random_eps)
@@ -361,7 +399,7 @@ class DDPGAgent(nn.Module):
         low = -config.clip_return if config.clip_return is not None else None
         self.loss: DDPGLoss | TD3Loss
         if td3 is None:
-            self.loss = DDPGLoss(self.actor, self.critic, delay_actor=True, delay_value=True)
+            self.loss = DDPGLoss(self.actor, self.critic, delay_actor=True, delay_value=True, reduction="none")
             estimator = ClippedTD0Estimator(
                 low=low, high=high, gamma=config.gamma, value_network=self.loss.actor_critic
             )
@@ -381,6 +419,7 @@ class DDPGAgent(nn.Module):
                 loss_function="l2",
                 delay_actor=True,
                 delay_qvalue=True,
+                reduction="none",
             )
             estimator = ClippedTD0Estimator(low=low, high=high, gamma=config.gamma, value_network=None)
             estimator.set_keys(value=self.loss.tensor_keys.state_action_value)
@@ -393,33 +432,30 @@ class DDPGAgent(nn.Module):
         critic_name = "value" if td3 is None else "qvalue"
         self._polyak_names = [(f"target_{n}_network_params", f"{n}_network_params") for n in ("actor", critic_name)]
         self._updates, self._actor_stepped = 0, False
-        # fused Adam (one kernel for all of a network's parameters): a third of the default's time on CPU
+        # fused Adam (one kernel for all of a network's parameters): a third of the default's time on CPU;
+        # its state is per element, so each learner's own
         fused = self.device.type in ("cpu", "cuda")
         self.actor_optimizer = torch.optim.Adam(
             self.loss.actor_network_params.values(True, True), lr=config.actor_lr, fused=fused
         )
         self.critic_optimizer = torch.optim.Adam(critic_params.values(True, True), lr=config.critic_lr, fused=fused)
-        # DDPGLoss trains the modules' own parameters (``loss.value_network_params`` are these tensors)
-        self._critic_parameters = list(self.critic.module.named_parameters())
-        self.replay = ReplayBuffer(
-            storage=LazyTensorStorage(config.buffer_size, device=self.device),
-            sampler=RandomSampler(),
-            batch_size=config.batch_size,
-        )
+        self.replay = LearnerReplay(k, config.buffer_size, config.batch_size, self.keys, self.device)
         self.to(self.device)
 
     def extend(self, data: TensorDictBase) -> None:
-        """Store a collected batch (any batch shape) and add its observations to the normaliser."""
-        flat = data.select(*self.keys).reshape(-1).to(self.device)
-        self.norm.update(flat[self.observation_key])
-        self.replay.extend(flat)
+        """Store a collected batch (first dim the learners' env batch, learner-major; any further dims) and
+        add its observations to each learner's normaliser."""
+        own = data.select(*self.keys).reshape(self.learners, -1).to(self.device)
+        self.norm.update(own[self.observation_key])
+        self.replay.extend(own)
 
-    def update(self) -> dict[str, float]:
-        """One Adam step of critic and actor on a replay sample; returns the losses (:meth:`update_on`)."""
+    def update(self) -> dict[str, torch.Tensor]:
+        """One Adam step of critic and actor on a replay sample; returns each learner's losses (:meth:`update_on`)."""
         return self.update_on(self.replay.sample())
 
-    def update_on(self, batch: TensorDictBase) -> dict[str, float]:
-        """One Adam step of critic and actor on ``batch`` (e.g. a replay sample re-shaped); returns the losses.
+    def update_on(self, batch: TensorDictBase) -> dict[str, torch.Tensor]:
+        """One Adam step of critic and actor on ``batch`` (``[K, B]``: learner ``k``'s samples in row ``k``, e.g.
+        a replay sample re-shaped); returns each learner's losses (``[K]``, detached).
 
         DDPG: the critic's loss is :class:`~torchrl.objectives.DDPGLoss`'s (its clipped TD(0)
         target through the target networks). The actor's loss is DDPGLoss's
@@ -428,42 +464,46 @@ class DDPGAgent(nn.Module):
         TD3: a step of both critics (:class:`~torchrl.objectives.TD3Loss`), and of the actor every
         ``policy_delay`` updates (then ``"loss_actor"`` is returned too).
         """
+        k = self.learners
         observation = self.norm(batch[self.observation_key])
         batch.set(NORMALIZED, observation)
         batch.set(("next", NORMALIZED), self.norm(batch["next", self.observation_key]))
         if self.td3 is not None:
             return self._td3_update(batch, self.td3)
         extra = (batch[SUBGOAL_INDEX],) if SUBGOAL_INDEX in self.actor.in_keys else ()
-        loss_value = self.loss.loss_value(batch)[0]
+        loss_value = learner_means(self.loss.loss_value(batch)[0], k)
         action = self.actor.module(observation, *extra)
-        detached = {name: p.detach() for name, p in self._critic_parameters}
-        loss_actor = -torch.func.functional_call(self.critic.module, detached, (observation, action, *extra)).mean()
+        critic: LearnerStack = self.critic.module
+        q = critic.call(critic.params.detach(), observation, action, *extra)
+        assert isinstance(q, torch.Tensor)
+        loss_actor = -learner_means(q, k)
         if self.config.action_l2:
-            loss_actor = loss_actor + self.config.action_l2 * action.square().mean()
+            loss_actor = loss_actor + self.config.action_l2 * learner_means(action.square(), k)
         # the actor's loss reads the critic through detached parameters and the critic's loss
         # reads no actor parameter: one backward pass gives each optimiser its own gradients
         self.critic_optimizer.zero_grad(set_to_none=True)
         self.actor_optimizer.zero_grad(set_to_none=True)
-        (loss_value + loss_actor).backward()
+        (loss_value + loss_actor).sum().backward()
         self.critic_optimizer.step()
         self.actor_optimizer.step()
-        return {"loss_value": loss_value.item(), "loss_actor": loss_actor.item()}
+        return {"loss_value": loss_value.detach(), "loss_actor": loss_actor.detach()}
 
-    def _td3_update(self, batch: TensorDictBase, td3: TD3Settings) -> dict[str, float]:
+    def _td3_update(self, batch: TensorDictBase, td3: TD3Settings) -> dict[str, torch.Tensor]:
         assert isinstance(self.loss, TD3Loss)
-        loss_value = self.loss.value_loss(batch)[0]
+        k = self.learners
+        loss_value = learner_means(self.loss.value_loss(batch)[0], k)
         self.critic_optimizer.zero_grad(set_to_none=True)
-        loss_value.backward()
+        loss_value.sum().backward()
         self.critic_optimizer.step()
         self._updates += 1
-        out = {"loss_value": loss_value.item()}
+        out = {"loss_value": loss_value.detach()}
         if self._updates % td3.policy_delay == 0:
-            loss_actor = self.loss.actor_loss(batch)[0]
+            loss_actor = learner_means(self.loss.actor_loss(batch)[0], k)
             self.actor_optimizer.zero_grad(set_to_none=True)
-            loss_actor.backward()
+            loss_actor.sum().backward()
             self.actor_optimizer.step()
             self._actor_stepped = True
-            out["loss_actor"] = loss_actor.item()
+            out["loss_actor"] = loss_actor.detach()
         return out
 
     def soft_update(self) -> None:

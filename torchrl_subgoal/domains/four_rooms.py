@@ -23,7 +23,7 @@ from torchrl_subgoal.experiments.paper import PaperResults, paper_table
 from torchrl_subgoal.experiments.plots import ReportMap
 from torchrl_subgoal.studio.domains import Limit, StudioDomain
 from torchrl_subgoal.subgoals import Cell, Predicate, State
-from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig
+from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig, SuccessSignal
 
 __all__ = ["A2C", "A2C_STEP", "DOMAIN", "PAPER", "STEP_DOMAIN", "STUDIO", "four_rooms_env", "four_rooms_step_env"]
 
@@ -89,7 +89,7 @@ def _sarsa(
     sarsa = SARSA_PRESETS["released"]
     env = four_rooms.FourRoomsEnv(num_envs=learners, max_steps=max_steps or 1000)
     agent = SoftmaxSarsa(learners, env.num_states, 4, sarsa, seed=seed)
-    return env, agent, {"gamma": sarsa.gamma, "value_lr": sarsa.value_lr, "observation_key": "cell"}
+    return env, agent, {"gamma": sarsa.gamma, "value_lr": sarsa.value_lr, "observation_key": "cell", "goal_reward": 1.0}
 
 
 def _candidates(seed: int) -> list[Predicate]:
@@ -135,6 +135,7 @@ A2C = LearnerDomain(
     },
     aggregation=four_rooms.room_aggregation,
     candidates=_candidates,
+    success=SuccessSignal(min_return=1.0),  # the goal's reward of 1 (every other step 0)
 )
 
 
@@ -146,6 +147,7 @@ A2C_STEP = dataclasses.replace(
     A2C,
     name="four_rooms_step",
     make_env=four_rooms_step_env,
+    success=SuccessSignal(min_return=-999.0),  # the goal reached within the 1,000-step cap (-1 a step, 0 there)
     defaults={
         **A2C.defaults,
         "a2c": dataclasses.replace(A2C.defaults["a2c"], total_frames=300_032),

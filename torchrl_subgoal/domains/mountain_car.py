@@ -19,7 +19,7 @@ from torchrl_subgoal.envs import mountain_car
 from torchrl_subgoal.experiments.plots import ReportMap, numbered_subgoals
 from torchrl_subgoal.studio.domains import BoxForm, StudioDomain
 from torchrl_subgoal.subgoals import Box, Predicate
-from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig
+from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig, SuccessSignal
 
 __all__ = ["DOMAIN", "FORM", "LEARNERS", "STUDIO", "check_subgoal"]
 
@@ -76,6 +76,7 @@ LEARNERS = LearnerDomain(
     mountain_car.SUBGOAL_FILE,
     eta=1.0,
     thresholds=(180.0, 150.0, 120.0),
+    success=SuccessSignal(min_return=-199.0),  # the flag within 199 steps (-1 a step; 200 is the time limit)
     defaults={
         "dqn": DQNConfig.preset("mountain_car"),  # rl-baselines3-zoo's tuned DQN
         # 50 batches of 16 steps per env = 4 whole 200-step episodes: while a learner never reaches the flag, its

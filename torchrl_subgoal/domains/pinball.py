@@ -24,7 +24,7 @@ from torchrl_subgoal.experiments.paper import PaperResults, paper_table
 from torchrl_subgoal.experiments.plots import ReportMap
 from torchrl_subgoal.studio.domains import Limit, StudioDomain
 from torchrl_subgoal.subgoals import Box, Circle, Predicate, StateAggregation
-from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig
+from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig, SuccessSignal
 
 __all__ = ["A2C", "DOMAIN", "PAPER", "STUDIO", "pinball_env"]
 
@@ -89,7 +89,11 @@ def _actor_critic(
     env = pinball.PinBallEnv(learners, map_ or "simple", max_steps=max_steps or 10_000, seed=seed)
     spec = env.observation_spec["observation"]
     agent = FourierActorCritic(learners, spec.low[0], spec.high[0], 5, ac, seed=seed)
-    return env, agent, {"gamma": ac.gamma, "value_lr": ac.value_lr, "observation_key": "observation"}
+    return (
+        env,
+        agent,
+        {"gamma": ac.gamma, "value_lr": ac.value_lr, "observation_key": "observation", "goal_reward": 10_000.0},
+    )
 
 
 def _candidates(seed: int) -> list[Predicate]:
@@ -110,6 +114,7 @@ A2C = LearnerDomain(
     str(files("torchrl_subgoal") / "data" / "pinball_participants.yaml"),
     eta=1.0,
     thresholds=(3000.0, 2000.0, 1000.0, 500.0),
+    success=SuccessSignal(min_return=10_000.0),  # the target's reward (no step cost)
     # lr: the paper's 0.01 divided by the Fourier features' norm (‖φ‖ ≈ 11.3 for order 3 on PinBall's
     # states), as its actor-critic divides its steps; with 0.01 A2C learns, then collapses (docs/torchrl.md).
     defaults={

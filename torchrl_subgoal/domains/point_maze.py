@@ -29,7 +29,7 @@ from torchrl_subgoal.envs import point_maze
 from torchrl_subgoal.experiments.plots import ReportMap, numbered_subgoals
 from torchrl_subgoal.studio.domains import StudioDomain
 from torchrl_subgoal.subgoals import Circle, Predicate
-from torchrl_subgoal.training import DDPGTrainConfig, LearnerDomain, PPOConfig
+from torchrl_subgoal.training import DDPGTrainConfig, LearnerDomain, PPOConfig, SuccessSignal
 
 __all__ = ["DOMAINS", "LEARNERS", "STUDIO", "check_subgoal", "maze_env", "route_env"]
 
@@ -63,7 +63,7 @@ def route_env(maze: str, route: str, seed: int) -> Callable[[int], EnvBase]:
         >>> point_maze_task("umaze", _route_seed("umaze", "top_to_bottom", 10)).route.name
         'top_to_bottom'
     """
-    return functools.partial(point_maze.make_point_maze, maze, seed=_route_seed(maze, route, seed))
+    return point_maze.point_maze_env(maze, _route_seed(maze, route, seed))
 
 
 def check_subgoal(maze: str, predicate: Predicate) -> str | None:
@@ -146,6 +146,7 @@ def _learners(maze: str) -> LearnerDomain:
             ),
         },
         pattern_env=functools.partial(route_env, maze),
+        success=SuccessSignal(min_return=1.0),  # the sparse reward of 1 at the goal, where the episode ends
     )
 
 

@@ -178,11 +178,18 @@ class FourRoomsEnv(EnvBase):
     Observations: ``"observation"`` the state number (free cells numbered
     row-major, a ``Categorical(104)``) and ``"cell"`` its ``(row, col)``.
 
+    Another map can be given as ``layout`` (rows of equal length, ``w`` for a
+    wall), with its own ``start`` and ``goal`` cells: a maze, a corridor, rooms
+    of another size; the rest works alike.
+
     Args:
         num_envs: batch size; ``None`` for a single unbatched env.
         max_steps: episode cap (1,000 in the paper).
         goal_reward: reward of the step that reaches the goal.
         step_reward: reward of every other step.
+        layout: the map (default: the four rooms).
+        start: the start cell ``(row, col)``.
+        goal: the goal cell.
         device: torch device.
 
     Examples:
@@ -195,6 +202,10 @@ class FourRoomsEnv(EnvBase):
         >>> step_cost = FourRoomsEnv(num_envs=2, goal_reward=0.0, step_reward=-1.0)
         >>> step_cost.rollout(3)["next", "reward"][0, :, 0].tolist()
         [-1.0, -1.0, -1.0]
+        >>> corridor = FourRoomsEnv(2, layout="wwwww\\nw   w\\nwwwww", start=(1, 1), goal=(1, 3))
+        >>> corridor.num_states, corridor.rollout(2, lambda td: td.set("action", torch.ones(2, dtype=torch.long)))[
+        ...     "next", "terminated"][0, :, 0].tolist()
+        (3, [False, True])
     """
 
     batch_locked = True
@@ -208,6 +219,9 @@ class FourRoomsEnv(EnvBase):
         max_steps: int = 1000,
         goal_reward: float = 1.0,
         step_reward: float = 0.0,
+        layout: str = LAYOUT,
+        start: tuple[int, int] = START,
+        goal: tuple[int, int] = GOAL,
         device: Any = "cpu",
     ) -> None:
         batch = torch.Size([]) if num_envs is None else torch.Size([num_envs])
@@ -219,16 +233,28 @@ class FourRoomsEnv(EnvBase):
         self.max_steps = int(max_steps)
         self.goal_reward = float(goal_reward)
         self.step_reward = float(step_reward)
-        n = len(_CELLS)
-        moves = [[_STATE.get((r + dr, c + dc), _STATE[(r, c)]) for dr, dc in ACTIONS] for r, c in _CELLS]
+        cells, size = _CELLS, SIZE
+        if layout != LAYOUT:
+            rows = layout.splitlines()
+            if not rows or len({len(row) for row in rows}) != 1:
+                raise ValueError("layout: give rows of equal length ('w' for a wall)")
+            size = (len(rows), len(rows[0]))
+            cells = [(r, c) for r in range(size[0]) for c in range(size[1]) if rows[r][c] != "w"]
+        state = {cell: i for i, cell in enumerate(cells)}
+        start, goal = (int(start[0]), int(start[1])), (int(goal[0]), int(goal[1]))
+        for name, cell in (("start", start), ("goal", goal)):
+            if cell not in state:
+                raise ValueError(f"{name}: {cell} is not a free cell of the layout")
+        n = len(cells)
+        moves = [[state.get((r + dr, c + dc), state[(r, c)]) for dr, dc in ACTIONS] for r, c in cells]
         self.transitions = torch.tensor(moves, device=self.device)  # [S, A] next state
-        self.cells = torch.tensor(_CELLS, device=self.device)  # [S, 2]
-        self.start_state = _STATE[START]
-        self.goal_state = _STATE[GOAL]
+        self.cells = torch.tensor(cells, device=self.device)  # [S, 2]
+        self.start_state = state[start]
+        self.goal_state = state[goal]
         self.num_states = n
         self.observation_spec = Composite(
             observation=Categorical(n, shape=batch, dtype=torch.long, device=self.device),
-            cell=Bounded(0, max(SIZE) - 1, shape=(*batch, 2), dtype=torch.long, device=self.device),
+            cell=Bounded(0, max(size) - 1, shape=(*batch, 2), dtype=torch.long, device=self.device),
             shape=batch,
         )
         self.action_spec = Categorical(len(ACTIONS), shape=batch, dtype=torch.long, device=self.device)

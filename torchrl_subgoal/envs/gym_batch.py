@@ -8,6 +8,11 @@ than the envs themselves for cheap tasks (MountainCar, a MuJoCo point mass).
 process, with gymnasium's automatic reset disabled so that TorchRL resets the
 finished envs (``"_reset"``) as it does for any batched env.
 
+:class:`GymTask` is the env factory ``make_env(num_envs)`` of one gymnasium task
+(its single-env constructor and time limit); factories of different tasks join
+into one batch (:meth:`GymTask.join`), so learners with their own tasks (a
+PointMaze start and goal each) step as one env.
+
 Needs ``gymnasium`` (``pip install gymnasium``, or the ``fetch`` extra).
 """
 
@@ -16,11 +21,12 @@ from __future__ import annotations
 import contextlib
 import io
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from torchrl.envs import EnvBase
 
-__all__ = ["gym_batch", "import_robotics", "require_gymnasium"]
+__all__ = ["GymTask", "gym_batch", "import_robotics", "require_gymnasium"]
 
 
 def require_gymnasium(what: str, *, robotics: bool = False) -> Any:
@@ -95,3 +101,39 @@ def gym_batch(make_envs: Sequence[Callable[[], Any]], *, max_steps: int | None =
     env = GymWrapper(vector, **{"categorical_action_encoding": True, **kwargs})
     env.max_steps = max_steps
     return env
+
+
+@dataclass(frozen=True)
+class GymTask:
+    """``make_env(num_envs)`` of one gymnasium task: ``num_envs`` copies of ``make_single`` stepped together
+    (:func:`gym_batch`). Picklable when ``make_single`` is.
+
+    Args:
+        make_single: builds one gymnasium env of the task.
+        max_steps: the task's time limit (the TorchRL env's ``max_steps``).
+
+    Examples:
+        >>> import functools, gymnasium
+        >>> car = GymTask(functools.partial(gymnasium.make, "MountainCar-v0"), max_steps=200)
+        >>> car(2).batch_size
+        torch.Size([2])
+        >>> faster = GymTask(functools.partial(gymnasium.make, "MountainCar-v0", goal_velocity=0.1), 200)
+        >>> GymTask.join([car, faster], 3).batch_size  # 3 envs of each task, learner-major
+        torch.Size([6])
+    """
+
+    make_single: Callable[[], Any]
+    max_steps: int | None = None
+
+    def __call__(self, num_envs: int) -> EnvBase:
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        return gym_batch([self.make_single] * num_envs, max_steps=self.max_steps)
+
+    @classmethod
+    def join(cls, tasks: Sequence[GymTask], envs_each: int) -> EnvBase:
+        """One env of ``envs_each`` envs of every task in ``tasks``, in order (task ``k``'s envs are rows
+        ``k·envs_each … (k+1)·envs_each − 1``); its ``max_steps`` is the tasks' longest."""
+        limits = [t.max_steps for t in tasks if t.max_steps is not None]
+        makers = [t.make_single for t in tasks for _ in range(envs_each)]
+        return gym_batch(makers, max_steps=max(limits) if limits else None)

@@ -43,7 +43,7 @@ from typing import Any, Literal
 import numpy as np
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal.envs.gym_batch import gym_batch, require_gymnasium
+from torchrl_subgoal.envs.gym_batch import GymTask, require_gymnasium
 from torchrl_subgoal.subgoals import SubgoalSeries, load_patterns
 
 __all__ = [
@@ -58,6 +58,7 @@ __all__ = [
     "PointMazeTask",
     "cell_centre",
     "make_point_maze",
+    "point_maze_env",
     "point_maze_task",
     "waypoint_patterns",
 ]
@@ -269,8 +270,22 @@ def make_point_maze(maze: str, num_envs: int, seed: int) -> EnvBase:
         >>> bool((td["observation"][:, :2] - torch.tensor([-1.0, -1.0])).abs().max() <= 0.25)  # in cell (3, 1)
         True
     """
-    if num_envs < 1:
-        raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+    return point_maze_env(maze, seed)(num_envs)
+
+
+def point_maze_env(maze: str, seed: int) -> GymTask:
+    """The env factory ``make_env(num_envs)`` of learning ``seed``'s task (:func:`make_point_maze`); the
+    factories of several learnings' tasks join into one env batch (:meth:`GymTask.join`).
+
+    Args:
+        maze: ``"umaze"`` or ``"medium"``.
+        seed: the learning's seed.
+
+    Examples:
+        >>> make_env = point_maze_env("umaze", seed=1)
+        >>> make_env.max_steps, make_env(3).batch_size
+        (300, torch.Size([3]))
+    """
     task = point_maze_task(maze, seed)
     require_gymnasium("PointMaze", robotics=True)
-    return gym_batch([partial(_make_single, task)] * num_envs, max_steps=MAX_EPISODE_STEPS[maze])
+    return GymTask(partial(_make_single, task), MAX_EPISODE_STEPS[maze])

@@ -32,6 +32,7 @@ from torchrl_subgoal.experiments.results import (
 )
 from torchrl_subgoal.experiments.store import load_frame, load_results
 from torchrl_subgoal.experiments.sweep import (
+    BackendUnavailableError,
     ChunkFailedError,
     CorruptChunkWarning,
     MethodSpec,
@@ -46,6 +47,7 @@ if TYPE_CHECKING:
     from torchrl_subgoal.experiments.report import ReportSpec, write_report
 
 __all__ = [
+    "BackendUnavailableError",
     "Chunk",
     "ChunkFailedError",
     "ConfigMismatchError",

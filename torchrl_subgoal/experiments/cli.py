@@ -462,6 +462,8 @@ def _build_nested(cls: type, values: Mapping[str, Any]) -> Any:
         message = " ".join(str(exc).split())
         named = [name for name in values if re.search(rf"\b{name}\b", message)]
         first = min(named, key=lambda name: re.search(rf"\b{name}\b", message).start()) if named else None  # type: ignore[union-attr]
+        if first is not None and message.startswith(f"{first} must "):  # the settings' rule: "<field> must ..."
+            message = message.removeprefix(f"{first} ")
         raise ConfigError(f"{flag_of(first)}: {message}" if first else message) from None
 
 

@@ -31,8 +31,10 @@ from typing import Any, ClassVar, Literal, cast
 
 import numpy as np
 import torch
+from torchrl.envs import EnvBase
 
 from torchrl_subgoal import TabularPotential, domains, load_patterns
+from torchrl_subgoal.experiments.budget import Budget
 from torchrl_subgoal.experiments.cli import ConfigError, check, flag_of, setting
 from torchrl_subgoal.experiments.recipe import (
     PatternSets,
@@ -49,7 +51,7 @@ from torchrl_subgoal.experiments.recipe import (
     quiet_torchrl,
 )
 from torchrl_subgoal.experiments.results import Chunk, EpisodeTable
-from torchrl_subgoal.methods import Method, paper_methods, shaping_parts
+from torchrl_subgoal.methods import Method, all_methods, shaping_parts
 from torchrl_subgoal.training import (
     LEARNERS,
     LearnerDomain,
@@ -61,10 +63,10 @@ from torchrl_subgoal.training import (
 __all__ = [
     "LOGGERS",
     "LearnerRecipeConfig",
-    "check_learner",
     "check_seed_batch",
     "default_learner",
     "frozen_tables",
+    "learner_budget",
     "learner_domain",
     "learner_methods",
     "learner_plan",
@@ -138,7 +140,7 @@ class LearnerRecipeConfig(RecipeConfig):
     methods: str = setting(
         "",
         "comma-separated methods: the learner's name for the unshaped learner (A2C, PPO, DQN, DDPG), HRS, NRS, "
-        "RRS, SARSA-RS",
+        "RRS, SARSA-RS, SRS",
         shown_default="the unshaped learner,HRS,NRS",
     )
     learnings: int = setting(1, "learnings per subgoal pattern (unshaped: as many per pattern of the file)")
@@ -151,7 +153,12 @@ class LearnerRecipeConfig(RecipeConfig):
         choices=["value", "zero", "nonpositive"],
     )
     monotone_potential: bool = setting(
-        False, "shape with the learned table made non-decreasing along the series (HRS, RRS)"
+        True, "shape with the learned table made non-decreasing along the series (HRS, RRS)"
+    )
+    progress_scale: float = setting(
+        1.0,
+        "the learned tables (HRS, RRS) start at the subgoals' progress prior of this scale, the goal's worth in "
+        "the learner's reward units (after --reward-scale); 0 starts them at 0; SRS shapes with the prior",
     )
     frozen_potential: str = setting(
         "",
@@ -160,8 +167,8 @@ class LearnerRecipeConfig(RecipeConfig):
     )
     seed_batch: int = setting(
         1,
-        "learners of a method trained together as one batch in one process (A2C, PPO: one env batch, "
-        "stacked networks, a table per learner); 1: one learner at a time",
+        "learners of a method trained together as one batch in one process (one env batch, stacked "
+        "networks, a replay buffer and a table per learner); 1: one learner at a time",
     )
     seed: int = setting(0, "sweep seed (random patterns, learner seeds)")
     results: str = setting("", "results directory (re-run to resume)", shown_default="results/<algo>_<domain>")
@@ -186,8 +193,16 @@ class LearnerRecipeConfig(RecipeConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.learner is not None:
-            check_learner(self.learner)
+        check(
+            math.isfinite(self.progress_scale) and self.progress_scale >= 0,
+            "progress_scale",
+            f"must be a finite number >= 0, got {self.progress_scale}",
+        )
+        check(
+            self.progress_scale > 0 or "SRS" not in self.method_names,
+            "progress_scale",
+            "SRS shapes with the progress prior: give it a scale > 0",
+        )
 
     @classmethod
     def nested_settings(cls, early: Mapping[str, Any]) -> dict[str, tuple[str, Any]]:
@@ -215,43 +230,14 @@ class LearnerRecipeConfig(RecipeConfig):
                 raise ConfigError(f"{flag}: a setting of {' and '.join(owners)}, not of {algo}")
 
 
-#: the learner settings every recipe checks, whatever the learner: (fields, the least value, strictly above it)
-_LEARNER_BOUNDS = (
-    (("num_envs", "frames_per_batch", "total_frames"), 1, False),
-    (("env_workers", "collector_workers"), 0, False),
-    (("lr", "value_lr", "reward_scale"), 0, True),
-)
-
-
-def check_learner(settings: Any) -> None:
-    """The learner settings a recipe refuses before anything runs, whatever the learner checks itself:
-    counts below 1 (workers below 0), and learning rates or a reward scale that are not positive.
-
-    Raises:
-        ConfigError: naming the flag.
-
-    Examples:
-        >>> from torchrl_subgoal.training import A2CConfig
-        >>> check_learner(A2CConfig(value_lr=0.0))
-        Traceback (most recent call last):
-        ...
-        torchrl_subgoal.experiments.cli.ConfigError: --value-lr: must be > 0, got 0.0
-    """
-    for names, low, strict in _LEARNER_BOUNDS:
-        for name in names:
-            value = getattr(settings, name, None)
-            if value is not None and not (value > low if strict else value >= low):
-                raise ConfigError(f"{flag_of(name)}: must be {'>' if strict else '>='} {low}, got {value}")
-
-
 def learner_methods(algo: str) -> dict[str, Method]:
     """The methods a sweep of learner ``algo`` compares: the paper's, the unshaped one named after the learner.
 
     Examples:
         >>> list(learner_methods("ppo"))
-        ['HRS', 'RRS', 'PPO', 'NRS', 'SARSA-RS']
+        ['HRS', 'RRS', 'PPO', 'NRS', 'SARSA-RS', 'SRS']
     """
-    return paper_methods(baseline=LEARNERS[algo].title)
+    return all_methods(baseline=LEARNERS[algo].title)
 
 
 def learner_settings(cfg: LearnerRecipeConfig, algo: str, domain: LearnerDomain) -> Any:
@@ -351,7 +337,8 @@ def learner_plan(cfg: LearnerRecipeConfig, algo: str, *, final_updates: int | No
         "learner": dataclasses.asdict(settings),
         "zero_terminal_potential": cfg.zero_terminal_potential,
         "start_potential": cfg.start_potential,
-        **({"monotone_potential": True} if cfg.monotone_potential else {}),
+        "monotone_potential": cfg.monotone_potential,
+        "progress_scale": cfg.progress_scale,
         **({"frozen_potential": frozen} if frozen else {}),
         "subgoal_file": subgoal_file,
         "patterns": pattern_config(patterns),
@@ -377,6 +364,35 @@ def learner_plan(cfg: LearnerRecipeConfig, algo: str, *, final_updates: int | No
         chunk_size=cfg.seed_batch,
         results=results,
         runtime={"logger": cfg.logger},
+        budget=learner_budget(settings, probe),
+    )
+
+
+def learner_budget(settings: Any, probe: EnvBase) -> Budget:
+    """What one learner costs at least: ``total_frames`` steps, and its collected batch (and replay buffer)
+    of frames at least as large as one of ``probe``'s (all its entries, ``next`` included).
+
+    Examples:
+        >>> from torchrl_subgoal.training import DQNConfig
+        >>> four_rooms = domains.part("four_rooms", LearnerDomain)
+        >>> budget = learner_budget(DQNConfig(total_frames=10_000), four_rooms.make_env(1))
+        >>> budget.steps, budget.length, budget.chunk_flag, budget.unit
+        (10000, ('total_frames', 10000), 'seed_batch', 'update')
+    """
+    fake = probe.fake_tensordict()
+    frame = sum(t.numel() * t.element_size() for t in fake.values(True, True)) // max(fake.numel(), 1)
+    frames = max(settings.frames_per_batch, settings.num_envs)
+    replayed = getattr(settings, "buffer_size", 0)
+    held = f"a batch of {frames} frames (--frames-per-batch, --num-envs)" + (
+        f" and {replayed} replayed ones" if replayed else ""
+    )
+    return Budget(
+        steps=settings.total_frames,
+        length=("total_frames", settings.total_frames),
+        learner_bytes=(frames + replayed) * frame,
+        held=f"{held}, {frame} bytes each",
+        chunk_flag="seed_batch",
+        unit="update",
     )
 
 
@@ -385,27 +401,16 @@ def check_seed_batch(algo: str, domain: LearnerDomain, settings: Any, methods: S
 
     Examples:
         >>> from torchrl_subgoal.training import DQNConfig
-        >>> check_seed_batch("dqn", domains.part("four_rooms", LearnerDomain), DQNConfig(), [])
+        >>> check_seed_batch("dqn", domains.part("four_rooms", LearnerDomain), DQNConfig(collector_workers=1), [])
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.experiments.cli.ConfigError: --seed-batch: dqn has no batch of learners (a2c, ppo have); ...
+        torchrl_subgoal.experiments.cli.ConfigError: --seed-batch: needs --collector-workers 0 (one collector for ...
     """
-    batched = [name for name, learner in LEARNERS.items() if learner.train_batch is not None]
-    check(
-        algo in batched,
-        "seed_batch",
-        f"{algo} has no batch of learners ({', '.join(batched)} have); run it with --seed-batch 1",
-    )
-    check(
-        domain.pattern_env is None,
-        "seed_batch",
-        f"{domain.name} gives each learner its own task (start and goal), so its learners cannot share an env batch",
-    )
     check(settings.collector_workers == 0, "seed_batch", "needs --collector-workers 0 (one collector for the batch)")
     check(
-        not (algo == "a2c" and settings.normalize_advantage),
+        domain.pattern_env is None or settings.env_workers == 0,
         "seed_batch",
-        "needs A2C's normalize_advantage off (it would mix the learners)",
+        f"{domain.name} gives each learner its own task, whose envs step in the batch's process: needs --env-workers 0",
     )
     trained = any(m.shaping in ("subgoals", "aggregation") for m in methods)
     check(
@@ -466,9 +471,8 @@ def frozen_tables(path: str, methods: Sequence[Method], patterns: PatternSets) -
 
 
 def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
-    """Train the chunk's learners, one after the other (each steps its own batch of envs) or, for a chunk of
-    several (``--seed-batch``), together as one batch (the learner's ``train_batch``,
-    e.g. :func:`~torchrl_subgoal.training.train_a2c_batch`); their records.
+    """Train the chunk's learners (one, or ``--seed-batch`` of them) as one batch (the learner's ``train``,
+    e.g. :func:`~torchrl_subgoal.training.train_a2c`); their records.
 
     Examples:
         >>> import tempfile
@@ -508,6 +512,7 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
             zero_terminal_potential=config["zero_terminal_potential"],
             start_potential=config["start_potential"],
             monotone_potential=config.get("monotone_potential", False),
+            progress_scale=config.get("progress_scale", 0.0),
         )
         frozen = config.get("frozen_potential", {}).get(pattern) if method.shaping == "subgoals" else None
         if parts is not None and frozen is not None:
@@ -525,31 +530,20 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
             fresh=True,
         )
         runs.append((make_env, Shaping(*parts) if parts is not None else None, seed, logger))
-    if len(runs) > 1:  # a seed batch (the plan checked that the learners can share one env batch)
-        assert learner.train_batch is not None, f"{learner.name} has no batch of learners"
-        curves = learner.train_batch(
-            runs[0][0],
-            settings,
-            [seed for _, _, seed, _ in runs],
-            shapings=[shaping for _, shaping, _, _ in runs],
-            observation_key=domain.observation_key,
-            loggers=[logger for *_, logger in runs],
-            progress=progress,
-        )
-    else:
-        curves = [
-            learner.train(
-                make_env,
-                settings,
-                shaping=shaping,
-                observation_key=domain.observation_key,
-                seed=seed,
-                logger=logger,
-                progress=progress,
-            )
-            for make_env, shaping, seed, logger in runs
-        ]
+    # the chunk's learners as one batch (one learner is a batch of one); each its own task where the
+    # domain gives one per learner (the plan checked that the learners can share one env batch)
+    trained = learner.train(
+        [make_env for make_env, *_ in runs],
+        settings,
+        seeds=[seed for _, _, seed, _ in runs],
+        shaping=[shaping for _, shaping, _, _ in runs],
+        observation_key=domain.observation_key,
+        loggers=[logger for *_, logger in runs],
+        progress=progress,
+        success=domain.success,
+    )
+    curves = trained.curves
     steps = np.array([np.round(c.episode_length) for c in curves], dtype=np.int64)
     returns = np.array([c.episode_return for c in curves])
-    success = np.array([c.success for c in curves])
+    success = np.nan_to_num(np.array([c.success for c in curves], dtype=np.float64), nan=0.0)  # no signal: 0
     return EpisodeTable(steps, returns, success)

@@ -14,6 +14,7 @@ every domain, and record in the results' ``config.json`` the command, its settin
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import shlex
@@ -25,10 +26,12 @@ from typing import Any, ClassVar, Literal, TypeVar
 import torch
 from torchrl.envs import EnvBase, TransformedEnv
 
+from torchrl_subgoal.experiments.budget import Budget, check_budget, check_learnings
 from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting, settings_data
 from torchrl_subgoal.experiments.results import Chunk, ResultsError, UnknownMethodError
 from torchrl_subgoal.experiments.store import code_version
 from torchrl_subgoal.experiments.sweep import (
+    BackendUnavailableError,
     ChunkFailedError,
     MethodSpec,
     RunChunk,
@@ -48,6 +51,7 @@ __all__ = [
     "check_device",
     "check_methods",
     "check_patterns",
+    "check_unused",
     "chunk_patterns",
     "config_main",
     "fail",
@@ -56,6 +60,8 @@ __all__ = [
     "pattern_config",
     "pattern_sets",
     "pattern_sources",
+    "potential_entries",
+    "potential_options",
     "quiet_torchrl",
     "recipe_main",
     "sweep_and_report",
@@ -68,7 +74,7 @@ C = TypeVar("C", bound="RecipeConfig")
 T = TypeVar("T")
 
 #: What a recipe reports as one line on stderr instead of a traceback (see :func:`fail`).
-RECIPE_ERRORS = (ConfigError, SubgoalFileError, ResultsError, ChunkFailedError)
+RECIPE_ERRORS = (ConfigError, SubgoalFileError, ResultsError, ChunkFailedError, BackendUnavailableError)
 
 
 def quiet_torchrl() -> None:
@@ -179,6 +185,32 @@ def check_methods(methods: Mapping[str, Method] | Sequence[str], names: Sequence
             f"--methods: {twice} {'is' if len(repeated) == 1 else 'are'} named twice; name each method once"
         )
     return list(names)
+
+
+def check_unused(cfg: Any, names: Sequence[str], reason: str) -> None:
+    """Refuse the settings ``names`` of ``cfg`` (a settings dataclass) set to anything but their defaults:
+    under the chosen settings they do not apply (``reason`` says why), and a flag is never silently ignored.
+
+    Raises:
+        ConfigError: naming the flags given, why they do not apply, and to leave them out.
+
+    Examples:
+        >>> from dataclasses import dataclass
+        >>> @dataclass
+        ... class Settings:
+        ...     task: str = "four_rooms"
+        ...     reward: str = "step-cost"
+        >>> check_unused(Settings(task="taxi"), ["reward"], "applies to --task four_rooms only")  # the default
+        >>> check_unused(Settings(task="taxi", reward="goal"), ["reward"], "applies to --task four_rooms only")
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --reward goal: applies to --task four_rooms only; leave it out
+    """
+    defaults = {f.name: f.default for f in dataclasses.fields(cfg)}
+    given = [name for name in names if getattr(cfg, name) != defaults[name]]
+    if given:
+        flags = ", ".join(f"--{name.replace('_', '-')} {getattr(cfg, name)}" for name in given)
+        raise ConfigError(f"{flags}: {reason}; leave {'it' if len(given) == 1 else 'them'} out")
 
 
 def needs_random_patterns(methods: Mapping[str, Method], names: Sequence[str]) -> bool:
@@ -468,6 +500,15 @@ class ReproductionConfig(RecipeConfig):
     bootstrap_truncated: bool = setting(
         True, "train V(z) on a time-out inside z (this engine's reproductions; the library default skips it)"
     )
+    progress_scale: float = setting(
+        0.0,
+        "the learned potentials' tables start at the subgoals' progress prior of this scale, in reward units "
+        "(0: at 0, the authors; the library default: the goal's reward); SRS shapes with that prior "
+        "(of scale --eta when 0)",
+    )
+    monotone_potential: bool = setting(
+        False, "shape with the learned tables non-decreasing along the series (the library default; not the authors)"
+    )
     engine: str = setting(
         "fused",
         "fused: one compiled loop; torchrl: step_and_maybe_reset (identical results)",
@@ -485,6 +526,39 @@ class ReproductionConfig(RecipeConfig):
         super().__post_init__()
         check(self.eta >= 0, "eta", f"must be >= 0, got {self.eta}")
         check(0.0 < self.expectile < 1.0, "expectile", f"must lie strictly between 0 and 1, got {self.expectile}")
+        check(self.progress_scale >= 0, "progress_scale", f"must be >= 0, got {self.progress_scale}")
+
+
+def potential_entries(cfg: ReproductionConfig) -> dict[str, Any]:
+    """The learned potential's conventions a reproduction records beyond the authors' (none when it runs theirs,
+    so that the configuration of an authors' run is what it always was).
+
+    Examples:
+        >>> potential_entries(ReproductionConfig()), potential_entries(ReproductionConfig(progress_scale=1.0))
+        ({}, {'progress_scale': 1.0})
+    """
+    entries: dict[str, Any] = {}
+    if cfg.progress_scale:
+        entries["progress_scale"] = cfg.progress_scale
+    if cfg.monotone_potential:
+        entries["monotone_potential"] = True
+    return entries
+
+
+def potential_options(config: Mapping[str, Any], method: Method) -> dict[str, Any]:
+    """The keyword arguments of :func:`~torchrl_subgoal.methods.shaping_transform` that a reproduction's stored
+    ``config`` gives ``method``'s potential (:func:`potential_entries`); SRS's prior has the scale η when the
+    sweep set none.
+
+    Examples:
+        >>> from torchrl_subgoal.methods import SRS, paper_methods
+        >>> potential_options({"eta": 10.0}, paper_methods("SARSA")["HRS"]), potential_options({"eta": 10.0}, SRS)
+        ({'progress_scale': 0.0, 'monotone_potential': False}, {'progress_scale': 10.0, 'monotone_potential': False})
+    """
+    scale = float(config.get("progress_scale", 0.0))
+    if method.shaping == "progress" and not scale:
+        scale = float(config["eta"])
+    return {"progress_scale": scale, "monotone_potential": bool(config.get("monotone_potential", False))}
 
 
 def sweep_entries(cfg: RecipeConfig, subgoal_file: str, patterns: PatternSets) -> dict[str, Any]:
@@ -520,6 +594,8 @@ class Plan:
         runtime: settings that change how chunks run but not their results (the logger): handed to
             ``run_chunk`` with ``config``, not part of what identifies the experiment.
         warm_up: run before the sweep's chunks, saying so (what compiles numba kernels: :func:`warm_up_chunks`).
+        budget: what one learner costs at least, checked before anything runs (:func:`check_budget`);
+            default: ``episodes`` episodes (``--episodes``) of at least one step, ``--chunk-size`` learners a chunk.
 
     Examples:
         >>> Plan("four_rooms", [], print, {}, episodes=10, chunk_size=100).results is None
@@ -535,6 +611,7 @@ class Plan:
     results: str | None = None
     runtime: Mapping[str, Any] = field(default_factory=dict)
     warm_up: Callable[[], object] | None = None
+    budget: Budget | None = None
 
 
 def warm_up_chunks(
@@ -615,8 +692,9 @@ def recipe_main(
     errors: tuple[type[BaseException], ...] = RECIPE_ERRORS,
     prog: str | None = None,
 ) -> int:
-    """A recipe's ``main``: parse the flags into ``config_cls``, make the :class:`Plan`, run (or resume)
-    the sweep, write the report and print it; the exit code (see :func:`fail`, :func:`sweep_and_report`).
+    """A recipe's ``main``: parse the flags into ``config_cls``, make the :class:`Plan`, check that it fits
+    this machine's memory and a year (:func:`~torchrl_subgoal.experiments.budget.check_budget`), run (or
+    resume) the sweep, write the report and print it; the exit code (see :func:`fail`, :func:`sweep_and_report`).
     The results' ``config.json`` records the command, its settings (``--config`` reads them back) and
     the package's version and commit.
 
@@ -636,8 +714,18 @@ def recipe_main(
     command = shlex.join([*(prog or os.path.basename(sys.argv[0])).split(), *args])
 
     def run(cfg: C) -> int:
+        check_learnings(cfg.learnings)  # before the plan, which may draw a pattern per learning
         sweep = plan(cfg)
         provenance = {"command": command, "settings": settings_data(cfg), **code_version()}
+        check_budget(
+            sweep.specs,
+            sweep.episodes,
+            sweep.chunk_size,
+            sweep.budget or Budget(steps=sweep.episodes, length=("episodes", sweep.episodes)),
+            learnings=cfg.learnings,
+            workers=cfg.workers,
+            backend=cfg.backend,
+        )
         return sweep_and_report(
             sweep,
             sweep.results or cfg.results,

@@ -11,7 +11,9 @@ backend:
 * ``"ray"``: one Ray task per chunk on an existing cluster (``RAY_ADDRESS`` or a
   running local cluster), else on a local Ray instance started for the sweep. Tasks
   *return* their table to the driver, which writes it: the cluster needs no shared
-  filesystem, and the store keeps a single writer.
+  filesystem, and the store keeps a single writer. A chunk whose worker process or
+  node dies runs again, up to :data:`RAY_RETRIES` times, before the sweep stops as
+  for any failed chunk.
 
 In both cases the parent process is the only writer: it validates each table and
 writes it atomically as soon as its chunk finishes, so an interrupted sweep loses at
@@ -60,6 +62,9 @@ from torchrl_subgoal.experiments.store import (
 
 Progress = Callable[[int], None]
 Backend = Literal["local", "ray"]
+#: How often Ray runs a chunk again whose worker process or node died (a ``run_chunk`` that raises is not
+#: run again: it would raise again).
+RAY_RETRIES = 3
 
 
 class RunChunk(Protocol):
@@ -90,6 +95,15 @@ class ChunkFailedError(RuntimeError):
     Examples:
         >>> issubclass(ChunkFailedError, RuntimeError), str(ChunkFailedError("HRS/00000: worker died"))
         (True, 'HRS/00000: worker died')
+    """
+
+
+class BackendUnavailableError(RuntimeError):
+    """The Ray cluster ``RAY_ADDRESS`` names does not answer; raised before anything is written.
+
+    Examples:
+        >>> issubclass(BackendUnavailableError, RuntimeError)
+        True
     """
 
 
@@ -322,20 +336,10 @@ def _execute_chunk(run_chunk: RunChunk, chunk: Chunk, config: Mapping[str, Any])
     return table
 
 
-def _execute_chunk_ray(
-    run_chunk: RunChunk, chunk: Chunk, config: Mapping[str, Any], progress_queue: Any
-) -> EpisodeTable:
-    _limit_threads()
-    progress = _ThrottledProgress(chunk.name, progress_queue.put_nowait)
-    table = run_chunk(chunk, config, progress)
-    progress.flush()
-    return table
-
-
-def _failure(chunk: Chunk, exc: BaseException) -> ChunkFailedError:
+def _failure(chunk: Chunk, exc: BaseException, note: str = "") -> ChunkFailedError:
     """The error for a chunk whose ``run_chunk`` raised; :meth:`Sweep.run` adds what to do next."""
-    reason = " ".join(str(exc).split()) or "(no message)"  # one line, however the cause wrote it
-    return ChunkFailedError(f"chunk {chunk.name} failed: {type(exc).__name__}: {reason}.")
+    reason = " ".join(str(exc).split()).rstrip(".") or "(no message)"  # one line, however the cause wrote it
+    return ChunkFailedError(f"chunk {chunk.name} failed: {type(exc).__name__}: {reason}{note}.")
 
 
 # -- backends: each yields (chunk, table) as chunks finish ----------------------------------
@@ -432,78 +436,6 @@ def _wait_for_exit(process: Any, grace: float = 2.0) -> None:
             process.kill()  # e.g. still importing torch, not acting on SIGTERM yet
             deadline, killed = time.monotonic() + 10 * grace, True
         time.sleep(0.01)
-
-
-def _connect_ray(workers: int) -> tuple[Any, bool]:
-    """Import Ray and connect; returns (ray module, whether we started the instance)."""
-    try:
-        import ray
-    except ImportError as exc:
-        raise ImportError("backend='ray' needs Ray: pip install 'torchrl_subgoal[ray]'") from exc
-    if ray.is_initialized():
-        return ray, False
-    if os.environ.get("RAY_ADDRESS") == "local":  # a fresh instance, whatever else runs here
-        ray.init(address="local", num_cpus=max(workers, 1), include_dashboard=False)
-        return ray, True
-    try:
-        # RAY_ADDRESS when set, else a cluster already running on this machine.
-        ray.init(address="auto")
-    except ConnectionError:
-        if os.environ.get("RAY_ADDRESS"):
-            raise
-        ray.init(address="local", num_cpus=max(workers, 1), include_dashboard=False)
-        return ray, True
-    return ray, False
-
-
-def _run_ray(
-    chunks: Sequence[Chunk],
-    run_chunk: RunChunk,
-    config: Mapping[str, Any],
-    bar: _ProgressBar,
-    workers: int,
-) -> Finished:
-    ray, started = _connect_ray(workers)
-    pending: list[Any] = []
-    progress_queue = None
-    try:
-        from ray.util.queue import Queue
-
-        progress_queue = Queue(actor_options={"num_cpus": 0})  # never waits for a free CPU
-        task = ray.remote(num_cpus=1)(_execute_chunk_ray)
-        config_ref = ray.put(dict(config))
-        refs = {task.remote(run_chunk, chunk, config_ref, progress_queue): chunk for chunk in chunks}
-        pending = list(refs)
-        error: ChunkFailedError | None = None
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1, timeout=0.2)
-            size = progress_queue.qsize()
-            messages = progress_queue.get_nowait_batch(size) if size else []
-            for name, k in messages:
-                bar.add(name, k)
-            for ref in done:
-                try:
-                    table = ray.get(ref)
-                except ray.exceptions.TaskCancelledError:
-                    continue
-                except ray.exceptions.RayError as exc:
-                    if error is None:
-                        # a task's own exception, without Ray's wrapping traceback text
-                        error = _failure(refs[ref], getattr(exc, "cause", None) or exc)
-                        error.__cause__ = exc
-                        for other in pending:
-                            ray.cancel(other)
-                    continue
-                yield refs[ref], table
-        if error is not None:
-            raise error
-    finally:
-        for other in pending:
-            ray.cancel(other, force=True)
-        if progress_queue is not None:
-            progress_queue.shutdown()
-        if started:
-            ray.shutdown()
 
 
 # -- the sweep -------------------------------------------------------------------------------
@@ -734,6 +666,8 @@ class Sweep:
             ChunkFailedError: ``run_chunk`` raised; finished chunks are kept. Locally, chunks
                 already running still finish and are written; on Ray the remaining tasks are
                 cancelled.
+            BackendUnavailableError: ``backend="ray"`` and nothing answers at ``RAY_ADDRESS``
+                (nothing is written).
         """
         if backend not in ("local", "ray"):
             raise ValueError(f"unknown backend {backend!r}; choose 'local' or 'ray'")
@@ -746,6 +680,10 @@ class Sweep:
                 raise TypeError(
                     "run_chunk must be picklable: define it at module level in an importable module"
                 ) from exc
+        if backend == "ray":
+            from torchrl_subgoal.experiments._ray import check_ray_address
+
+            check_ray_address()  # before anything is written
         self._check_directory()  # before the lock file is created in a directory that is not ours
         with self.store.lock():
             self._open_store()
@@ -758,7 +696,9 @@ class Sweep:
                 config = {**self.config, **self.runtime}
                 finished: Finished
                 if backend == "ray":
-                    finished = _run_ray(todo, self.run_chunk, config, bar, workers)
+                    from torchrl_subgoal.experiments._ray import run_ray
+
+                    finished = run_ray(todo, self.run_chunk, config, bar, workers)
                 elif workers == 0:
                     finished = _run_inline(todo, self.run_chunk, config, bar)
                 else:

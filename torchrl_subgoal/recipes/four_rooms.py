@@ -51,14 +51,16 @@ from torchrl_subgoal.experiments.recipe import (
     method_specs,
     needs_random_patterns,
     pattern_sets,
+    potential_entries,
+    potential_options,
     recipe_main,
     sweep_entries,
     warm_up_chunks,
 )
-from torchrl_subgoal.methods import paper_methods, shaping_transform
+from torchrl_subgoal.methods import all_methods, paper_methods, shaping_transform
 from torchrl_subgoal.subgoals import Cell
 
-METHODS = paper_methods(baseline="SARSA")
+METHODS = all_methods(baseline="SARSA")
 PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")
 OBSERVATION_KEY = "cell"  # what the subgoal predicates read: (row, col)
 
@@ -74,7 +76,9 @@ class Config(ReproductionConfig):
     )
     episodes: int = setting(1000, "episodes per learning (paper: 1000)")
     learnings: int = setting(10, "learnings per subgoal pattern (paper: 100)")
-    methods: str = setting(",".join(METHODS), "comma-separated methods to run")
+    methods: str = setting(
+        ",".join(paper_methods(baseline="SARSA")), f"comma-separated methods to run, of {', '.join(METHODS)}"
+    )
     subgoals: str = setting(
         PARTICIPANTS, "subgoal file of the human patterns (HRS, NRS)", shown_default="the paper's ten participants'"
     )
@@ -124,9 +128,10 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
         start_potential=config["start_potential"],
         expectile=config.get("expectile", 0.5),
         bootstrap_truncated=config.get("bootstrap_truncated", True),
+        **potential_options(config, method),
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
-    subgoal_aware = config["agent_state"] == "s,z" and method.shaping in ("subgoals", "naive")
+    subgoal_aware = config["agent_state"] == "s,z" and method.shaping in ("subgoals", "naive", "progress")
     abstract_states = max(len(p) for p in patterns) + 1 if subgoal_aware else 1
     agent = SoftmaxSarsa(
         chunk.n_learners,
@@ -164,6 +169,7 @@ def plan(cfg: Config) -> Plan:
             )
         },
         "sarsa": dataclasses.asdict(SARSA_PRESETS[cfg.preset]),
+        **potential_entries(cfg),
         **sweep_entries(cfg, cfg.subgoals, patterns),
         "report": {
             "metric": "steps",

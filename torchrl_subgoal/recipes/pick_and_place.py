@@ -9,14 +9,15 @@ Dynamic Trajectory Aggregation" (IJCNN 2021):
 * NRS      — naive subgoal shaping with a fixed potential η,
 * SARSA-RS — a learned table over a hand-given three-state aggregation.
 
-Each learning: a TorchRL ``MultiSyncCollector`` of ``--collector-workers`` processes, each
-stepping its share of the MuJoCo envs through the shaping transform, whose potential
-is this process's V in shared memory (``torchrl_subgoal.training.EnvFactory``); or,
-with ``--collector-workers 0``, a ``Collector`` here over ``TransformedEnv(envs,
-shaping)``. The authors' schedule (epochs of cycles: every env collects one episode,
-V takes one step of ``SubgoalValueLoss`` on the cycle's SMDP transitions, ``updates``
-DDPG gradient steps, one soft target update), then ``test_episodes`` greedy episodes
-whose final-step success gives the epoch's success rate. Every epoch is checkpointed, so a re-run resumes
+Each learning is one ``torchrl_subgoal.training.train_ddpg`` (its collector: a
+``MultiSyncCollector`` of ``--collector-workers`` processes, each stepping its share of
+the MuJoCo envs through the shaping transform, whose potential is this process's V in
+shared memory; or, with ``--collector-workers 0``, a ``Collector`` here) on the authors'
+schedule: one collected batch per cycle (every env one episode), ``updates`` DDPG
+gradient steps and one soft target update after it, V one step of ``SubgoalValueLoss``
+on the cycle's SMDP transitions; after every epoch of cycles (the recipe's hooks,
+``Epochs``), ``test_episodes`` greedy episodes whose final-step success gives the
+epoch's success rate. Every epoch is checkpointed, so a re-run resumes
 mid-learning; results go through the experiment engine (one chunk per learning) and the report gives success
 curves, epochs to a success rate of 0.6 and the asymptotic success beside the paper's.
 
@@ -39,7 +40,6 @@ from typing import Any, Literal
 import numpy as np
 import torch
 from tensordict import TensorDictBase
-from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.envs import (
     EnvBase,
     ExplorationType,
@@ -50,7 +50,6 @@ from torchrl_subgoal import (
     NeuralPotential,
     SubgoalPotentialTransform,
     SubgoalSeries,
-    SubgoalValueLoss,
 )
 from torchrl_subgoal.agents.ddpg import DDPG_KEYS, DDPGAgent, DDPGConfig, mlp
 from torchrl_subgoal.envs import fetch
@@ -61,6 +60,7 @@ from torchrl_subgoal.experiments import (
     UnknownMethodError,
     select_methods,
 )
+from torchrl_subgoal.experiments.budget import Budget
 from torchrl_subgoal.experiments.checkpoint import (
     LearningCheckpoint,
     restore_rng_states,
@@ -81,14 +81,17 @@ from torchrl_subgoal.experiments.recipe import (
 )
 from torchrl_subgoal.methods import paper_methods, shaping_parts
 from torchrl_subgoal.training import (
-    EnvFactory,
+    DDPGHooks,
+    DDPGTrainConfig,
+    LearnerBatch,
     PotentialTrainer,
     Shaping,
-    close_collector,
-    shaped_env,
+    train_ddpg,
 )
 
 METHODS = paper_methods(baseline="DDPG")
+#: The neural potential's target (the paper's): the mean of the SMDP returns, a time-out bootstrapped.
+NEURAL_TARGET = {"expectile": 0.5, "bootstrap_truncated": True}
 #: --clip-positive: which learners clip their critic's targets above at 0.
 CLIP_POSITIVE = ("unshaped", "all", "none")
 #: epochs, cycles per epoch, env steps per cycle, gradient steps per cycle, test episodes, DDPG settings.
@@ -191,7 +194,8 @@ class Config(RecipeConfig):
 def make_shaping(
     method_name: str, series: SubgoalSeries | None, config: Mapping[str, Any], gamma: float
 ) -> tuple[Shaping | None, PotentialTrainer | None]:
-    """The method's shaping and, for a neural potential (HRS, RRS), its trainer."""
+    """The method's shaping and, for a neural potential (HRS, RRS), its trainer (the paper's target: the mean,
+    a time-out bootstrapped; Adam at ``value_lr``)."""
     method = METHODS[method_name]
     parts = shaping_parts(
         method,
@@ -205,21 +209,11 @@ def make_shaping(
     subgoals, potential, options = parts
     if method.shaping == "subgoals" and "start_potential" in config:  # HRS, RRS: --start-potential (--shaping wins)
         options = {**options, "start_potential": config["start_potential"]}
-    shaping = Shaping(subgoals, potential, {**options, **config["shaping"]})
+    shaping = Shaping(subgoals, potential, {**options, **config["shaping"]}, loss=NEURAL_TARGET)
     if method.shaping != "subgoals":  # NRS: fixed η; SARSA-RS: its table learns online in the transform
         return shaping, None
     shaping.potential = NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, config["ddpg"]["hidden"]))
-    trainer = PotentialTrainer(
-        shaping.transform(shaping.potential, gamma, None),
-        SubgoalValueLoss(
-            shaping.potential,
-            reduction="mean",
-            expectile=0.5,  # the paper's mean target
-            bootstrap_truncated=True,
-        ).make_value_estimator(gamma=gamma),
-        torch.optim.Adam(shaping.potential.parameters(), lr=config["value_lr"]),
-    )
-    return shaping, trainer
+    return shaping, PotentialTrainer.for_shaping(shaping, gamma, config["value_lr"], "adam")
 
 
 def agent_config(config: Mapping[str, Any], shaped: bool) -> DDPGConfig:
@@ -242,38 +236,50 @@ def agent_config(config: Mapping[str, Any], shaped: bool) -> DDPGConfig:
     return DDPGConfig(**settings)
 
 
-def make_collector(
-    goal_seed: int,
-    shaping: Shaping | None,
-    value_lr: float | None,
-    agent: DDPGAgent,
-    config: Mapping[str, Any],
-    device: torch.device,
-) -> Collector | MultiSyncCollector:
-    """A MultiSyncCollector of ``collector_workers`` processes sharing V, or a Collector in this process."""
+def learner_config(config: Mapping[str, Any], method_name: str, shaped: bool, epochs: int) -> DDPGTrainConfig:
+    """A learning's settings for :func:`~torchrl_subgoal.training.train_ddpg`: ``epochs`` epochs of the
+    authors' schedule, one collected batch per cycle (``cycle_steps`` frames), ``updates`` gradient steps
+    after it and one soft target update; the DDPG settings of :func:`agent_config`; the neural potential
+    (HRS, RRS) trained per batch, SARSA-RS's table online.
+
+    Examples:
+        >>> config = {"ddpg": dataclasses.asdict(DDPGConfig()), "cycles": 50, "cycle_steps": 300, "updates": 40,
+        ...           "envs": 6, "collector_workers": 2, "env_processes": 0, "device": "cpu", "value_lr": 1e-3,
+        ...           "aggregation_lr": 0.1}
+        >>> settings = learner_config(config, "HRS", shaped=True, epochs=200)
+        >>> settings.total_frames, settings.num_envs, settings.polyak_every, settings.online_potential
+        (3000000, 3, 'batch', False)
+    """
+    ddpg = agent_config(config, shaped)
+    if ddpg.actor_lr != ddpg.critic_lr:
+        raise ValueError(f"actor_lr ({ddpg.actor_lr}) and critic_lr ({ddpg.critic_lr}) differ: train_ddpg takes one lr")
     workers = config["collector_workers"]
-    factory = EnvFactory(
-        shaped_env,
-        make_env=partial(fetch.make_fetch_envs, goal_seed),
-        episode_stats=False,
+    aggregation = METHODS[method_name].shaping == "aggregation"
+    return DDPGTrainConfig(
         num_envs=config["envs"] // max(workers, 1),
         env_workers=config["env_processes"],
-        shaping=shaping,
-        potential=shaping.potential if shaping is not None else None,
-        gamma=agent.config.gamma,
-        value_lr=value_lr,
+        collector_workers=workers,
+        frames_per_batch=config["cycle_steps"],
+        total_frames=epochs * config["cycles"] * config["cycle_steps"],
+        gamma=ddpg.gamma,
+        lr=ddpg.actor_lr,
+        learning_starts=0,
+        updates_per_batch=config["updates"],
+        batch_size=ddpg.batch_size,
+        buffer_size=ddpg.buffer_size,
+        polyak=ddpg.polyak,
+        polyak_every="batch",
+        hidden=ddpg.hidden,
+        noise_eps=ddpg.noise_eps,
+        random_eps=ddpg.random_eps,
+        action_l2=ddpg.action_l2,
+        norm_clip=ddpg.norm_clip,
+        clip_return=ddpg.clip_return,
+        clip_positive=ddpg.clip_positive,
+        value_lr=config["aggregation_lr"] if aggregation else config["value_lr"],
+        online_potential=aggregation,
+        device=config["device"],
     )
-    common: dict[str, Any] = {
-        "frames_per_batch": config["cycle_steps"],
-        "total_frames": -1,
-        "policy_device": device,
-        "storing_device": "cpu",
-        "env_device": "cpu",
-        "auto_register_policy_transforms": False,
-    }
-    if workers == 0:
-        return Collector(factory(), agent.policy, **common)
-    return MultiSyncCollector([factory] * workers, agent.policy, cat_results="stack", **common)
 
 
 def evaluate(env: EnvBase, agent: DDPGAgent, episodes: int) -> tuple[float, float]:
@@ -287,6 +293,75 @@ def evaluate(env: EnvBase, agent: DDPGAgent, episodes: int) -> tuple[float, floa
     return float(np.mean(successes)), float(np.mean(returns))
 
 
+class Epochs:
+    """A learning's epochs on :func:`~torchrl_subgoal.training.train_ddpg`'s loop (:class:`DDPGHooks`): after
+    every ``cycles`` batches, ``test_episodes`` greedy episodes and a checkpoint (networks, optimisers,
+    normaliser, potential, random states and the epoch's transitions); a resumed learning restores the
+    last checkpoint before its first batch. The collector is re-seeded at every epoch's start (epochs end
+    on whole episodes), so a resumed learning collects as the uninterrupted one did."""
+
+    def __init__(
+        self,
+        chunk: Chunk,
+        config: Mapping[str, Any],
+        checkpoint: LearningCheckpoint,
+        test_env: EnvBase,
+        progress: Callable[[int], None],
+    ) -> None:
+        self.chunk, self.config, self.checkpoint, self.test_env, self.progress = (
+            chunk,
+            config,
+            checkpoint,
+            test_env,
+            progress,
+        )
+        self.saved = checkpoint.load()
+        self.records: list[list[float]] = self.saved[0]["records"] if self.saved is not None else []
+        self.collected: list[TensorDictBase] = []
+        self.cycle = 0
+
+    def start(self, agent: DDPGAgent, batch: LearnerBatch[DDPGTrainConfig]) -> None:
+        """Restore the checkpoint (after the collector, whose set-up draws random numbers); seed the epoch."""
+        if self.saved is not None:
+            state, transitions = self.saved
+            for part in transitions:
+                agent.replay.extend(part.to(agent.device))
+            agent.load_training_state(state["agent"])
+            if batch.shaping is not None and state["potential"] is not None:
+                batch.shaping.potential.load_state_dict(state["potential"])
+            if batch.trainer is not None:
+                batch.trainer.optimizer.load_state_dict(state["value_optimizer"])
+            restore_rng_states(state["rng"])
+            self.progress(len(self.records))
+        self._seed(batch)
+
+    def batch(self, agent: DDPGAgent, batch: LearnerBatch[DDPGTrainConfig], data: TensorDictBase) -> bool:
+        """Keep the batch's transitions; at an epoch's end, test, checkpoint and seed the next epoch."""
+        self.collected.append(data.select(*DDPG_KEYS).reshape(-1))
+        self.cycle += 1
+        if self.cycle % self.config["cycles"]:
+            return False
+        success, test_return = evaluate(self.test_env, agent, self.config["test_episodes"])
+        self.records.append([self.config["cycles"] * self.config["cycle_steps"], test_return, success])
+        state = {
+            "agent": agent.training_state(),
+            "records": self.records,
+            "rng": rng_states(),
+            "potential": batch.shaping.potential.state_dict() if batch.shaping is not None else None,
+            "value_optimizer": batch.trainer.optimizer.state_dict() if batch.trainer is not None else None,
+        }
+        self.checkpoint.save(len(self.records), state, torch.cat(self.collected))
+        self.collected = []
+        self.progress(1)
+        self._seed(batch)
+        return len(self.records) >= self.config["epochs"]
+
+    def _seed(self, batch: LearnerBatch[DDPGTrainConfig]) -> None:
+        assert batch.collector is not None
+        epoch = len(self.records)
+        batch.collector.set_seed(int(np.random.SeedSequence([self.chunk.seed, epoch]).generate_state(1)[0]))
+
+
 def learn(
     chunk: Chunk,
     learning: int,
@@ -294,67 +369,26 @@ def learn(
     config: Mapping[str, Any],
     progress: Callable[[int], None],
 ) -> np.ndarray:
-    """One learning; returns ``[epochs, 3]`` records (env steps, test return, success rate)."""
+    """One learning on :func:`~torchrl_subgoal.training.train_ddpg`; returns ``[epochs, 3]`` records (env steps,
+    test return, success rate)."""
     torch.set_num_threads(1)  # a MultiSyncCollector's shutdown gives this process its workers' threads back
-    torch.manual_seed(chunk.seed)
+    torch.manual_seed(chunk.seed)  # the neural potential's weights
     np.random.seed(chunk.seed % 2**32)
     goal_seed = int(np.random.SeedSequence([config["seed"], learning]).generate_state(1)[0])
-    shaping, trainer = make_shaping(chunk.method, series, config, config["ddpg"]["gamma"])
-    ddpg = agent_config(config, shaped=shaping is not None)
-    device = torch.device(config["device"])
-    online_lr = config["aggregation_lr"] if METHODS[chunk.method].shaping == "aggregation" else None
-    test_env = fetch.make_fetch_env(goal_seed, device=device)
-    agent = DDPGAgent(fetch.OBSERVATION_SIZE, test_env.action_spec_unbatched, ddpg, device)
-
-    checkpoint = LearningCheckpoint(Path(config["checkpoints"]) / chunk.name)
-    records: list[list[float]] = []
-    if (saved := checkpoint.load()) is not None:  # resume: replay the stored transitions, restore state
-        state, transitions = saved
-        for part in transitions:
-            agent.replay.extend(part.to(device))
-        agent.load_training_state(state["agent"])
-        if shaping is not None:
-            shaping.potential.load_state_dict(state["potential"])
-        if trainer is not None:
-            trainer.optimizer.load_state_dict(state["value_optimizer"])
-        records = state["records"]
-        progress(len(records))
-    epochs = config["epochs"]
-    if len(records) < epochs:
-        collector = make_collector(goal_seed, shaping, online_lr, agent, config, device)
-        if saved is not None:  # after the collector, whose set-up draws random numbers
-            restore_rng_states(saved[0]["rng"])
-        batches = iter(collector)
-        for epoch in range(len(records), epochs):
-            # workers' noise and envs re-seeded per epoch (epochs end on whole episodes): a resumed
-            # learning collects as the uninterrupted one did
-            collector.set_seed(int(np.random.SeedSequence([chunk.seed, epoch]).generate_state(1)[0]))
-            collected = []
-            for _ in range(config["cycles"]):
-                data: TensorDictBase = next(batches)
-                if trainer is not None:
-                    trainer.step(data)
-                agent.extend(data)
-                collected.append(data.select(*DDPG_KEYS).reshape(-1))
-                for _ in range(config["updates"]):
-                    agent.update()
-                agent.soft_update()
-                if isinstance(collector, MultiSyncCollector):
-                    collector.update_policy_weights_()
-            success, test_return = evaluate(test_env, agent, config["test_episodes"])
-            records.append([config["cycles"] * config["cycle_steps"], test_return, success])
-            state = {
-                "agent": agent.training_state(),
-                "records": records,
-                "rng": rng_states(),
-                "potential": shaping.potential.state_dict() if shaping is not None else None,
-                "value_optimizer": trainer.optimizer.state_dict() if trainer is not None else None,
-            }
-            checkpoint.save(epoch + 1, state, torch.cat(collected))
-            progress(1)
-        close_collector(collector)
+    shaping, _ = make_shaping(chunk.method, series, config, config["ddpg"]["gamma"])
+    test_env = fetch.make_fetch_env(goal_seed, device=torch.device(config["device"]))
+    epochs = Epochs(chunk, config, LearningCheckpoint(Path(config["checkpoints"]) / chunk.name), test_env, progress)
+    left = config["epochs"] - len(epochs.records)
+    if left > 0:
+        train_ddpg(
+            partial(fetch.make_fetch_envs, goal_seed),
+            learner_config(config, chunk.method, shaping is not None, left),
+            seeds=[chunk.seed],
+            shaping=shaping,
+            hooks=DDPGHooks(start=epochs.start, batch=epochs.batch),
+        )
     test_env.close()
-    return np.asarray(records, dtype=np.float64)
+    return np.asarray(epochs.records, dtype=np.float64)
 
 
 def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int], None]) -> EpisodeTable:
@@ -513,7 +547,9 @@ def plan(cfg: Config) -> Plan:
         },
     }
     check_shaping_builds(specs, config)
-    return Plan("fetch", specs, run_chunk, config, episodes=epochs, chunk_size=1)
+    steps = epochs * preset["cycles"] * preset["cycle_steps"]
+    budget = Budget(steps, ("epochs", epochs), chunk_flag=None, unit="epoch")
+    return Plan("fetch", specs, run_chunk, config, episodes=epochs, chunk_size=1, budget=budget)
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:

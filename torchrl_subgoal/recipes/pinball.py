@@ -50,13 +50,15 @@ from torchrl_subgoal.experiments.recipe import (
     method_specs,
     needs_random_patterns,
     pattern_sets,
+    potential_entries,
+    potential_options,
     recipe_main,
     sweep_entries,
     warm_up_chunks,
 )
-from torchrl_subgoal.methods import paper_methods, shaping_transform
+from torchrl_subgoal.methods import all_methods, paper_methods, shaping_transform
 
-METHODS = paper_methods(baseline="AC")
+METHODS = all_methods(baseline="AC")
 OBSERVATION_KEY = "observation"  # what the subgoal predicates read: (x, y, ẋ, ẏ)
 PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "pinball_participants.yaml")
 SUBGOAL_RADIUS = 0.04  # the target's radius, as in the paper
@@ -74,7 +76,9 @@ class Config(ReproductionConfig):
     )
     episodes: int = setting(200, "episodes per learning (paper: 200)")
     learnings: int = setting(10, "learnings per subgoal pattern (paper: 10)")
-    methods: str = setting(",".join(METHODS), "comma-separated methods to run")
+    methods: str = setting(
+        ",".join(paper_methods(baseline="AC")), f"comma-separated methods to run, of {', '.join(METHODS)}"
+    )
     subgoals: str = setting(
         PARTICIPANTS, "subgoal file of the human patterns (HRS, NRS)", shown_default="the paper's ten participants'"
     )
@@ -149,6 +153,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
         start_potential=config["start_potential"],
         expectile=config.get("expectile", 0.5),
         bootstrap_truncated=config.get("bootstrap_truncated", True),
+        **potential_options(config, method),
     )
     learning_env = TransformedEnv(env, shaping) if shaping is not None else env
     spec = env.observation_spec["observation"]
@@ -183,6 +188,7 @@ def plan(cfg: Config) -> Plan:
             )
         },
         "actor_critic": dataclasses.asdict(AC_PRESETS[cfg.preset]),
+        **potential_entries(cfg),
         **sweep_entries(cfg, cfg.subgoals, patterns),
         "report": {
             "metric": "steps",

@@ -22,7 +22,7 @@ to ``RESULTS/logs`` (``--logger csv``, ``tensorboard``, ``wandb`` or ``none``).
 
     torchrl-subgoal train --algo ppo --domain four_rooms
     torchrl-subgoal train --algo dqn --domain mountain_car --methods DQN,HRS --learnings 3
-    torchrl-subgoal train --algo ddpg --domain point_maze_umaze --total-frames 50000 --sees-subgoal
+    torchrl-subgoal train --algo ddpg --domain point_maze_umaze --total-frames 50000 --sees-subgoal True
     torchrl-subgoal train --config results/ppo_four_rooms/config.json --results results/again
 """
 

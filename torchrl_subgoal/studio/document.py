@@ -17,6 +17,7 @@ the file, the pattern and the field.
 
 from __future__ import annotations
 
+import errno
 import itertools
 import json
 import math
@@ -47,6 +48,7 @@ __all__ = [
     "Drawing",
     "RequestError",
     "file_path",
+    "folder_error",
     "parse_json",
     "read_drawing",
     "read_file",
@@ -345,12 +347,17 @@ def read_drawing(data: Any, domains: Mapping[str, Domain], *, source: str = "dra
 
 
 def save_drawing(drawing: Drawing, path: Path, *, overwrite: bool = False) -> None:
-    """Write the drawing's patterns to ``path`` with :func:`save_patterns`, atomically and never through a link.
+    """Write the drawing's patterns to ``path`` with :func:`save_patterns`: atomically, exclusively and
+    never through a link.
 
     The file is written to a new temporary file in ``path``'s folder, created
-    exclusively (``O_CREAT | O_EXCL | O_NOFOLLOW``, a random name), then renamed
-    over ``path``: a link planted at ``path`` or at any temporary name is replaced
-    or left alone, never written through.
+    exclusively (``O_CREAT | O_EXCL | O_NOFOLLOW``, a random name). A first save
+    (no ``overwrite``) then *links* it to ``path``, which fails if anything of that
+    name exists, so of any number of concurrent first saves exactly one creates the
+    file and the others get a 409; ``overwrite`` renames it over ``path``. Either
+    way ``path`` is the complete old file or the complete new one, and a link
+    planted at ``path`` or at any temporary name is replaced or left alone, never
+    written through.
 
     Args:
         drawing: what to save.
@@ -360,7 +367,7 @@ def save_drawing(drawing: Drawing, path: Path, *, overwrite: bool = False) -> No
 
     Raises:
         RequestError: 409 if ``path`` exists (and not ``overwrite``) or is a directory;
-            500 naming the reason if the folder cannot be written.
+            for a folder that cannot be written, the answer of :func:`folder_error`.
 
     Examples:
         >>> from torchrl_subgoal.studio.domains import default_domains
@@ -376,31 +383,45 @@ def save_drawing(drawing: Drawing, path: Path, *, overwrite: bool = False) -> No
         ...
         torchrl_subgoal.studio.document.RequestError: alice.yaml exists in the save folder; choose another name, ...
     """
+    exists = RequestError(
+        f"{path.name} exists in the save folder; choose another name, or confirm replacing it", status=409
+    )
     try:
-        mode = os.lstat(path).st_mode
+        mode: int | None = os.lstat(path).st_mode
     except FileNotFoundError:
         mode = None
+    except OSError as exc:
+        raise folder_error(exc, path.parent, f"save {path.name}") from None
     if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISLNK(mode)):
         raise RequestError(
             f"{path.name}: a directory (or another non-file) of that name is in the save folder; choose another name",
             status=409,
         )
     if mode is not None and not overwrite:
-        raise RequestError(
-            f"{path.name} exists in the save folder; choose another name, or confirm replacing it", status=409
-        )
+        raise exists
     with tempfile.TemporaryDirectory(prefix="studio-save-") as private:  # ours alone: nothing planted in it
         rendered = Path(private) / path.name
         save_patterns(rendered, drawing.patterns, domain=drawing.domain.name, description=drawing.description)
         text = rendered.read_bytes()
     try:
-        _write_new(path, text)
+        _write_new(path, text, overwrite=overwrite)
+    except FileExistsError:  # another save of this name won the race
+        raise exists from None
+    except IsADirectoryError:
+        raise RequestError(
+            f"{path.name}: a directory of that name is in the save folder; choose another name", 409
+        ) from None
     except OSError as exc:
-        raise RequestError(f"cannot write {path.name} in the save folder ({exc.strerror or exc})", status=500) from None
+        raise folder_error(exc, path.parent, f"save {path.name}") from None
 
 
-def _write_new(path: Path, data: bytes) -> None:
-    """Write ``data`` to a fresh temporary file beside ``path`` (created exclusively), then rename it to ``path``."""
+#: ``link`` errors of file systems without hard links (FAT, some network mounts): claim the name instead.
+_NO_LINKS = frozenset({errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EMLINK})
+
+
+def _write_new(path: Path, data: bytes, *, overwrite: bool) -> None:
+    """Write ``data`` to a fresh temporary file beside ``path`` (created exclusively), then move it to
+    ``path``: renamed over it with ``overwrite``, else linked to it (``FileExistsError`` if ``path`` exists)."""
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
     for _ in range(100):
         tmp = path.with_name(f".{path.name}.{secrets.token_hex(8)}.tmp")
@@ -416,10 +437,48 @@ def _write_new(path: Path, data: bytes) -> None:
             handle.write(data)
             handle.flush()
             os.fsync(handle.fileno())
+        if not overwrite:
+            try:
+                os.link(tmp, path)  # atomic and exclusive: fails if path exists
+                return
+            except OSError as exc:
+                if exc.errno not in _NO_LINKS:
+                    raise
+            os.close(os.open(path, flags, 0o666))  # no hard links here: claim the name (exclusive), then fill it
         os.replace(tmp, path)  # replaces a link at path, never follows it
-    except BaseException:
+    finally:
         tmp.unlink(missing_ok=True)
-        raise
+
+
+def folder_error(exc: OSError, folder: Path, doing: str) -> RequestError:
+    """What the page shows when the file system refuses ``doing`` in the save ``folder`` (never a 500).
+
+    503 when the folder is gone (deleted, moved, replaced by a file), 403 when it may not be
+    read or written (permissions, a read-only file system), 507 when the disk is full,
+    else 503 naming the system's reason.
+
+    Examples:
+        >>> folder = Path(tempfile.mkdtemp())
+        >>> error = folder_error(PermissionError(errno.EACCES, "Permission denied"), folder, "save a.yaml")
+        >>> error.status, str(error).startswith("cannot save a.yaml in the save folder")
+        (403, True)
+        >>> folder.rmdir()
+        >>> folder_error(FileNotFoundError(errno.ENOENT, "No such file"), folder, "list the files").status
+        503
+    """
+    reason = exc.strerror or str(exc)
+    if not os.path.isdir(folder):
+        return RequestError(
+            f"the save folder {folder} is gone (deleted, moved or replaced by a file): create it again, or "
+            "restart the studio with --folder DIR",
+            status=503,
+        )
+    where = f"cannot {doing} in the save folder {folder} ({reason})"
+    if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        return RequestError(f"{where}: let this user read and write it, or restart the studio with --folder DIR", 403)
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return RequestError(f"{where}: free some space, then save again", status=507)
+    return RequestError(where, status=503)
 
 
 def read_file(folder: Path, name: str) -> tuple[Path, bytes]:
@@ -435,7 +494,8 @@ def read_file(folder: Path, name: str) -> tuple[Path, bytes]:
         name: the file's name in it (as in a request).
 
     Raises:
-        RequestError: 400 for a bad name or a link out of the folder, 404 if there is no such file.
+        RequestError: 400 for a bad name or a link out of the folder, 404 if there is no such file;
+            for a folder that is gone or cannot be read, the answer of :func:`folder_error`.
 
     Examples:
         >>> import tempfile
@@ -449,15 +509,23 @@ def read_file(folder: Path, name: str) -> tuple[Path, bytes]:
     missing = RequestError(f"{path.name}: no such file in the save folder", status=404)
     try:
         real = path.resolve(strict=True)
-    except (FileNotFoundError, NotADirectoryError, RuntimeError):  # RuntimeError: a loop of links
+    except RuntimeError:  # a loop of links
         raise missing from None
+    except OSError as exc:
+        if isinstance(exc, (FileNotFoundError, NotADirectoryError)) and os.path.isdir(root):
+            raise missing from None
+        raise folder_error(exc, root, f"read {path.name}") from None
     if real.parent != root:
         raise RequestError(f"file name {name!r}: must name a file directly in the save folder")
     flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
     try:
         fd = os.open(real, flags)
     except FileNotFoundError:
+        if not os.path.isdir(root):
+            raise folder_error(FileNotFoundError(errno.ENOENT, "gone"), root, f"read {path.name}") from None
         raise missing from None
+    except PermissionError as exc:
+        raise folder_error(exc, root, f"read {path.name}") from None
     except OSError as exc:  # ELOOP: a link was put there after the check
         raise RequestError(f"{path.name}: cannot open it ({exc.strerror or exc})", status=400) from None
     with os.fdopen(fd, "rb") as handle:

@@ -1,6 +1,7 @@
 """The studio's web server: the page, its JSON API and the command line.
 
-Routes (JSON in and out; every error is ``{"error": message}`` with a 4xx code):
+Routes (JSON in and out; every error is ``{"error": message}`` with a 4xx code, or 503 when the save
+folder is gone and 507 when its disk is full; a 500 is a bug):
 
 =======================  ==============================================================
 ``GET /``                the page
@@ -11,13 +12,13 @@ Routes (JSON in and out; every error is ``{"error": message}`` with a 4xx code):
 ``GET /api/files/NAME``  one file as a drawing (``/files/NAME``: the file itself)
 ``PUT /api/files/NAME``  save a drawing as ``NAME`` (``.yaml`` added when no suffix);
                          ``?overwrite=1`` to replace an existing file (else 409)
-``POST /api/try``        start a "Try it" learning of one pattern: ``{..drawing, pattern,
+``POST /api/try``        start a "Try it" learning of one pattern: ``{..drawing, pattern, method,
                          episodes, learners, max_steps}``; 202 with the job
 ``GET /api/try/ID``      the job's state, progress and, when done, its result
 ``DELETE /api/try/ID``   cancel it
 =======================  ==============================================================
 
-Every request is checked first (:func:`create_app`): its ``Host`` must be one this
+Every request is checked first (:func:`create_app`): it must carry a ``Host`` header naming one this
 studio serves (loopback names and the addresses it listens on), a browser's
 ``Origin`` must be the studio's own, anything that changes state (POST, PUT; a
 DELETE that has a body) must be JSON (``Content-Type: application/json``), and with a token (the
@@ -54,6 +55,7 @@ from torchrl_subgoal.studio.document import (
     SUFFIXES,
     RequestError,
     file_path,
+    folder_error,
     infer_domain,
     parse_json,
     read_drawing,
@@ -63,7 +65,7 @@ from torchrl_subgoal.studio.document import (
 )
 from torchrl_subgoal.studio.domains import Domain, default_domains
 from torchrl_subgoal.studio.jobs import JobError, Jobs
-from torchrl_subgoal.studio.training import TrySettings, try_pattern
+from torchrl_subgoal.studio.training import METHODS, TrySettings, try_pattern
 from torchrl_subgoal.subgoals import (
     MAX_FILE_BYTES,
     SubgoalFileError,
@@ -168,6 +170,11 @@ def served_hosts(host: str) -> list[str]:
 
 def _check_request(hosts: frozenset[str], token: str | None) -> None:
     """Refuse a request a foreign page could have made (see the module doc); raises :class:`RequestError`."""
+    if "HTTP_HOST" not in request.environ:  # else werkzeug makes one up from the server's own address
+        raise RequestError(
+            "request: no Host header; the studio answers only requests that name it: open the address it printed",
+            status=403,
+        )
     name = _host_name(request.host)
     if name is None or not (name in hosts or _is_loopback(name)):
         served = ", ".join(["localhost", "127.0.0.1", "::1", *sorted(hosts - {"localhost", "127.0.0.1", "::1"})])
@@ -299,15 +306,20 @@ def create_app(
     @app.get("/api/files")
     def files() -> Response:
         resolved = root.resolve()
-        found = sorted(
-            p
-            for p in resolved.iterdir()
-            if p.suffix.lower() in SUFFIXES
-            and not p.name.startswith(".")
-            and p.is_file()
-            and p.resolve().parent == resolved
-        )  # links out of the folder: not listed
-        return jsonify(folder=str(resolved), files=[{"name": p.name, "bytes": p.stat().st_size} for p in found])
+        try:
+            entries = sorted(resolved.iterdir())
+        except OSError as exc:
+            raise folder_error(exc, resolved, "list the files") from None
+        listed = []
+        for p in entries:
+            if p.suffix.lower() not in SUFFIXES or p.name.startswith("."):
+                continue
+            try:  # links out of the folder are not listed; an entry removed meanwhile neither
+                if p.resolve(strict=True).parent == resolved and p.is_file():
+                    listed.append({"name": p.name, "bytes": p.stat().st_size})
+            except (OSError, RuntimeError):
+                continue
+        return jsonify(folder=str(resolved), files=listed)
 
     @app.get("/api/files/<path:name>")
     def open_file(name: str) -> Response:
@@ -360,11 +372,14 @@ def create_app(
         data = _body()
         if not isinstance(data, Mapping):
             raise RequestError("request: expected a JSON object")
-        fields = {"pattern", "episodes", "learners", "max_steps"}
+        fields = {"pattern", "method", "episodes", "learners", "max_steps"}
         drawing = read_drawing({k: v for k, v in data.items() if k not in fields}, studio.domains, source=_source(data))
         name = data.get("pattern", next(iter(drawing.patterns)) if len(drawing.patterns) == 1 else None)
-        if name not in drawing.patterns:
+        if not isinstance(name, str) or name not in drawing.patterns:
             raise RequestError(f"pattern: expected one of {list(drawing.patterns)}, got {name!r}")
+        method = data.get("method", "HRS")
+        if not isinstance(method, str) or method not in METHODS:
+            raise RequestError(f"method: expected one of {list(METHODS)}, got {method!r}")
         domain = drawing.domain
         if not domain.limits:
             raise RequestError(f"Try it: {domain.try_note or 'not offered for ' + domain.title}")
@@ -378,10 +393,10 @@ def create_app(
         map_ = domain.maps.get(drawing.map)
 
         def work(progress: Any) -> dict[str, Any]:
-            result = try_pattern(domain.name, series, settings, map=map_, progress=progress).to_json()
-            return {**result, "pattern": name}
+            result = try_pattern(domain.name, series, settings, method=method, map=map_, progress=progress)
+            return {**result.to_json(), "pattern": name}
 
-        key = f"{domain.name}/{name}"
+        key = f"{domain.name}/{name}/{method}"
         job = studio.jobs.start(key, 2 * settings.learners * settings.episodes, work)
         return jsonify(job.status()), 202
 

@@ -3,8 +3,8 @@
 Everything the studio trains goes through :func:`try_pattern`, built from the
 library's pieces: the domain's batched env and the paper's learner, both from
 its registration (the ``learner`` of its :class:`~torchrl_subgoal.studio.domains.StudioDomain`: SARSA on
-four-rooms, the Fourier actor-critic on PinBall), the HRS shaping transform of
-:func:`torchrl_subgoal.methods.shaping_transform` and
+four-rooms, the Fourier actor-critic on PinBall), the shaping transform of the chosen method
+(HRS, SRS or NRS) from :func:`torchrl_subgoal.methods.shaping_transform` and
 :func:`torchrl_subgoal.agents.run_episodes` on the fused engine. Both runs use
 the same seeds, so the two curves differ only by the shaping. This is the one
 place to update when the engine's interface changes.
@@ -24,16 +24,17 @@ from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import domains
 from torchrl_subgoal.agents import run_episodes
-from torchrl_subgoal.methods import paper_methods, shaping_transform
+from torchrl_subgoal.methods import SRS, paper_methods, shaping_transform
 from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.studio.domains import studio_domain
 from torchrl_subgoal.subgoals import SubgoalSeries
 from torchrl_subgoal.transform import SubgoalPotentialTransform
 
-__all__ = ["Curve", "TryResult", "TrySettings", "try_pattern"]
+__all__ = ["METHODS", "Curve", "TryResult", "TrySettings", "try_pattern"]
 
-#: The shaped method: HRS (a learned potential over the drawn series).
-HRS = paper_methods(baseline="none")["HRS"]
+#: The shaped methods a "Try it" offers: HRS (the library's learned potential, the default), SRS (the
+#: progress prior, fixed) and NRS (the naive pulse).
+METHODS = {"HRS": paper_methods(baseline="none")["HRS"], "SRS": SRS, "NRS": paper_methods(baseline="none")["NRS"]}
 Progress = Callable[[int], None]
 
 
@@ -87,11 +88,13 @@ class TryResult:
     """What the page draws: both learning curves and the learned potential ``V(z)``.
 
     Attributes:
-        shaped: steps per episode with the drawn subgoals (HRS).
+        shaped: steps per episode with the drawn subgoals.
         baseline: steps per episode without shaping.
-        potential: mean over learners of the learned ``V(z)``, ``z = 0..n``
-            (``z = 0`` before any subgoal, ``z = i + 1`` once subgoal ``i`` is achieved).
+        potential: mean over learners of the table ``V(z)`` at the end (learned for HRS, the fixed
+            prior for SRS; empty for NRS), ``z = 0..n`` (``z = 0`` before any subgoal, ``z = i + 1``
+            once subgoal ``i`` is achieved).
         potential_sem: its standard error over learners.
+        method: the shaped learners' method.
         settings: the settings of the run.
         seconds: wall time of both runs.
 
@@ -108,6 +111,7 @@ class TryResult:
     potential_sem: list[float]
     settings: dict[str, Any] = field(default_factory=dict)
     seconds: float = 0.0
+    method: str = "HRS"
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict."""
@@ -119,16 +123,18 @@ def try_pattern(
     series: SubgoalSeries,
     settings: TrySettings,
     *,
+    method: str = "HRS",
     map: str | Path | None = None,
     progress: Progress | None = None,
 ) -> TryResult:
-    """Learn with ``series`` (HRS) and without shaping, same seeds, on the fused engine.
+    """Learn with ``series`` (shaped by ``method``) and without shaping, same seeds, on the fused engine.
 
     Args:
         domain: a registered domain whose studio part has a learner:
             ``"four_rooms"``, ``"pinball"``.
         series: the drawn pattern.
         settings: episodes, learners, seed, episode cap.
+        method: ``"HRS"`` (default), ``"SRS"`` or ``"NRS"`` (:data:`METHODS`).
         map: the PinBall map (``"simple"``, ``"hard"`` or a file); ignored by four-rooms.
         progress: called with the number of learner-episodes just finished
             (``2 * learners * episodes`` in all); it may raise to cancel.
@@ -142,7 +148,11 @@ def try_pattern(
         >>> result = try_pattern("four_rooms", series, TrySettings(episodes=3, learners=2))
         >>> len(result.shaped.mean), len(result.potential)
         (3, 3)
+        >>> [round(v, 3) for v in try_pattern("four_rooms", series, TrySettings(3, 2), method="SRS").potential]
+        [0.0, 0.333, 0.667]
     """
+    if method not in METHODS:
+        raise ValueError(f"method: expected one of {list(METHODS)}, got {method!r}")
     found = studio_domain(domain)
     if found is None or found.learner is None:
         problem = "unknown domain" if domains.find(domain) is None else "no learner (StudioDomain.learner) for domain"
@@ -158,20 +168,25 @@ def try_pattern(
         )
         if label == "shaped":
             transform = shaping_transform(
-                HRS,
+                METHODS[method],
                 env.batch_size,
                 gamma=shaping["gamma"],
                 value_lr=shaping["value_lr"],
                 patterns=[series],
                 pattern_index=torch.zeros(settings.learners, dtype=torch.long),
                 observation_key=shaping["observation_key"],
+                eta=shaping.get("goal_reward", 1.0),
+                progress_scale=shaping.get("goal_reward", 1.0),
             )
             assert transform is not None
             env = TransformedEnv(env, transform)
         records = run_episodes(env, agent, settings.episodes, progress=progress, engine="fused")
         curves[label] = Curve.of(records.steps, records.success)
-    assert transform is not None and isinstance(transform.potential, TabularPotential)
-    table = transform.potential.table.detach().double().reshape(settings.learners, -1)
+    assert transform is not None
+    if isinstance(transform.potential, TabularPotential):
+        table = transform.potential.table.detach().double().reshape(settings.learners, -1)
+    else:  # NRS: no table
+        table = torch.zeros(settings.learners, 0, dtype=torch.double)
     sem = table.std(0) / math.sqrt(settings.learners) if settings.learners > 1 else torch.zeros(table.shape[1])
     return TryResult(
         shaped=curves["shaped"],
@@ -180,4 +195,5 @@ def try_pattern(
         potential_sem=sem.tolist(),
         settings={**asdict(settings), "domain": domain, "map": str(map or "")},
         seconds=time.perf_counter() - start,
+        method=method,
     )

@@ -121,6 +121,66 @@ class SubgoalSeries:
         succ: tuple[tuple[int, ...], ...] = self._succ  # type: ignore[attr-defined]
         return succ[z]
 
+    def parents(self, z: int) -> tuple[int, ...]:
+        """The abstract states from which ``z`` is entered (``()`` for the start, ``z = 0``).
+
+        Examples:
+            >>> from torchrl_subgoal.subgoals import Cell
+            >>> diamond = SubgoalSeries([Cell(1, 1), Cell(2, 2), Cell(3, 3)], order=[(0, 2), (1, 2)])
+            >>> diamond.parents(3), diamond.parents(1)
+            ((1, 2), (0,))
+        """
+        if z == 0:
+            return ()
+        return tuple(node for node in range(self.num_abstract_states) if z - 1 in self.successors(node))
+
+    def ancestors(self, z: int) -> tuple[int, ...]:
+        """``z`` and every abstract state an episode can pass through before entering it.
+
+        Examples:
+            >>> from torchrl_subgoal.subgoals import Cell
+            >>> SubgoalSeries([Cell(1, 1), Cell(2, 2), Cell(3, 3)], order=[(0, 2), (1, 2)]).ancestors(3)
+            (0, 1, 2, 3)
+        """
+        seen, stack = {z}, [z]
+        while stack:
+            for p in self.parents(stack.pop()):
+                if p not in seen:
+                    seen.add(p)
+                    stack.append(p)
+        return tuple(sorted(seen))
+
+    @property
+    def levels(self) -> tuple[int, ...]:
+        """For every abstract state, the number of subgoals achieved on the longest way to it: ``z`` in a
+        chain; in a partial order, one more than the deepest of its :meth:`parents`.
+
+        Examples:
+            >>> from torchrl_subgoal.subgoals import Cell
+            >>> SubgoalSeries([Cell(1, 1), Cell(2, 2)]).levels
+            (0, 1, 2)
+            >>> SubgoalSeries([Cell(1, 1), Cell(2, 2), Cell(3, 3)], order=[(0, 2), (1, 2)]).levels
+            (0, 1, 1, 2)
+        """
+        levels = [0] * self.num_abstract_states
+        for _ in range(len(self)):  # a path has at most len(self) subgoals: that many relaxations settle it
+            for z in range(1, self.num_abstract_states):
+                levels[z] = 1 + max(levels[p] for p in self.parents(z))
+        return tuple(levels)
+
+    def progress(self, scale: float = 1.0) -> tuple[float, ...]:
+        """The progress prior of every abstract state: ``scale · level / (depth + 1)``, where ``depth`` is
+        the deepest level. The goal, one stage further, would be worth ``scale``: each subgoal achieved
+        adds an equal share of it.
+
+        Examples:
+            >>> from torchrl_subgoal.subgoals import Cell
+            >>> SubgoalSeries([Cell(1, 1), Cell(2, 2), Cell(3, 3)]).progress(2.0)
+            (0.0, 0.5, 1.0, 1.5)
+        """
+        levels = self.levels
+        return tuple(scale * level / (max(levels) + 1) for level in levels)
+
     def _covering(self) -> tuple[tuple[int, ...], ...]:
         n = len(self)
         if self.order is None:

@@ -1,16 +1,26 @@
-"""TorchRL-native training with subgoal shaping: one building block per learner, and what they share.
+"""TorchRL-native training with subgoal shaping: one building block per learner, batched by construction.
 
-* :mod:`~torchrl_subgoal.training.common`: the shaped env (:func:`shaped_env`), the
-  collector, the potential's training (:class:`PotentialTrainer`), re-shaping replay
-  samples (:class:`SampleReshaper`), the learner seeing ``z`` (:func:`subgoal_states`)
-  and the records (:class:`LearningCurve`);
-* :mod:`~torchrl_subgoal.training.a2c` (:func:`train_a2c`),
-  :mod:`~torchrl_subgoal.training.ppo` (:func:`train_ppo`),
-  :mod:`~torchrl_subgoal.training.dqn` (:func:`train_dqn`) and
-  :mod:`~torchrl_subgoal.training.ddpg` (:func:`train_ddpg`, DDPG or TD3): one learner
-  each, ``train_<algo>(make_env, config, shaping=..., seed=...) -> LearningCurve``; A2C and PPO also
-  as a batch of learners (:func:`train_a2c_batch`, :func:`train_ppo_batch`; seeds as a batch
-  dimension: :mod:`~torchrl_subgoal.training.batch`);
+Every block trains ``len(seeds)`` learners as one program (one learner is a batch of one):
+``train_<algo>(make_env, config, *, seeds=[...], shaping=...) -> Trained``.
+
+* the blocks: :mod:`~torchrl_subgoal.training.a2c` (:func:`train_a2c`),
+  :mod:`~torchrl_subgoal.training.ppo` (:func:`train_ppo`; what the two share:
+  :mod:`~torchrl_subgoal.training.on_policy`),
+  :mod:`~torchrl_subgoal.training.dqn` (:func:`train_dqn`),
+  :mod:`~torchrl_subgoal.training.ddpg` (:func:`train_ddpg`, DDPG or TD3) and tabular
+  Q-learning (:mod:`~torchrl_subgoal.training.qlearning`);
+* their settings: :mod:`~torchrl_subgoal.training.config` (:class:`LearnerConfig`, the fields
+  and the one check every learner shares; each config adds its own);
+* what they share: :mod:`~torchrl_subgoal.training.envs` (the shaped env :func:`shaped_env`,
+  :class:`Shaping`, one env batch for many learners :func:`learner_envs`),
+  :mod:`~torchrl_subgoal.training.networks` (input layers, the learner seeing ``z``),
+  :mod:`~torchrl_subgoal.training.collection` (:func:`make_collector`),
+  :mod:`~torchrl_subgoal.training.recording` (:class:`LearningCurve`, :class:`SuccessSignal`),
+  :mod:`~torchrl_subgoal.training.potential` (:class:`PotentialTrainer`, :class:`SampleReshaper`),
+  :mod:`~torchrl_subgoal.training.batch` (:class:`LearnerBatch`: ``K`` learners' env batch,
+  stacked networks, one table per learner);
+* what they return: :mod:`~torchrl_subgoal.training.result` (:class:`Trained`: curves, modules,
+  save and load; :func:`evaluate`);
 * :mod:`~torchrl_subgoal.training.smdp`: keep only the real SMDP transitions
   (:func:`smdp_transitions`, :func:`extend_transitions` into a replay buffer);
 * :mod:`~torchrl_subgoal.training.shared`: :class:`EnvFactory`, one potential
@@ -29,73 +39,104 @@ from typing import Literal
 
 from torchrl.record.loggers import CSVLogger, Logger
 
-from torchrl_subgoal.training.a2c import A2CConfig, actor_critic, train_a2c, train_a2c_batch
-from torchrl_subgoal.training.common import (
-    CurveRecorder,
-    EpisodeWindow,
-    FourierFeatures,
-    LearnerSettings,
-    LearningCurve,
-    PotentialTrainer,
-    SampleReshaper,
+from torchrl_subgoal.training.a2c import A2CConfig, A2CUpdate, train_a2c
+from torchrl_subgoal.training.batch import (
+    LearnerBatch,
+    LearnerReplay,
+    LearnerStack,
+    batch_shaping,
+    clip_grad_norm_per_learner,
+    learner_means,
+    per_learner,
+)
+from torchrl_subgoal.training.collection import close_collector, make_collector, seed_collector
+from torchrl_subgoal.training.config import LearnerConfig, NetworkConfig, OffPolicyConfig, Settings
+from torchrl_subgoal.training.ddpg import DDPGHooks, DDPGTrainConfig, ddpg_agent, ddpg_modules, train_ddpg
+from torchrl_subgoal.training.domains import A2CDomain, LearnerDomain
+from torchrl_subgoal.training.dqn import DQN_PRESETS, DQNConfig, DQNUpdate, dqn_modules, train_dqn
+from torchrl_subgoal.training.envs import (
+    EPISODE_RETURN,
     Shaping,
     batched,
-    check_settings,
-    close_collector,
-    learner_env,
-    make_collector,
+    close_probe,
+    learner_envs,
+    probe_env,
     shaped_env,
-    subgoal_states,
 )
-from torchrl_subgoal.training.ddpg import DDPGTrainConfig, ddpg_agent, train_ddpg
-from torchrl_subgoal.training.domains import A2CDomain, LearnerDomain
-from torchrl_subgoal.training.dqn import DQN_PRESETS, DQNConfig, q_network, train_dqn
 from torchrl_subgoal.training.learners import LEARNERS, Learner, action_kind, check_actions
-from torchrl_subgoal.training.ppo import PPOConfig, ppo_actor_critic, train_ppo, train_ppo_batch
+from torchrl_subgoal.training.networks import FourierFeatures, q_network, subgoal_states
+from torchrl_subgoal.training.on_policy import actor_critic, actor_critic_modules, train_on_policy
+from torchrl_subgoal.training.potential import PotentialTrainer, SampleReshaper
+from torchrl_subgoal.training.ppo import PPOConfig, PPOUpdate, ppo_actor_critic, train_ppo
+from torchrl_subgoal.training.recording import CurveRecorder, EpisodeWindow, LearningCurve, SuccessSignal
+from torchrl_subgoal.training.result import Evaluation, Trained, evaluate
 from torchrl_subgoal.training.shared import EnvFactory
 from torchrl_subgoal.training.smdp import extend_transitions, smdp_transitions
 
 __all__ = [
     "DQN_PRESETS",
+    "EPISODE_RETURN",
     "LEARNERS",
     "A2CConfig",
     "A2CDomain",
+    "A2CUpdate",
     "CurveRecorder",
+    "DDPGHooks",
     "DDPGTrainConfig",
     "DQNConfig",
+    "DQNUpdate",
     "EnvFactory",
     "EpisodeWindow",
+    "Evaluation",
     "FourierFeatures",
     "Learner",
+    "LearnerBatch",
+    "LearnerConfig",
     "LearnerDomain",
-    "LearnerSettings",
+    "LearnerReplay",
+    "LearnerStack",
     "LearningCurve",
+    "NetworkConfig",
+    "OffPolicyConfig",
     "PPOConfig",
+    "PPOUpdate",
     "PotentialTrainer",
     "SampleReshaper",
+    "Settings",
     "Shaping",
+    "SuccessSignal",
+    "Trained",
     "action_kind",
     "actor_critic",
+    "actor_critic_modules",
+    "batch_shaping",
     "batched",
     "check_actions",
-    "check_settings",
+    "clip_grad_norm_per_learner",
     "close_collector",
+    "close_probe",
     "ddpg_agent",
+    "ddpg_modules",
+    "dqn_modules",
+    "evaluate",
     "experiment_logger",
     "extend_transitions",
-    "learner_env",
+    "learner_envs",
+    "learner_means",
     "make_collector",
+    "per_learner",
     "ppo_actor_critic",
+    "probe_env",
     "q_network",
+    "seed_collector",
     "shaped_env",
     "smdp_transitions",
     "subgoal_states",
     "train_a2c",
-    "train_a2c_batch",
     "train_ddpg",
     "train_dqn",
+    "train_on_policy",
     "train_ppo",
-    "train_ppo_batch",
 ]
 
 

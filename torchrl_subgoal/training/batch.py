@@ -1,34 +1,35 @@
-"""Several learners of one algorithm as one batch: what a building block needs to train ``K`` seeds at once.
+"""Learners as a batch: what every building block needs to train ``K`` seeds as one program.
 
 ``K`` independent learners, each stepping ``M`` envs, become one env batch of
 ``K·M`` envs (learner-major: envs ``k·M … (k+1)·M − 1`` are learner ``k``'s),
-one collector and one optimiser step per batch:
+one collector and one optimiser step per update; one learner is a batch of one.
 
-* :class:`LearnerStack`: ``K`` copies of a network, each with its own
-  parameters (stacked ``[K, …]``, applied with ``torch.vmap``), over inputs whose
-  first dim is the env batch;
+* the networks and replay (:mod:`torchrl_subgoal.agents.stack`, re-exported here):
+  :class:`~torchrl_subgoal.agents.stack.LearnerStack` (``K`` networks' parameters stacked,
+  applied with ``torch.vmap``; :func:`stack_actor_critic`, :func:`seeded`),
+  :func:`~torchrl_subgoal.agents.stack.learner_means`,
+  :func:`~torchrl_subgoal.agents.stack.clip_grad_norm_per_learner`,
+  :class:`~torchrl_subgoal.agents.stack.LearnerReplay`;
 * :func:`batch_shaping`: the learners' shapings as one transform's, one table
   per learner (``TabularPotential(envs_per_table=M)``), each trained online
   exactly as the learner's own table would be;
-* :func:`learner_means`: per-sample losses as each learner's mean, whose sum
-  gives every learner the gradient it gets alone;
-* :func:`clip_grad_norm_per_learner`: gradient clipping learner by learner.
+* :class:`LearnerBatch`: the checks, the env batch and its collector, the potential's
+  training, each learner's records and what the block returns.
 
-Learners of a batch are statistically, not bitwise, the learners run one by
-one: the networks start from each learner's seed as alone, but actions are
+Learners of a batch are statistically, not bitwise, the learners run one
+by one: the networks start from each learner's seed as alone, but actions are
 sampled from one random stream and the envs are seeded once for the batch.
 """
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Generator, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Generic, TypedDict, TypeVar
 
 import torch
-from tensordict import TensorDict, TensorDictBase
+from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from tensordict.utils import NestedKey
 from torch import nn
@@ -37,80 +38,62 @@ from torchrl.envs import EnvBase
 from torchrl.modules import ProbabilisticActor, ValueOperator
 from torchrl.record.loggers import Logger
 
+from torchrl_subgoal.agents.stack import (
+    LearnerReplay,
+    LearnerStack,
+    clip_grad_norm_per_learner,
+    learner_means,
+    per_learner,
+)
 from torchrl_subgoal.potentials import NaivePotential, TabularPotential
 from torchrl_subgoal.subgoals import StateAggregation, SubgoalSeries
-from torchrl_subgoal.training.common import (
-    CurveRecorder,
-    LearnerSettings,
-    LearningCurve,
-    Shaping,
-    _close_probe,
-    _probe_env,
-    _seed_collector,
-    learner_env,
-    make_collector,
-    subgoal_states,
-)
+from torchrl_subgoal.training.collection import close_collector, make_collector, seed_collector
+from torchrl_subgoal.training.config import LearnerConfig
+from torchrl_subgoal.training.envs import Shaping, close_probe, learner_envs, probe_env, shaped_env
+from torchrl_subgoal.training.networks import subgoal_states
+from torchrl_subgoal.training.potential import PotentialTrainer, SampleReshaper
+from torchrl_subgoal.training.recording import CurveRecorder, LearningCurve, SuccessSignal
+from torchrl_subgoal.training.shared import EnvFactory
 
 __all__ = [
+    "LEARNER",
     "LearnerBatch",
+    "LearnerOptions",
+    "LearnerReplay",
     "LearnerStack",
     "batch_shaping",
     "clip_grad_norm_per_learner",
+    "label_learners",
     "learner_means",
     "learner_rows",
+    "per_learner",
+    "seeded",
     "stack_actor_critic",
 ]
 
+if TYPE_CHECKING:
+    from torchrl_subgoal.training.result import Trained
 
-class LearnerStack(nn.Module):
-    """``K`` networks of one architecture as one module: each learner's rows go through its own parameters.
+C = TypeVar("C", bound=LearnerConfig)
+T = TypeVar("T")
+#: The learner of each row of a batch's data (:meth:`LearnerBatch.labelled`), e.g. a ``GAE`` ``group_key``.
+LEARNER = "learner"
+ShapingArg = Shaping | Sequence[Shaping | None] | None
 
-    Args:
-        networks: one network per learner (same architecture; their parameters and buffers are
-            copied, stacked along a new first dim).
 
-    The inputs' first dim is the env batch, learner-major (``K·M`` rows, the first
-    ``M`` learner 0's), or the learners themselves (``K`` rows of samples); any further
-    dims (time, minibatch, a ``vmap`` of TorchRL's value estimators) follow.
+def seeded(seeds: Sequence[int], make: Callable[[], T]) -> list[T]:
+    """``make()`` once per seed, torch seeded with it first: each learner's networks as they start alone.
 
     Examples:
-        >>> _ = torch.manual_seed(0)
-        >>> nets = [nn.Linear(3, 2) for _ in range(2)]
-        >>> stack = LearnerStack(nets)
-        >>> x = torch.randn(4, 5, 3)  # 2 learners x 2 envs, 5 steps
-        >>> out = stack(x)
-        >>> out.shape, torch.allclose(out[2:], nets[1](x[2:]), atol=1e-6)
-        (torch.Size([4, 5, 2]), True)
+        >>> nets = seeded([0, 1, 0], lambda: nn.Linear(2, 1))
+        >>> torch.equal(nets[0].weight, nets[2].weight), torch.equal(nets[0].weight, nets[1].weight)
+        (True, False)
     """
-
-    def __init__(self, networks: Sequence[nn.Module]) -> None:
-        super().__init__()
-        if not networks:
-            raise ValueError("LearnerStack needs at least one network")
-        self.learners = len(networks)
-        self.params = TensorDict.from_modules(*networks, as_module=True)
-        base = copy.deepcopy(networks[0])
-        self.params[0].data.to("meta").to_module(base)  # the architecture, without its own weights
-        self.__dict__["_base"] = base  # not a submodule: its (meta) parameters are not this module's
-
-    def forward(self, *inputs: torch.Tensor) -> torch.Tensor | tuple[torch.Tensor, ...]:
-        k = self.learners
-        for x in inputs:
-            if x.shape[0] % k:
-                raise ValueError(f"LearnerStack of {k} learners got {x.shape[0]} rows: not a multiple of {k}")
-
-        base: nn.Module = self.__dict__["_base"]
-
-        def call(params: TensorDictBase, *xs: torch.Tensor) -> torch.Tensor:
-            with params.to_module(base):
-                return base(*xs)
-
-        grouped = [x.unflatten(0, (k, -1)) for x in inputs]
-        out = torch.vmap(call, (0,) * (len(inputs) + 1))(self.params, *grouped)
-        if isinstance(out, tuple):  # several outputs (a location and a scale)
-            return tuple(o.flatten(0, 1) for o in out)
-        return out.flatten(0, 1)
+    out = []
+    for seed in seeds:
+        torch.manual_seed(seed)
+        out.append(make())
+    return out
 
 
 def stack_actor_critic(
@@ -134,6 +117,21 @@ def stack_actor_critic(
     return actor, critic
 
 
+def label_learners(data: TensorDictBase, learners: int) -> TensorDictBase:
+    """``data`` (first dim the learners' env batch, learner-major) with each row's learner under :data:`LEARNER`
+    (e.g. a GAE's ``group_key``: advantages standardised learner by learner); unchanged for one learner.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> label_learners(TensorDict({}, [4, 2]), 2)[LEARNER].tolist()
+        [[0, 0], [0, 0], [1, 1], [1, 1]]
+    """
+    if learners > 1:
+        rows = torch.arange(learners, device=data.device).repeat_interleave(data.shape[0] // learners)
+        data.set(LEARNER, rows.view(-1, *([1] * (data.batch_dims - 1))).expand(data.batch_size))
+    return data
+
+
 def learner_rows(learners: int, rows: int) -> list[slice]:
     """Each learner's rows of a learner-major env batch of ``rows`` rows.
 
@@ -145,51 +143,13 @@ def learner_rows(learners: int, rows: int) -> list[slice]:
     return [slice(k * per, (k + 1) * per) for k in range(learners)]
 
 
-def learner_means(values: torch.Tensor, learners: int) -> torch.Tensor:
-    """Each learner's mean of per-sample ``values`` (first dim the learner-major env batch), ``[K]``.
-
-    A learner's mean is its loss alone; the sum over learners is the batch's loss, whose
-    gradient for each learner's parameters is its gradient alone.
-
-    Examples:
-        >>> learner_means(torch.tensor([[1.0, 3.0], [2.0, 2.0], [5.0, 7.0], [6.0, 6.0]]), 2).tolist()
-        [2.0, 6.0]
-    """
-    return values.reshape(learners, -1).mean(1)
-
-
-def clip_grad_norm_per_learner(parameters: Iterable[torch.Tensor], max_norm: float, learners: int) -> torch.Tensor:
-    """``torch.nn.utils.clip_grad_norm_`` for each learner of stacked parameters (first dim ``K``): each
-    learner's gradients scaled by ``min(1, max_norm / (‖g_k‖ + 1e-6))``; the learners' norms.
-
-    Examples:
-        >>> p = nn.Parameter(torch.zeros(2, 2))
-        >>> p.grad = torch.tensor([[3.0, 4.0], [0.3, 0.4]])
-        >>> clip_grad_norm_per_learner([p], 1.0, 2).tolist()
-        [5.0, 0.5]
-        >>> [round(g, 4) for g in p.grad.reshape(-1).tolist()]  # learner 0 clipped to norm 1, learner 1 kept
-        [0.6, 0.8, 0.3, 0.4]
-    """
-    grads = [p.grad for p in parameters if p.grad is not None]
-    for g in grads:
-        if g.shape[0] != learners:
-            raise ValueError(f"a parameter of shape {tuple(g.shape)} is not stacked over {learners} learners")
-    if not grads:
-        return torch.zeros(learners)
-    norms = torch.stack([g.reshape(learners, -1).pow(2).sum(1) for g in grads]).sum(0).sqrt()
-    scale = (max_norm / (norms + 1e-6)).clamp(max=1.0)
-    for g in grads:
-        g.mul_(scale.view(learners, *([1] * (g.dim() - 1))))
-    return norms
-
-
 def batch_shaping(shapings: Sequence[Shaping | None], envs_per_learner: int) -> Shaping | None:
     """The learners' shapings as one transform's over their learner-major env batch.
 
-    Each learner keeps its subgoals (one series per env) and gets its own table, which starts
-    from (and, if frozen, stays at) the learner's table: a :class:`TabularPotential` of the
-    learners' batch with ``envs_per_table = envs_per_learner``. Naive potentials (no table) with
-    one ``η`` are shared.
+    One learner keeps its shaping as it is (its potential is the one trained). In a batch of several, each
+    learner keeps its subgoals (one series per env) and gets its own table, which starts from (and, if
+    frozen, stays at) the learner's table: a :class:`TabularPotential` of the learners' batch with
+    ``envs_per_table = envs_per_learner``. Naive potentials (no table) with one ``η`` are shared.
 
     Raises:
         ValueError: the learners mix shaped and unshaped, potentials of other kinds or settings,
@@ -209,6 +169,8 @@ def batch_shaping(shapings: Sequence[Shaping | None], envs_per_learner: int) -> 
     if any(s is None for s in shapings):
         raise ValueError("a learner batch cannot mix shaped and unshaped learners")
     given = [s for s in shapings if s is not None]
+    if len(given) == 1:
+        return given[0]
     options = given[0].options
     if any(s.options != options for s in given):
         raise ValueError("the learners of a batch must share the shaping transform's options")
@@ -261,25 +223,66 @@ def _batch_potential(potentials: Sequence[nn.Module], envs_per_learner: int) -> 
     return batch
 
 
-class LearnerBatch:
+def _shapings(shaping: ShapingArg, learners: int) -> list[Shaping | None]:
+    """One shaping per learner: ``None`` for all, one for every learner, or one each."""
+    if shaping is None or isinstance(shaping, Shaping):
+        return [shaping] * learners
+    given = list(shaping)
+    if len(given) != learners:
+        raise ValueError(f"{learners} seeds need one shaping or {learners} shapings, got {len(given)}")
+    return given
+
+
+class LearnerOptions(TypedDict, total=False):
+    """What every ``train_<algo>(make_env, config, **options)`` takes besides the envs and the settings.
+
+    Attributes:
+        seeds: one per learner: its networks' initial weights (torch's sampling and the envs are seeded with
+            the first); default ``[0]``, one learner.
+        shaping: one for every learner (each starts from its potential), or one per learner; ``None`` (the
+            default): unshaped. See :func:`batch_shaping`.
+        observation_key: what the networks read (default ``"observation"``).
+        episode_cap: what the curves record before any episode finished (default: the env's ``max_steps``).
+        loggers: one TorchRL logger (CSV, TensorBoard…) per learner, for losses and episode statistics.
+        progress: called with 1 after every batch for every learner.
+        success: how a finished episode's success is read (default: the env's ``"is_success"`` or
+            ``"success"`` entry, else not recorded).
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> from torchrl_subgoal.training import A2CConfig, train_a2c
+        >>> options: LearnerOptions = {"seeds": [0, 1], "observation_key": "observation"}
+        >>> config = A2CConfig(num_envs=2, frames_per_batch=8, total_frames=8, features="one_hot")
+        >>> len(train_a2c(FourRoomsEnv, config, **options).curves)
+        2
+    """
+
+    seeds: Sequence[int]
+    shaping: ShapingArg
+    observation_key: NestedKey
+    episode_cap: float | None
+    loggers: Sequence[Logger | None] | None
+    progress: Callable[[int], None] | None
+    success: SuccessSignal | None
+
+
+class LearnerBatch(Generic[C]):
     """What a building block's batch of ``K`` learners shares: the checks, the env batch and its collector,
-    each learner's networks started from its seed, and one :class:`~torchrl_subgoal.training.CurveRecorder`
-    per learner.
+    the potential's training, each learner's networks started from its seed, and one
+    :class:`~torchrl_subgoal.training.CurveRecorder` per learner.
 
     Args:
-        make_env: ``make_env(num_envs)``, every learner's task.
+        make_env: ``make_env(num_envs)``, every learner's task, or one such factory per learner (each its
+            own task; see :func:`~torchrl_subgoal.training.learner_envs`).
         config: every learner's settings; the batch steps ``K × num_envs`` envs and collects
             ``K × frames_per_batch`` frames per batch (:attr:`config`), as many batches as one learner.
-        seeds: one per learner: its networks' initial weights (the envs and the actions are seeded with
-            the first).
-        shapings: one per learner (``None``: all unshaped); see :func:`batch_shaping`.
-        loggers: one TorchRL logger per learner (``None``: none).
-        progress: called with 1 after every batch for every learner.
-        episode_cap: what the curves record before any episode finished (default: the env's ``max_steps``).
+
+    The keyword arguments (the learners' seeds, shapings, loggers…) are :class:`LearnerOptions`'s.
 
     Raises:
-        ValueError: ``collector_workers`` is not 0, or a trained potential is not trained online (their
-            per-learner versions are not built), or the seeds, shapings and loggers differ in number.
+        ValueError: settings a batch of several learners cannot have (``collector_workers``, a potential
+            trained outside the transform, ``env_workers`` with a task per learner), a device that is not
+            there, or seeds, shapings and loggers of different numbers.
 
     Examples:
         >>> from torchrl_subgoal.envs import FourRoomsEnv
@@ -292,85 +295,154 @@ class LearnerBatch:
 
     def __init__(
         self,
-        make_env: Callable[[int], EnvBase],
-        config: LearnerSettings,
-        seeds: Sequence[int],
+        make_env: Callable[[int], EnvBase] | Sequence[Callable[[int], EnvBase]],
+        config: C,
         *,
-        shapings: Sequence[Shaping | None] | None = None,
+        seeds: Sequence[int] = (0,),
+        shaping: ShapingArg = None,
+        observation_key: NestedKey = "observation",
+        episode_cap: float | None = None,
         loggers: Sequence[Logger | None] | None = None,
         progress: Callable[[int], None] | None = None,
-        episode_cap: float | None = None,
+        success: SuccessSignal | None = None,
     ) -> None:
+        seeds = [int(s) for s in seeds]
         k = self.learners = len(seeds)
         if k < 1:
             raise ValueError("a learner batch needs at least one seed")
-        shapings = list(shapings) if shapings is not None else [None] * k
+        shapings = _shapings(shaping, k)
         loggers = list(loggers) if loggers is not None else [None] * k
-        if len(shapings) != k or len(loggers) != k:
-            raise ValueError(f"{k} seeds need {k} shapings and {k} loggers, got {len(shapings)} and {len(loggers)}")
-        if config.collector_workers:
-            raise ValueError("a learner batch needs collector_workers off (0): its per-learner version is not built")
+        if len(loggers) != k:
+            raise ValueError(f"{k} seeds need {k} loggers, got {len(loggers)}")
+        factories = [make_env] if callable(make_env) else list(make_env)
+        if len(factories) not in (1, k):
+            raise ValueError(f"{k} seeds need one env factory or {k}, got {len(factories)}")
+        self.device = _check_device(config.device)
+        if k > 1 and config.collector_workers:
+            raise ValueError(
+                "a batch of several learners needs collector_workers 0: its per-learner version is not built"
+            )
+        self.make_env = learner_envs(factories if len(factories) > 1 else factories[0])
+        if k > 1 and config.env_workers and self.make_env not in factories:
+            raise ValueError("learners with their own tasks step their envs here: env_workers must be 0")
         self.shaping = batch_shaping(shapings, config.num_envs)
-        if self.shaping is not None and self.shaping.trained and not config.online_potential:
-            raise ValueError("a learner batch trains its tables online: online_potential must be True")
-        self.seeds = list(seeds)
-        self.settings = config
+        trained = self.shaping is not None and self.shaping.trained
+        if k > 1 and trained and not config.online_potential:
+            raise ValueError("a batch of several learners trains its tables online: online_potential must be True")
+        self.seeds, self.settings, self.observation_key = seeds, config, observation_key
         iterations = math.ceil(config.total_frames / config.frames_per_batch)
-        self.config: Any = dataclasses.replace(
-            config,  # type: ignore[type-var]
+        self.config: C = dataclasses.replace(
+            config,
             num_envs=k * config.num_envs,
             frames_per_batch=k * config.frames_per_batch,
             total_frames=k * config.frames_per_batch * iterations,
         )
-        self.factory, _ = learner_env(make_env, self.config, self.shaping)
+        online = trained and config.online_potential
+        self.factory: EnvFactory[EnvBase] = EnvFactory(
+            shaped_env,
+            make_env=self.make_env,
+            num_envs=self.config.num_envs,
+            env_workers=config.env_workers,
+            shaping=self.shaping,
+            potential=self.shaping.potential if self.shaping is not None else None,
+            gamma=config.gamma,
+            value_lr=config.value_lr if online else None,
+            reward_scale=config.reward_scale,
+        )
+        self.trainer: PotentialTrainer | None = None
+        if self.shaping is not None and trained and not online:
+            self.trainer = PotentialTrainer.for_shaping(
+                self.shaping, config.gamma, config.value_lr, config.value_optimizer
+            )
         self.subgoal_states = subgoal_states(config, self.shaping)
-        self.make_env, self.episode_cap = make_env, episode_cap
-        self.loggers, self.progress = loggers, progress
-        self.recorders: list[CurveRecorder] = []
-
-    def networks(
-        self,
-        build: Callable[[EnvBase, NestedKey], tuple[ProbabilisticActor, ValueOperator]],
-        observation_key: NestedKey,
-    ) -> tuple[ProbabilisticActor, ValueOperator]:
-        """Each learner's ``build(env, observation_key)`` from its seed, stacked (:func:`stack_actor_critic`); then
-        torch is seeded with the first seed for the batch's sampling. Sets up the recorders (they need the
-        env's episode cap)."""
-        probe, cap = _probe_env(self.make_env, self.episode_cap)
-        pairs = []
-        for seed in self.seeds:  # each learner's networks start as they would alone
-            torch.manual_seed(seed)
-            pairs.append(build(probe, observation_key))
-        _close_probe(probe)
-        torch.manual_seed(self.seeds[0])
+        self.probe, self.cap = probe_env(factories[0], episode_cap)
+        self.loggers, self.progress, self.success = loggers, progress, success
+        self.frames = 0  # per learner
+        self.collector: Collector | MultiSyncCollector | None = None
         potential = self.shaping.potential if self.shaping is not None else None
         tables = potential.table if isinstance(potential, TabularPotential) else None
-        c = self.settings
         self.recorders = [
             CurveRecorder(
-                c.record_window,
-                cap,
-                c.reward_scale,
-                self.loggers[k],
-                self.progress,
-                _LearnerTable(tables[k]) if tables is not None else None,
+                config.record_window,
+                self.cap,
+                config.reward_scale,
+                loggers[j],
+                progress,
+                (tables if k == 1 else tables[j]) if tables is not None else None,
+                success,
             )
-            for k in range(self.learners)
+            for j in range(k)
         ]
-        return stack_actor_critic(pairs)
 
-    def collector(self, actor: TensorDictModuleBase) -> Collector | MultiSyncCollector:
-        """The batch's collector over its env batch, seeded with the first seed."""
-        collector = make_collector(self.factory, actor, self.config)
-        _seed_collector(collector, self.seeds[0])
-        return collector
+    def modules(self, build: Callable[..., dict[str, nn.Module]], **extra: Any) -> dict[str, nn.Module]:
+        """The block's modules, ``build(env, config, observation_key, subgoal_states, seeds, **extra)`` (each
+        learner's networks from its seed, stacked; ``env`` a probe of one env for the specs), on the config's
+        device; then torch is seeded with the first seed for the batch's sampling."""
+        modules = build(self.probe, self.settings, self.observation_key, self.subgoal_states, self.seeds, **extra)
+        close_probe(self.probe)
+        torch.manual_seed(self.seeds[0])
+        return {name: module.to(self.device) for name, module in modules.items()}
 
-    def record(self, data: TensorDictBase, frames: int, scalars: Mapping[str, torch.Tensor]) -> None:
-        """Add each learner's rows of a collected batch (``frames`` per learner so far) and its ``scalars``
-        (``[K]`` each) to its recorder."""
-        for k, rows in enumerate(learner_rows(self.learners, data.shape[0])):
-            own = {name: float(values[k].detach()) for name, values in scalars.items()}
-            self.recorders[k].add(data[rows], frames, {**own, "loss_potential": math.nan})
+    def reshaper(self) -> SampleReshaper:
+        """What re-shapes the batch's replay samples with the potential as it is now (``reshape_samples``)."""
+        if self.shaping is None:
+            raise ValueError("reshape_samples needs shaping: there is no potential to re-shape samples with")
+        return SampleReshaper(self.shaping.transform(self.shaping.potential, self.settings.gamma, None))
+
+    def result(self, algo: str, modules: dict[str, nn.Module]) -> Trained:
+        """What the block returns: the curves and its ``modules`` (:class:`~torchrl_subgoal.training.Trained`)."""
+        from torchrl_subgoal.training.result import Trained
+
+        return Trained(
+            algo,
+            self.settings,
+            self.seeds,
+            self.curves,
+            modules,
+            self.observation_key,
+            self.subgoal_states,
+            self.shaping,
+        )
+
+    def collect(
+        self,
+        policy: TensorDictModuleBase,
+        *,
+        init_random_frames: int = 0,
+        start: Callable[[], None] | None = None,
+    ) -> Generator[TensorDictBase, None, None]:
+        """The batch's collected batches (collector seeded with the first seed, closed at the end);
+        :attr:`frames` counts one learner's frames so far. ``init_random_frames`` is one learner's; ``start`` is
+        called once the collector is built (:attr:`collector`), before the first batch."""
+        collector = make_collector(
+            self.factory,
+            policy,
+            self.config,
+            init_random_frames=self.learners * init_random_frames,
+            device=self.device,
+        )
+        self.collector = collector
+        seed_collector(collector, self.seeds[0])
+        try:
+            if start is not None:
+                start()
+            for data in collector:
+                self.frames += data.numel() // self.learners
+                yield data
+        finally:
+            close_collector(collector)
+
+    def record(self, data: TensorDictBase, scalars: Mapping[str, torch.Tensor | float]) -> None:
+        """After a batch's update: the potential's step (when it is trained outside the transform), the new
+        weights to collector workers, and each learner's rows of ``data`` and its ``scalars`` (``[K]`` each,
+        or one number for one learner) to its recorder."""
+        potential_loss = self.trainer.step(data) if self.trainer is not None else math.nan
+        if self.settings.collector_workers and self.collector is not None:
+            self.collector.update_policy_weights_()
+        rows = learner_rows(self.learners, data.shape[0])
+        for k, recorder in enumerate(self.recorders):
+            own = {name: _entry(values, k) for name, values in scalars.items()}
+            recorder.add(data[rows[k]], self.frames, {**own, "loss_potential": potential_loss})
 
     @property
     def curves(self) -> list[LearningCurve]:
@@ -378,9 +450,19 @@ class LearnerBatch:
         return [r.curve for r in self.recorders]
 
 
-class _LearnerTable(nn.Module):
-    """One learner's row of a batch of tables (a view), as :class:`CurveRecorder` logs a potential's ``table``."""
+def _entry(values: torch.Tensor | float, k: int) -> float:
+    if isinstance(values, torch.Tensor) and values.dim():
+        return float(values[k].detach())
+    return float(values)
 
-    def __init__(self, table: torch.Tensor) -> None:
-        super().__init__()
-        self.table = table
+
+def _check_device(device: str) -> torch.device:
+    """``device`` as a ``torch.device``, refused (naming the field) where it is not there."""
+    out = torch.device(device)
+    if out.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device {device!r}: CUDA is not available here (torch {torch.__version__}); use 'cpu'")
+    if out.type == "cuda" and out.index is not None and out.index >= torch.cuda.device_count():
+        raise ValueError(f"device {device!r}: there are {torch.cuda.device_count()} CUDA devices here")
+    if out.type not in ("cpu", "cuda"):
+        raise ValueError(f"device {device!r}: the learners run on cpu or cuda")
+    return out

@@ -18,6 +18,7 @@ from tensordict.utils import NestedKey
 from torchrl.envs import EnvBase
 
 from torchrl_subgoal.subgoals import Predicate, StateAggregation
+from torchrl_subgoal.training.recording import SuccessSignal
 
 __all__ = ["A2CDomain", "LearnerDomain"]
 
@@ -43,6 +44,8 @@ class LearnerDomain:
         pattern_env: for a domain whose subgoal patterns each belong to their own task (PointMaze:
             one pattern per direction of its route), ``pattern_env(pattern, seed)`` is the env factory
             of a learner following ``pattern``; ``None``: ``make_env`` for every learner.
+        success: what counts as a successful episode where the env writes no success entry (a return
+            threshold); ``None``: the env's ``"is_success"``/``"success"`` entry, else not recorded.
 
     Examples:
         >>> from torchrl_subgoal import domains
@@ -65,6 +68,7 @@ class LearnerDomain:
     aggregation: Callable[[], StateAggregation | None] = field(default=lambda: None)
     candidates: Callable[[int], list[Predicate]] = field(default=lambda seed: [])
     pattern_env: Callable[[str, int], Callable[[int], EnvBase]] | None = None
+    success: SuccessSignal | None = None
 
     @property
     def a2c(self) -> Any:

@@ -1,6 +1,6 @@
 """The learners by name: each building block's settings class, its training function and the actions it needs.
 
-``LEARNERS["ppo"].train(make_env, config, shaping=..., seed=...)`` is
+``LEARNERS["ppo"].train(make_env, config, seeds=..., shaping=...)`` is
 :func:`~torchrl_subgoal.training.train_ppo`; a sweep over learners (the
 ``torchrl-subgoal train`` recipe) reads its algorithm here and checks, before
 anything runs, that the env's actions suit it (:func:`check_actions`).
@@ -13,14 +13,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from torch import nn
 from torchrl.data import Bounded, Categorical, OneHot
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal.training.a2c import A2CConfig, train_a2c, train_a2c_batch
-from torchrl_subgoal.training.common import LearningCurve
-from torchrl_subgoal.training.ddpg import DDPGTrainConfig, train_ddpg
-from torchrl_subgoal.training.dqn import DQNConfig, train_dqn
-from torchrl_subgoal.training.ppo import PPOConfig, train_ppo, train_ppo_batch
+from torchrl_subgoal.training.a2c import A2CConfig, train_a2c
+from torchrl_subgoal.training.ddpg import DDPGTrainConfig, ddpg_modules, train_ddpg
+from torchrl_subgoal.training.dqn import DQNConfig, dqn_modules, train_dqn
+from torchrl_subgoal.training.on_policy import actor_critic_modules
+from torchrl_subgoal.training.ppo import PPOConfig, train_ppo
+from torchrl_subgoal.training.result import Trained
 
 __all__ = ["LEARNERS", "Actions", "Learner", "action_kind", "check_actions"]
 
@@ -34,10 +36,11 @@ class Learner:
     Attributes:
         name: ``"a2c"``, ``"ppo"``, ``"dqn"`` or ``"ddpg"``.
         config: its settings class (:class:`~torchrl_subgoal.training.A2CConfig`, …).
-        train: ``train(make_env, config, *, shaping, observation_key, seed, logger, progress) -> LearningCurve``.
+        train: ``train(make_env, config, *, seeds, shaping, observation_key, loggers, progress, ...) -> Trained``,
+            ``len(seeds)`` learners as one batch.
         actions: the action kinds it handles.
-        train_batch: ``train_batch(make_env, config, seeds, *, shapings, observation_key, loggers, progress)
-            -> list[LearningCurve]``, several learners as one batch (``None``: not built for this block).
+        modules: ``modules(env, config, observation_key, subgoal_states, seeds)``, the block's networks over
+            ``len(seeds)`` learners (what :meth:`~torchrl_subgoal.training.Trained.load` rebuilds).
 
     Examples:
         >>> LEARNERS["dqn"].actions, LEARNERS["ppo"].actions
@@ -46,9 +49,9 @@ class Learner:
 
     name: str
     config: type
-    train: Callable[..., LearningCurve]
+    train: Callable[..., Trained]
     actions: tuple[Actions, ...]
-    train_batch: Callable[..., list[LearningCurve]] | None = None
+    modules: Callable[..., dict[str, nn.Module]]
 
     def has_setting(self, name: str) -> bool:
         """Whether the learner's settings have a field ``name``.
@@ -69,10 +72,10 @@ class Learner:
 LEARNERS: dict[str, Learner] = {
     learner.name: learner
     for learner in (
-        Learner("a2c", A2CConfig, train_a2c, ("discrete",), train_a2c_batch),
-        Learner("ppo", PPOConfig, train_ppo, ("discrete", "continuous"), train_ppo_batch),
-        Learner("dqn", DQNConfig, train_dqn, ("discrete",)),
-        Learner("ddpg", DDPGTrainConfig, train_ddpg, ("continuous",)),
+        Learner("a2c", A2CConfig, train_a2c, ("discrete",), actor_critic_modules),
+        Learner("ppo", PPOConfig, train_ppo, ("discrete", "continuous"), actor_critic_modules),
+        Learner("dqn", DQNConfig, train_dqn, ("discrete",), dqn_modules),
+        Learner("ddpg", DDPGTrainConfig, train_ddpg, ("continuous",), ddpg_modules),
     )
 }
 

@@ -10,8 +10,9 @@ policy and the update index it by the env's position in the batch.
 ::
 
     env = TransformedEnv(FourRoomsEnv(num_envs=20, goal_reward=0.0, step_reward=-1.0), shaping)
-    records = train_qlearning(env, QLearningConfig(episodes=300), seed=0)
-    records.steps        # [20, 300] steps of every learner's episodes
+    trained = train_qlearning(env, QLearningConfig(episodes=300), seed=0, success=SuccessSignal(min_return=-999))
+    trained.records.steps    # [20, 300] steps of every learner's episodes
+    trained.policy(3)        # learner 3's greedy policy
 """
 
 from __future__ import annotations
@@ -27,29 +28,20 @@ from tensordict.nn import TensorDictModuleBase
 from tensordict.utils import NestedKey
 from torchrl.collectors import Collector
 from torchrl.data import Categorical, OneHot
-from torchrl.envs import EnvBase
+from torchrl.envs import EnvBase, ExplorationType
+from torchrl.envs.utils import exploration_type
 
 from torchrl_subgoal._kernels.records import record_episodes
 from torchrl_subgoal.agents.records import EpisodeRecords
+from torchrl_subgoal.training.config import Settings
+from torchrl_subgoal.training.recording import SuccessSignal
 
-__all__ = ["EpsilonGreedyQ", "QLearningConfig", "train_qlearning"]
+__all__ = ["EpsilonGreedyQ", "QLearningConfig", "TrainedQ", "train_qlearning"]
 
 
 @dataclass
-class QLearningConfig:
-    """Settings of a batch of tabular Q-learners.
-
-    Attributes:
-        episodes: episodes recorded per learner (the run stops once every learner has them).
-        lr: the step size ``α`` of ``Q(s, a) ← Q(s, a) + α (r + γ max Q(s', ·) − Q(s, a))``.
-        gamma: discount ``γ``.
-        epsilon: probability of a uniformly random action.
-        init: initial value of every entry (0: optimistic under a step cost, pessimistic under a
-            goal reward).
-        sees_subgoal: the table is over ``(s, z)`` (``z`` the transform's subgoal index): the
-            shaped reward is then a function of the learner's own state.
-        max_frames: a cap on collected steps per learner (``0``: none); learners that have not
-            finished their episodes by then keep ``max_steps``-long placeholder episodes.
+class QLearningConfig(Settings):
+    """Settings of a batch of tabular Q-learners (``gamma``, ``device``: :class:`~torchrl_subgoal.training.Settings`).
 
     Examples:
         >>> QLearningConfig(epsilon=1.5)
@@ -59,24 +51,19 @@ class QLearningConfig:
     """
 
     episodes: int = 300
+    """episodes recorded per learner (the run stops once every learner has them)"""
     lr: float = 0.1
-    gamma: float = 0.99
+    """the step size (alpha) of the update ``Q(s, a) += alpha * (r + gamma * max Q(s', .) - Q(s, a))``"""
     epsilon: float = 0.1
+    """probability of a uniformly random action"""
     init: float = 0.0
+    """initial value of every entry (0: optimistic under a step cost, pessimistic under a goal reward)"""
     sees_subgoal: bool = True
+    """the table is over ``(s, z)`` (``z`` the transform's subgoal index): the shaped reward is then a
+    function of the learner's own state"""
     max_frames: int = 0
-
-    def __post_init__(self) -> None:
-        if self.episodes < 1:
-            raise ValueError(f"episodes must be >= 1, got {self.episodes}")
-        if not 0.0 < self.lr <= 1.0:
-            raise ValueError(f"lr must lie in (0, 1], got {self.lr}")
-        if not 0.0 <= self.gamma <= 1.0:
-            raise ValueError(f"gamma must lie in [0, 1], got {self.gamma}")
-        if not 0.0 <= self.epsilon <= 1.0:
-            raise ValueError(f"epsilon must lie in [0, 1], got {self.epsilon}")
-        if self.max_frames < 0:
-            raise ValueError(f"max_frames must be >= 0, got {self.max_frames}")
+    """a cap on collected steps per learner (``0``: none); learners that have not finished their episodes
+    by then keep ``max_steps``-long placeholder episodes"""
 
 
 class EpsilonGreedyQ(TensorDictModuleBase):
@@ -131,6 +118,21 @@ class EpsilonGreedyQ(TensorDictModuleBase):
 
     table: torch.Tensor
 
+    def learner(self, k: int) -> EpsilonGreedyQ:
+        """Learner ``k``'s table as a policy of its own (for any number of envs)."""
+        _, states, abstract, actions = self.table.shape
+        own = EpsilonGreedyQ(
+            1,
+            states,
+            actions,
+            abstract,
+            self.epsilon,
+            observation_key=self.observation_key,
+            subgoal_key=self.subgoal_key,
+        )
+        own.table.copy_(self.table[k : k + 1])
+        return own
+
     def index(self, td: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
         """The ``(s, z)`` of every row of ``td`` (``z = 0`` when the table ignores it)."""
         s = td.get(self.observation_key).reshape(-1).long()
@@ -139,7 +141,11 @@ class EpsilonGreedyQ(TensorDictModuleBase):
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         s, z = self.index(tensordict)
-        q = self.table[self.rows, s, z]  # [N, A]
+        rows = self.rows if len(self.rows) == len(s) or len(self.rows) > 1 else torch.zeros_like(s)  # one table: all
+        q = self.table[rows, s, z]  # [N, A]
+        if exploration_type() not in (ExplorationType.RANDOM, None):  # greedy, the first best action
+            tensordict.set("action", q.argmax(-1).reshape(tensordict.batch_size))
+            return tensordict
         best = q == q.max(-1, keepdim=True).values
         weights = best.float() + 1e-30  # uniform over the greedy actions
         greedy = torch.multinomial(weights, 1, generator=self.generator).squeeze(-1)
@@ -150,6 +156,31 @@ class EpsilonGreedyQ(TensorDictModuleBase):
         return tensordict
 
 
+@dataclass
+class TrainedQ:
+    """What :func:`train_qlearning` returns: every learner's episodes and the tables.
+
+    Attributes:
+        records: steps, env return and success of every learner's episodes.
+        q: the tables (``[N, S, Z, A]``) and their ε-greedy policy.
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> from torchrl_subgoal.training import evaluate
+        >>> trained = train_qlearning(FourRoomsEnv(2), QLearningConfig(episodes=1, sees_subgoal=False))
+        >>> evaluate(trained.policy(1), FourRoomsEnv, 1).lengths  # greedy on learner 1's table
+        [1000]
+    """
+
+    records: EpisodeRecords
+    q: EpsilonGreedyQ
+
+    def policy(self, learner: int = 0) -> EpsilonGreedyQ:
+        """Learner ``learner``'s table as a policy (greedy under deterministic exploration, e.g. in
+        :func:`~torchrl_subgoal.training.evaluate`)."""
+        return self.q.learner(learner)
+
+
 def train_qlearning(
     env: EnvBase,
     config: QLearningConfig,
@@ -157,8 +188,10 @@ def train_qlearning(
     observation_key: NestedKey = "observation",
     seed: int = 0,
     progress: Callable[[int], None] | None = None,
-) -> EpisodeRecords:
-    """Train one tabular Q-learner per env of the batched ``env`` on a ``Collector``; every learner's episodes.
+    success: SuccessSignal | None = None,
+) -> TrainedQ:
+    """Train one tabular Q-learner per env of the batched ``env`` on a ``Collector``; every learner's episodes
+    and tables.
 
     ``env`` may carry a :class:`~torchrl_subgoal.SubgoalPotentialTransform`: the learners
     then learn from the shaped ``"reward"`` and the records keep the env's own return
@@ -171,16 +204,21 @@ def train_qlearning(
         observation_key: the state number the tables are indexed by.
         seed: seeds the policy's draws (the env is seeded with it too).
         progress: called with the number of learner-episodes just finished.
+        success: how an episode's success is read (default: the env's ``"is_success"``/``"success"``
+            entry); where it is not measured, every episode's success is recorded as ``False``.
 
     Returns:
-        steps, env return and success (terminated) of every learner's first ``config.episodes`` episodes.
+        the records (steps, env return and success of every learner's first ``config.episodes`` episodes)
+        and the tables.
 
     Examples:
         >>> from torchrl_subgoal.envs import FourRoomsEnv
-        >>> records = train_qlearning(FourRoomsEnv(3, goal_reward=0.0, step_reward=-1.0),
-        ...                           QLearningConfig(episodes=2, sees_subgoal=False), seed=0)
-        >>> records.steps.shape, bool(records.success.all())
-        (torch.Size([3, 2]), True)
+        >>> from torchrl_subgoal.training import SuccessSignal
+        >>> trained = train_qlearning(FourRoomsEnv(3, goal_reward=0.0, step_reward=-1.0),
+        ...                           QLearningConfig(episodes=2, sees_subgoal=False), seed=0,
+        ...                           success=SuccessSignal(min_return=-999.0))
+        >>> trained.records.steps.shape, bool(trained.records.success.all()), trained.q.table.shape
+        (torch.Size([3, 2]), True, torch.Size([3, 104, 1, 4]))
     """
     n = max(1, env.batch_size.numel())
     obs_spec = env.observation_spec[observation_key]
@@ -206,16 +244,17 @@ def train_qlearning(
         observation_key=observation_key,
     )
     return_key = "env_reward" if "env_reward" in env.reward_keys else "reward"
+    signal = success if success is not None else SuccessSignal()
     episodes = config.episodes
     steps = torch.zeros(n, episodes, dtype=torch.long)
     returns = torch.zeros(n, episodes)
-    success = torch.zeros(n, episodes, dtype=torch.bool)
-    outputs = (steps.numpy(), returns.numpy(), success.numpy())
+    successes = torch.zeros(n, episodes, dtype=torch.bool)
+    outputs = (steps.numpy(), returns.numpy(), successes.numpy())
     t, ret, filed = np.zeros(n, np.int64), np.zeros(n), np.zeros(n, np.int64)
     env.set_seed(seed)
     collector = Collector(env, policy, frames_per_batch=n, total_frames=-1, auto_register_policy_transforms=False)
     table, rows, lr, gamma = policy.table, policy.rows, config.lr, config.gamma
-    frames = 0
+    frames, flagged = 0, False
     try:
         for data in collector:
             data = data.reshape(-1)  # one step of every learner
@@ -229,8 +268,11 @@ def train_qlearning(
             table[rows, s, z, a] += lr * (target - table[rows, s, z, a])
             frames += 1
             done = nxt.get("done").reshape(-1)
+            won = signal.at_end(nxt)  # the step's success flag, filed where an episode ends
+            flagged = won is not None
+            won = won if won is not None else torch.zeros_like(done)
             count = record_episodes(
-                done.numpy(), terminated.numpy(), nxt.get(return_key).reshape(-1).numpy(), t, ret, filed, *outputs
+                done.numpy(), won.numpy(), nxt.get(return_key).reshape(-1).numpy(), t, ret, filed, *outputs
             )
             if count and progress is not None:
                 progress(count)
@@ -247,4 +289,6 @@ def train_qlearning(
         )
         for b in np.nonzero(short)[0]:
             steps[b, filed[b] :] = int(cap) if math.isfinite(cap) else frames
-    return EpisodeRecords(steps, returns, success, frames * n)
+    if signal.min_return is not None and not flagged:  # success read from the returns
+        successes.copy_(returns >= signal.min_return)
+    return TrainedQ(EpisodeRecords(steps, returns, successes, frames * n), policy)

@@ -16,8 +16,8 @@ from torchrl_subgoal.transform.compiled import StepInputs, check_finite
 from torchrl_subgoal.transform.setup import BatchSetup, Settings
 from torchrl_subgoal.transform.shaping import (
     accumulate,
+    ancestral_max,
     closes,
-    nondecreasing,
     restart,
     shaped_reward,
     start_level,
@@ -115,7 +115,7 @@ def torch_step(
         assert smdp is not None
         update(smdp)
     with torch.no_grad():
-        if setup.lengths is not None:  # a monotone table
+        if setup.ancestors is not None:  # a monotone table
             assert isinstance(potential, TabularPotential)
             phi, phi_next, v_start = monotone_values(
                 potential, setup, [current[keys.index], z_next, start_entries(current, settings)[keys.index]]
@@ -145,26 +145,26 @@ def torch_step(
 
 def monotone_values(potential: TabularPotential, setup: BatchSetup, indices: list[torch.Tensor]) -> list[torch.Tensor]:
     """``Φ`` at each of ``indices`` (``z`` entries, ``[*B, 1]``) read from each row's table made non-decreasing
-    along its series (:func:`~torchrl_subgoal.transform.shaping.nondecreasing`).
+    along its series (:func:`~torchrl_subgoal.transform.shaping.ancestral_max`).
 
     Examples:
         >>> from torchrl_subgoal import State, SubgoalSeries, TabularPotential
-        >>> from torchrl_subgoal.transform.setup import Subgoals
-        >>> v, learner = TabularPotential(3), torch.zeros(1, 1, dtype=torch.long)
+        >>> from torchrl_subgoal.transform.setup import Subgoals, monotone_ancestors
+        >>> v, learner = TabularPotential(3, monotone=True), torch.zeros(1, 1, dtype=torch.long)
         >>> with torch.no_grad():
         ...     v.table[:] = torch.tensor([1.0, 0.5, 2.0])
         >>> subgoals = Subgoals(SubgoalSeries([State(1), State(2)]))
         >>> batch = BatchSetup(torch.Size([1]), subgoals.compile(learner, torch.Size([1]), 1, (1, False), "o"), learner,
-        ...                    lengths=torch.tensor([3]))
+        ...                    ancestors=monotone_ancestors(v, subgoals, learner, 1))
         >>> [phi.item() for phi in monotone_values(v, batch, [torch.tensor([[1]]), torch.tensor([[2]])])]
-        [0.75, 2.0]
+        [1.0, 2.0]
     """
     rows = setup.learner.reshape(-1)
     table = potential.table.detach().reshape(-1, potential.num_states)
     per_row = table[rows // potential.envs_per_table] if potential.batch_shape else table.expand(rows.numel(), -1)
-    assert setup.lengths is not None
-    projected = nondecreasing(per_row, setup.lengths)
-    return [projected.gather(1, z.reshape(-1, 1)).view(*setup.batch_shape, 1) for z in indices]
+    assert setup.ancestors is not None
+    lifted = ancestral_max(per_row, setup.ancestors)
+    return [lifted.gather(1, z.reshape(-1, 1)).view(*setup.batch_shape, 1) for z in indices]
 
 
 def start_entries(current: dict[str, torch.Tensor], settings: Settings) -> dict[str, torch.Tensor]:

@@ -37,7 +37,7 @@ __all__ = [
     "compiled_potential",
     "initial_state",
     "kept_entries",
-    "monotone_lengths",
+    "monotone_ancestors",
     "observation_layout",
     "online_update",
     "settings",
@@ -45,6 +45,8 @@ __all__ = [
 
 #: ``table`` of a naive potential in the kernels: no table, ``Φ = η · achieved``
 NO_TABLE = np.zeros((0, 1), dtype=np.float32)
+#: ``ancestors`` of a table shaped as it is (not monotone)
+NO_ANCESTORS = np.zeros((0, 0, 0), dtype=np.bool_)
 
 
 class Settings(NamedTuple):
@@ -171,6 +173,8 @@ class PotentialKernelState(NamedTuple):
     start_mode: int  #: ``_kernels.shaping.START_VALUE``, ``START_ZERO`` or ``START_NONPOSITIVE``
     expectile: float = 0.5  #: ``τ`` of the online update's target (0.5: the mean)
     bootstrap_truncated: bool = True  #: whether a time-out inside ``z`` trains ``V(z)``
+    #: with a monotone table, ``[R, Z, Z]``: what comes before each ``z`` in each row's series; else empty
+    ancestors: np.ndarray = NO_ANCESTORS
 
 
 def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss | None) -> str | None:
@@ -184,8 +188,6 @@ def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss
         'it shapes with a TabularPotential or a NaivePotential, not NeuralPotential'
     """
     if isinstance(potential, TabularPotential):
-        if potential.monotone:
-            return "it reads the table as it is, not made non-decreasing (TabularPotential(monotone=True))"
         if potential.table.device.type != "cpu":
             return f"it reads the potential's table on the CPU, not {potential.table.device}"
     elif not isinstance(potential, NaivePotential):
@@ -193,6 +195,42 @@ def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss
     if update is not None and (type(update) is not SubgoalValueLoss or update.reduction != "sum"):
         return "its online update is one SGD step of the default SubgoalValueLoss (reduction 'sum')"
     return None
+
+
+def check_device(potential: TensorDictModuleBase, data: torch.Tensor | None) -> None:
+    """Refuse a potential whose parameters are not on the device of ``data`` (an entry it shapes; ``None``:
+    nothing to compare).
+
+    Examples:
+        >>> check_device(TabularPotential(3), torch.zeros(2))  # fine
+        >>> check_device(TabularPotential(3).to("meta"), torch.zeros(2))
+        Traceback (most recent call last):
+        ...
+        ValueError: SubgoalPotentialTransform: the potential is on meta but the data it shapes on cpu; ...
+    """
+    device = data.device if data is not None else None
+    for tensor in (*potential.parameters(), *potential.buffers()):
+        if device is not None and tensor.device != device:
+            raise ValueError(
+                f"SubgoalPotentialTransform: the potential is on {tensor.device} but the data it shapes on {device}; "
+                "keep them on one device: move the env with its transforms (env.to(device)), or the transform "
+                "back (transform.to(device))"
+            )
+
+
+def trained_parameters(
+    potential: TensorDictModuleBase, update: ValueUpdate | None
+) -> tuple[list[torch.nn.Parameter], torch.optim.SGD | None]:
+    """The potential's parameters as they are now, and the online update's SGD over them (plain SGD keeps no
+    state, so one made anew after a move that replaced them loses nothing).
+
+    Examples:
+        >>> parameters, optimizer = trained_parameters(TabularPotential(3), None)
+        >>> len(parameters), optimizer
+        (1, None)
+    """
+    parameters = list(potential.parameters())
+    return parameters, torch.optim.SGD(parameters, update.lr) if update else None
 
 
 def check_options(gamma: float, start: str, backend: str) -> None:
@@ -242,41 +280,48 @@ def settings(
 
 
 def check_monotone(subgoals: Subgoals) -> None:
-    """Refuse a monotone table (``TabularPotential(monotone=True)``) where "later along the series" has
-    no meaning: an aggregation, or a series with a partial order.
+    """Refuse a monotone table (``TabularPotential(monotone=True)``) over a hand-given aggregation, whose
+    abstract states come in no order.
 
     Examples:
         >>> from torchrl_subgoal import StateAggregation
         >>> check_monotone(Subgoals(StateAggregation(torch.tensor([0, 0, 1, 1]), num_states=2)))
         Traceback (most recent call last):
         ...
-        ValueError: TabularPotential(monotone=True): the shaping needs subgoal series in a total order ...
+        ValueError: TabularPotential(monotone=True): the shaping needs subgoal series, ...
     """
-    if subgoals.aggregation is not None or not all(p.is_chain for p in subgoals.patterns):
+    if subgoals.aggregation is not None:
         raise ValueError(
-            "TabularPotential(monotone=True): the shaping needs subgoal series in a total order (a chain), "
-            "where a larger z is later along the series; an aggregation or a partial order has no such order"
+            "TabularPotential(monotone=True): the shaping needs subgoal series, whose abstract states come "
+            "one after another; an aggregation's states have no order (use monotone=False)"
         )
 
 
-def monotone_lengths(
+def monotone_ancestors(
     potential: TensorDictModuleBase, subgoals: Subgoals, learner: torch.Tensor, n_learners: int
 ) -> torch.Tensor | None:
-    """With a monotone table (``TabularPotential(monotone=True)``), the number of abstract states of each
-    row's series (``learner``: ``[*B, 1]``), flattened: ``[R]``; else ``None``.
+    """With a monotone table (``TabularPotential(monotone=True)``), which abstract states of each row's
+    series (``learner``: ``[*B, 1]``) come before each one, itself included, flattened: ``[R, Z, Z]``
+    (``[r, z, a]``: ``a`` is ``z`` or comes before it; states past a short series are their own only);
+    else ``None``.
 
     Examples:
         >>> from torchrl_subgoal import State
         >>> subgoals = Subgoals([SubgoalSeries([State(1)]), SubgoalSeries([State(1), State(2)])])
-        >>> monotone_lengths(TabularPotential(3, monotone=True), subgoals, torch.tensor([[1], [0], [1]]), 2).tolist()
-        [3, 2, 3]
-        >>> monotone_lengths(TabularPotential(3), subgoals, torch.tensor([[1], [0], [1]]), 2) is None
+        >>> ancestors = monotone_ancestors(TabularPotential(3, monotone=True), subgoals, torch.tensor([[1], [0]]), 2)
+        >>> ancestors[0, 2].tolist(), ancestors[1, 2].tolist()  # row 1's series has no z = 2
+        ([True, True, True], [False, False, True])
+        >>> monotone_ancestors(TabularPotential(3), subgoals, torch.tensor([[1], [0], [1]]), 2) is None
         True
     """
     if not (isinstance(potential, TabularPotential) and potential.monotone):
         return None
-    sizes = torch.tensor([p.num_abstract_states for p in subgoals.patterns], dtype=torch.long)
-    return sizes[subgoals.pattern_of(n_learners)[learner.reshape(-1)]]
+    n = potential.num_states
+    masks = torch.eye(n, dtype=torch.bool).repeat(len(subgoals.patterns), 1, 1)
+    for p, series in enumerate(subgoals.patterns):
+        for z in range(series.num_abstract_states):
+            masks[p, z, list(series.ancestors(z))] = True
+    return masks[subgoals.pattern_of(n_learners)[learner.reshape(-1)]]
 
 
 def check_table(potential: TensorDictModuleBase, n_learners: int, num_states: int) -> None:
@@ -309,7 +354,7 @@ def compiles(backend: str, potential: TensorDictModuleBase, update: ValueUpdate 
         >>> compiles("auto", TabularPotential(3), None), compiles("torch", TabularPotential(3), None)
         (True, False)
         >>> compiles("auto", TabularPotential(3, monotone=True), None)
-        False
+        True
     """
     why = (
         "backend='torch'"
@@ -366,7 +411,7 @@ class BatchSetup:
     table: torch.Tensor | None = None  #: the tabular potential's parameter, to see it move
     table_ptr: int = 0
     z_start: np.ndarray = field(default_factory=lambda: np.zeros((1, 1), np.int64))
-    lengths: torch.Tensor | None = None  #: with a monotone table: each row's number of abstract states, ``[R]``
+    ancestors: torch.Tensor | None = None  #: with a monotone table: what comes before each ``z``, ``[R, Z, Z]``
 
     def __post_init__(self) -> None:
         self.rows = self.batch_shape.numel()  #: rows of the batch
@@ -400,9 +445,19 @@ class BatchSetup:
         mode = START_MODES[settings.start]
         loss = update.loss if update is not None else None
         expectile, bootstrap = (0.5, True) if loss is None else (loss.expectile, loss.bootstrap_truncated)
+        ancestors = NO_ANCESTORS if self.ancestors is None else self.ancestors.numpy()
         self.kernel = tuple(
             PotentialKernelState(
-                table, eta, settings.gamma, settings.value_gamma, lr, settings.zero_terminal, mode, expectile, bootstrap
+                table,
+                eta,
+                settings.gamma,
+                settings.value_gamma,
+                lr,
+                settings.zero_terminal,
+                mode,
+                expectile,
+                bootstrap,
+                ancestors,
             )
             for lr in (0.0, update.lr if update else 0.0)
         )  # type: ignore[assignment]
@@ -413,6 +468,10 @@ class BatchSetup:
     def moved(self) -> bool:
         """Whether the tabular potential's table moved since (to shared memory, another device…)."""
         return self.table is not None and self.table.data_ptr() != self.table_ptr
+
+    def stale(self, potential: TensorDictModuleBase) -> bool:
+        """Whether ``potential``'s table moved since, or is another tensor now (``.to("meta")`` replaces it)."""
+        return self.table is not None and (self.moved or self.table is not getattr(potential, "table", None))
 
 
 def check_potential(potential: TensorDictModuleBase, keys: SubgoalKeys) -> None:

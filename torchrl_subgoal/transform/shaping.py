@@ -8,8 +8,8 @@ One env step from the abstract state ``(z, r_h, k)`` to ``z'``, with the env rew
   ``r_h`` and ``k`` restart from 0 (:func:`restart`);
 * the reward becomes ``r + γ Φ(z') − Φ(z)`` (:func:`shaped_reward`), with ``Φ = V − c`` where
   ``c`` is set by the start state's value (:func:`start_level`) and, optionally, ``Φ(z') = 0``
-  at a terminal state; with ``monotone_potential`` ``V`` is first replaced by the nearest table
-  that does not decrease along the series (:func:`nondecreasing`).
+  at a terminal state; with a monotone table ``V(z)`` is first replaced by the largest value of ``z``
+  and the states an episode passes through before it (:func:`ancestral_max`).
 
 The online update of the potential (one SGD step of :class:`~torchrl_subgoal.SubgoalValueLoss` on
 the closed transitions, before shaping) is the loss's own code.
@@ -26,8 +26,8 @@ __all__ = [
     "START_MODES",
     "StartPotential",
     "accumulate",
+    "ancestral_max",
     "closes",
-    "nondecreasing",
     "restart",
     "shaped_reward",
     "start_level",
@@ -105,27 +105,17 @@ def shaped_reward(
     return reward + (gamma * phi_next - phi).to(reward.dtype)
 
 
-def nondecreasing(values: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
-    """The nearest (least-squares) non-decreasing sequence to each row's first ``lengths`` entries;
-    the entries past a row's length are left as they are.
+def ancestral_max(values: torch.Tensor, ancestors: torch.Tensor) -> torch.Tensor:
+    """Each row's values made non-decreasing along its series: entry ``z`` becomes the largest value of
+    ``z`` and of the states before it (``ancestors[r, z, a]``: ``a`` is ``z`` or comes before it).
 
-    ``values`` is ``[R, n]`` (a table row per batch row), ``lengths`` ``[R]``. Entry ``i`` of the
-    projection is ``max_{j ≤ i} min_{k ≥ i} mean(values[j..k])`` (the min-max formula of isotonic
-    regression): where a later subgoal is valued below an earlier one, both get the mean of the
-    run they form, so the shaping neither charges for reaching the later one nor pays for lingering
-    before it.
+    ``values`` is ``[R, n]`` (a table row per batch row), ``ancestors`` ``[R, n, n]`` boolean. A later
+    subgoal valued below an earlier one (say, never reached, so still at its initial value) is shaped at
+    the earlier one's value: reaching it is never charged, and no value is lowered.
 
     Examples:
-        >>> nondecreasing(torch.tensor([[1.0, 0.5, 2.0], [1.0, 0.5, 0.0]]), torch.tensor([3, 2])).tolist()
-        [[0.75, 0.75, 2.0], [0.75, 0.75, 0.0]]
+        >>> chain = torch.ones(3, 3, dtype=torch.bool).tril()  # 0 ≺ 1 ≺ 2
+        >>> ancestral_max(torch.tensor([[1.0, 0.5, 2.0], [0.9, 0.0, 0.1]]), chain.expand(2, 3, 3)).tolist()
+        [[1.0, 1.0, 2.0], [0.8999999761581421, 0.8999999761581421, 0.8999999761581421]]
     """
-    n = values.shape[-1]
-    idx = torch.arange(n, device=values.device)
-    valid = idx < lengths[:, None]  # [R, n]
-    sums = torch.nn.functional.pad(values.masked_fill(~valid, 0.0).cumsum(-1), (1, 0))  # [R, n + 1]
-    first, last = idx[:, None], idx[None, :]  # run [first, last]
-    means = (sums[:, None, 1:] - sums[:, :-1, None]) / (last - first + 1).clamp(min=1)  # [R, first, last]
-    means = means.masked_fill((first > last) | (last >= lengths[:, None, None]), math.inf)
-    lowest = means.flip(-1).cummin(-1).values.flip(-1)  # [R, j, i]: min over runs from j ending at i or later
-    best = lowest.masked_fill(first > last, -math.inf).amax(-2)  # [R, i]: max over runs starting at j <= i
-    return torch.where(valid, best, values)
+    return values.unsqueeze(-2).masked_fill(~ancestors, -math.inf).amax(-1)

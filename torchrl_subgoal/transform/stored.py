@@ -114,6 +114,8 @@ def shape_stored(
         True
     """
     time = time_dim(data)
+    if data.batch_size.numel() == 0:  # an empty sample ([0], [B, 0]): no step to shape
+        return data
     nxt = data.get("next", None)
     stored_reward = nxt is not None and read(nxt, env.env_reward) is not None  # then the one shaped
     missing = [

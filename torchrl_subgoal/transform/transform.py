@@ -116,10 +116,7 @@ class SubgoalPotentialTransform(Transform):
         self.potential = potential
         self.backend, self.transitions_key = backend, transitions_key
         self.value_update = setup.online_update(value_update, potential, gamma)
-        self.value_optimizer = (
-            torch.optim.SGD(potential.parameters(), self.value_update.lr) if self.value_update else None
-        )
-        self._parameters_list = list(potential.parameters())
+        self._parameters_list, self.value_optimizer = setup.trained_parameters(potential, self.value_update)
         self._settings = setup.settings(
             self.keys, potential, self.subgoals, gamma, self.value_update, observation_key, transitions_key,
             zero_terminal=zero_terminal_potential, start=start_potential,
@@ -196,6 +193,7 @@ class SubgoalPotentialTransform(Transform):
     ) -> BatchSetup:
         """Set up a batch whose rows belong to ``learner`` (``online``: the env's batch, in order)."""
         setup.check_table(self.potential, n_learners, self.num_abstract_states)
+        setup.check_device(self.potential, obs)
         layout = self._layout  # the observation's entries and encoding: the env's spec's once known
         if layout is None:
             spec = None
@@ -205,9 +203,9 @@ class SubgoalPotentialTransform(Transform):
             if spec is not None:
                 self._layout = layout
         abstraction = self.subgoals.compile(learner, batch_shape, n_learners, layout, self.observation_key)
-        lengths = setup.monotone_lengths(self.potential, self.subgoals, learner, n_learners)
+        ancestors = setup.monotone_ancestors(self.potential, self.subgoals, learner, n_learners)
         batch = BatchSetup(
-            batch_shape, abstraction, learner, compiled_search=self.backend != "torch" and NUMBA, lengths=lengths
+            batch_shape, abstraction, learner, compiled_search=self.backend != "torch" and NUMBA, ancestors=ancestors
         )
         if setup.compiles(self.backend, self.potential, self.value_update):
             batch.use_kernels(self.potential, self._settings, self.value_update, online)
@@ -215,10 +213,15 @@ class SubgoalPotentialTransform(Transform):
 
     def _online_batch(self, batch_shape: torch.Size, obs: torch.Tensor | None) -> BatchSetup:
         batch = self._online
-        if batch is None or batch.batch_shape != batch_shape or batch.moved:
+        if batch is None or batch.batch_shape != batch_shape or batch.stale(self.potential):
             n = batch_shape.numel()
             batch = self._online = self._batch(batch_shape, torch.arange(n).reshape(*batch_shape, 1), n, obs, True)
         return batch
+
+    def _apply(self, fn: Any, recurse: bool = True) -> Any:  # .to(), .cuda(), .share_memory()...
+        applied, self._online = super()._apply(fn, recurse), None  # set up again at the next step
+        self._parameters_list, self.value_optimizer = setup.trained_parameters(self.potential, self.value_update)
+        return applied  # and train the parameters as they are now (a move may replace them)
 
     def _kept_specs(self) -> dict[str, TensorSpec]:
         self._env = EnvKeys.resolve(self.parent)
@@ -309,11 +312,7 @@ class SubgoalPotentialTransform(Transform):
             next_tensordict,
         )
         batch = self._online  # set up again for another batch shape, or when a table moved (to shared memory…)
-        if (
-            batch is None
-            or batch.batch_shape != nxt.batch_size
-            or (batch.table is not None and batch.table.data_ptr() != batch.table_ptr)
-        ):
+        if batch is None or batch.batch_shape != nxt.batch_size or batch.stale(self.potential):
             batch = self._online_batch(nxt.batch_size, obs)
         out = self._advance(batch, current, step, self.value_update is not None and self.learning)
         for name in settings.kept:
@@ -390,7 +389,7 @@ class SubgoalPotentialTransform(Transform):
         observation as at a reset, and restarts after every ``done``. The reward shaped is the env reward
         (``"env_reward"`` when stored). The rows' learners matter only when learners have their own table
         or pattern: then each row's is read from ``"subgoal_learner"`` (or the rows are the env batch in
-        order); otherwise any sample, shuffled or not, is shaped.
+        order); otherwise any sample, shuffled or not, is shaped (an empty one is returned as it is).
         """
 
         def set_up(shape: torch.Size, learned: torch.Tensor | None, time: int, obs: torch.Tensor | None) -> BatchSetup:

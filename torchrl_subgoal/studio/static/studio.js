@@ -743,7 +743,8 @@ function currentValues() {
 async function tryIt() {
   const p = pattern();
   const body = Object.assign(drawing([p]), {
-    pattern: p.name, episodes: Number($("episodes").value), learners: Number($("learners").value),
+    pattern: p.name, method: $("method").value, episodes: Number($("episodes").value),
+    learners: Number($("learners").value),
   });
   try {
     const job = await api("POST", "/api/try", body);
@@ -865,7 +866,7 @@ function renderCurves(result) {
   el("text", { x: (L + W - R) / 2, y: H - 4, "text-anchor": "middle", class: "chart-label" }, svg, "episode");
   el("text", { x: 12, y: (T + H - B) / 2, "text-anchor": "middle", class: "chart-label",
     transform: `rotate(-90 12 ${(T + H - B) / 2})` }, svg, "steps per episode (log)");
-  const labels = { shaped: "with the subgoals", baseline: "no shaping" };
+  const labels = { shaped: `with the subgoals (${result.method || "HRS"})`, baseline: "no shaping" };
   series.forEach((s, k) => {
     const band = s.hi.map((v, i) => `${X(i)},${Y(v)}`).concat(s.lo.map((v, i) => `${X(i)},${Y(v)}`).reverse());
     el("polygon", { points: band.join(" "), class: `band ${s.key}` }, svg);
@@ -891,7 +892,7 @@ function renderResult() {
   const r = entry.result;
   const s = r.settings;
   $("result-title").textContent =
-    `Try it: '${r.pattern}' · ${s.learners} learner${s.learners > 1 ? "s" : ""} × ${s.episodes} episodes · ${r.seconds.toFixed(1)} s`;
+    `Try it: '${r.pattern}' (${r.method || "HRS"}) · ${s.learners} learner${s.learners > 1 ? "s" : ""} × ${s.episodes} episodes · ${r.seconds.toFixed(1)} s`;
   $("result-stale").hidden = entry.signature === signature(p);
   renderCurves(r);
   const n = r.shaped.mean.length;
@@ -903,6 +904,10 @@ function renderResult() {
     `Episodes reaching the goal: ${(100 * r.shaped.success).toFixed(0)}% and ${(100 * r.baseline.success).toFixed(0)}%.`;
   const body = $("values").querySelector("tbody");
   body.replaceChildren();
+  $("values").hidden = r.potential.length === 0;  // NRS: no table
+  $("values-caption").textContent = r.method === "SRS"
+    ? "Fixed potential V(z) (the progress prior): the value of having reached each subgoal"
+    : "Learned potential V(z): the value of having reached each subgoal (mean ± s.e. over learners)";
   const scale = Math.max(1e-12, ...r.potential.map(Math.abs));
   r.potential.forEach((v, z) => {
     const tr = document.createElement("tr");
