@@ -129,7 +129,7 @@ def test_continuous_learners_on_point_maze(tmp_path: Path, algo: str, batch: str
         (["--algo", "dqn", "--methods", "PPO"], "--methods: unknown method(s) ['PPO']"),
         (["--algo", "ppo", "--num-envs", "3"], "frames_per_batch (256) must be a multiple of num_envs"),
         (["--algo", "ppo", "--total-frames", "100"], "--total-frames: 100 is less than one batch of 256 frames"),
-        (["--algo", "dqn", "--value-lr", "0"], "must be > 0, got 0.0"),
+        (["--algo", "dqn", "--value-lr", "0"], "--value-lr: must lie in (0, 1], got 0.0"),
         (["--algo", "ppo", "--clip-epsilon", "nan"], "--clip-epsilon: must be a finite number, got nan"),
         (["--algo", "ppo", "--epochs", "many"], "argument --epochs: invalid int value: 'many'"),
         (["--logger", "mlflow"], "argument --logger: invalid choice: 'mlflow'"),
