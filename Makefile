@@ -1,6 +1,7 @@
 # Two entry points for a fresh machine; each installs what it needs.
 #   make demo   small four-rooms reproduction: prints a table, writes plots
-#   make test   lint, type-check and the test suite (what CI runs)
+#   make test   lint, type-check, the docs site, the install check and the test suite (what CI runs)
+#   make install-check   the built wheel in venvs outside the repository (core alone; with extras)
 #   make test-fast   the suite without the tests marked slow
 #   make docs   the documentation site (strict: any warning fails) into site/
 #   make bench-docs   run the benchmarks at a quick scale and regenerate docs/benchmarks.md
@@ -9,7 +10,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint docs bench-docs install clean
+.PHONY: demo test test-fast lint docs bench-docs install install-check clean
 
 # The studio's browser tests drive Debian's Chromium through Playwright (a dev
 # dependency); nothing downloads a browser build. Installed once, with apt.
@@ -27,7 +28,7 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(PY) recipes/four_rooms.py
+	$(VENV)/bin/torchrl-subgoal reproduce four-rooms
 
 SOURCES := torchrl_subgoal recipes tests benchmarks tools docs/tutorials
 
@@ -41,6 +42,15 @@ lint: $(STAMP)
 docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir site
 
+# The package as a user installs it: the wheel, built from this tree, in two venvs outside the
+# repository (kept in $(CHECK_VENVS) and reused; the first run creates them, ~10 min of downloads):
+# the core alone imports and runs the README snippet without numba, pandas or matplotlib; with
+# the experiments and tensorboard extras, `torchrl-subgoal train` and `report` run and log.
+CHECK_VENVS ?= $(or $(TMPDIR),/tmp)/torchrl_subgoal-install-check
+
+install-check: $(STAMP)
+	$(PY) tools/check_install.py --venvs $(CHECK_VENVS)
+
 bench-docs: $(STAMP)
 	$(PY) benchmarks/docs_page.py docs/benchmarks.md
 
@@ -52,7 +62,7 @@ $(CHROMIUM):
 # instances never start at once
 PYTEST := $(PY) -m pytest -q -n 2 --dist loadgroup
 
-test: lint docs $(CHROMIUM)
+test: lint docs install-check $(CHROMIUM)
 	$(PYTEST)
 
 # skip the longest end-to-end tests (marked slow) while developing; CI runs them all

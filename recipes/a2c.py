@@ -4,7 +4,7 @@ Each learner is one A2C agent (TorchRL's ``A2CLoss`` with ``GAE``; policy and
 value ``TensorDictModule`` s: a one-hot table for four-rooms, a Fourier basis
 for PinBall) trained on batches from a ``Collector`` over ``--num-envs`` envs
 (a ``ParallelEnv`` with ``--env-workers``; a ``MultiSyncCollector`` with
-``--collector-workers``). The shaping transform sits on the outer env; its
+``--collector-workers``; every field of ``A2CConfig`` is a flag). The shaping transform sits on the outer env; its
 potential is shared with the main process, where ``SubgoalValueLoss`` trains
 it from each batch's SMDP transitions with its own optimiser (``--online-potential``:
 the transform's per-step update instead). Methods: plain A2C, HRS, RRS, NRS and
@@ -17,7 +17,7 @@ finished episode over the last 8 batches); the report gives times to threshold i
 updates and in frames. ``recipes/train.py --algo a2c`` runs the same learners on any
 domain with the library's shaping defaults; this recipe keeps the A2C flags and the
 settings of the figures in docs/torchrl.md.
-TorchRL CSV logs (TensorBoard too if installed) go to ``RESULTS/logs``.
+Each learner's TorchRL log goes to ``RESULTS/logs`` (``--logger csv``, ``tensorboard``, ``wandb`` or ``none``).
 
     python recipes/a2c.py --domain four_rooms                 # plain vs HRS vs SARSA-RS, 10 learners each
     python recipes/a2c.py --domain pinball --total-frames 2000000
@@ -26,8 +26,9 @@ TorchRL CSV logs (TensorBoard too if installed) go to ``RESULTS/logs``.
 from __future__ import annotations
 
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from torchrl_subgoal.experiments.cli import setting
 from torchrl_subgoal.experiments.learners import LearnerRecipeConfig, learner_methods, learner_plan
@@ -43,28 +44,27 @@ class Config(LearnerRecipeConfig):
     domain: str = setting("four_rooms", "four_rooms or pinball", choices=["four_rooms", "pinball"])
     methods: str = setting("A2C,HRS,SARSA-RS", "comma-separated methods: " + ", ".join(METHODS))
     learnings: int = setting(1, "learnings per subgoal pattern (10 patterns: 10 learners per method)")
-    num_envs: int = setting(16, "envs per learner")
-    frames_per_batch: int = setting(256, "frames per A2C update")
-    lr: float = setting(0.0, "A2C learning rate (0: the domain's default)")
-    normalize_advantage: bool = setting(False, "standardise GAE advantages per batch")
-    online_potential: bool = setting(
-        False, "train the potential in the transform at every step (the library default) instead of per batch"
-    )
     start_potential: str = setting(
         "value",
         "level of Φ: value (Φ = V; docs/torchrl.md's figures), zero or "
         "nonpositive (the library default; docs/shaping_defaults.md)",
         choices=["value", "zero", "nonpositive"],
     )
-    results: str = setting("", "results directory (default results/a2c_<domain>; re-run to resume)")
+    results: str = setting("", "results directory (re-run to resume)", shown_default="results/a2c_<domain>")
 
-    AT_LEAST_ONE: ClassVar[tuple[str, ...]] = ("learnings", "random_patterns", "num_envs", "frames_per_batch")
-    AT_LEAST_ZERO: ClassVar[tuple[str, ...]] = ("total_frames", "env_workers", "collector_workers", "workers")
+    ALGO: ClassVar[str | None] = "a2c"
+    #: the settings of docs/torchrl.md's figures: 16 envs, 256-frame updates, the potential trained per batch
+    LEARNER_DEFAULTS: ClassVar[Mapping[str, Any]] = {
+        "num_envs": 16,
+        "frames_per_batch": 256,
+        "normalize_advantage": False,
+        "online_potential": False,
+    }
 
 
 def plan(cfg: Config) -> Plan:
     """The sweep of ``cfg``: one chunk per learner, the stored configuration, the report's thresholds."""
-    return learner_plan(cfg, "a2c", extra={"normalize_advantage": cfg.normalize_advantage}, final_updates=10)
+    return learner_plan(cfg, "a2c", final_updates=10)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -20,8 +20,8 @@ Taxi: −1 per step, −10 per illegal action, +20 at delivery; subgoals: passen
 then at the destination). Results go to ``--results`` chunk by chunk (re-run to resume); the report
 gives episodes to each threshold of steps per episode, the final steps and the tests.
 
-    python recipes/qlearning.py --task four_rooms --reward step-cost    # 20 learners per method
-    python recipes/qlearning.py --task taxi --episodes 400
+    python recipes/qlearning.py --domain four_rooms --reward step-cost    # 20 learners per method
+    python recipes/qlearning.py --domain taxi --episodes 400
 """
 
 from __future__ import annotations
@@ -102,7 +102,7 @@ SPARSE_ROOMS_ROUTE = SubgoalSeries([Cell(5, 10), Cell(9, 15)], name="through_the
 class Config(RecipeConfig):
     """Tabular ε-greedy Q-learning with HRS (library defaults), HRS-mean and NRS against no shaping."""
 
-    task: str = setting("four_rooms", "four_rooms, sparse_rooms or taxi", choices=sorted(TASKS))
+    domain: str = setting("four_rooms", "four_rooms, sparse_rooms or taxi", choices=sorted(TASKS))
     reward: str = setting(
         "step-cost",
         "four_rooms and sparse_rooms: step-cost (-1 per step) or goal (+1 at the goal)",
@@ -128,7 +128,9 @@ class Config(RecipeConfig):
         "nonpositive", "HRS, HRS-mean: the level of Φ", choices=["value", "zero", "nonpositive"]
     )
     chunk_size: int = setting(100, "learners per batch (one policy seed per chunk)")
-    results: str = setting("", "results directory (default results/qlearning_<task>[_<reward>]; re-run to resume)")
+    results: str = setting(
+        "", "results directory (re-run to resume)", shown_default="results/qlearning_<domain>[_<reward>]"
+    )
 
     AT_LEAST_ONE = ("learnings", "episodes", "chunk_size")
 
@@ -141,8 +143,10 @@ class Config(RecipeConfig):
         check(self.eta >= 0.0, "eta", f"must be >= 0, got {self.eta}")
         check(self.progress_scale >= 0.0, "progress_scale", f"must be >= 0, got {self.progress_scale}")
         check(0.0 < self.expectile < 1.0, "expectile", f"must lie strictly between 0 and 1, got {self.expectile}")
-        if self.task == "taxi":
-            check_unused(self, ["reward"], "applies to --task four_rooms only (taxi's rewards are its own)")
+        if self.domain == "taxi":
+            check_unused(
+                self, ["reward"], "applies to --domain four_rooms and sparse_rooms only (taxi's rewards are its own)"
+            )
 
 
 def make_env(config: Mapping[str, Any], n: int) -> EnvBase:
@@ -209,39 +213,41 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
 def plan(cfg: Config) -> Plan:
     """The sweep of ``cfg``: every method's learners, the stored configuration, the report's thresholds."""
     check_methods(METHODS, cfg.method_names)
-    task = TASKS[cfg.task]
-    if cfg.task == "taxi":
+    task = TASKS[cfg.domain]
+    if cfg.domain == "taxi":
         from torchrl_subgoal.envs.taxi import taxi_subgoals
 
         human, subgoal_file = {"pick_up_then_drive": taxi_subgoals()}, "torchrl_subgoal.envs.taxi:taxi_subgoals"
-    elif cfg.task == "sparse_rooms":
+    elif cfg.domain == "sparse_rooms":
         human, subgoal_file = {SPARSE_ROOMS_ROUTE.name: SPARSE_ROOMS_ROUTE}, "recipes/qlearning.py:SPARSE_ROOMS_ROUTE"
     else:
         human, subgoal_file = load_patterns(PARTICIPANTS, domain="four_rooms"), PARTICIPANTS
     patterns = pattern_sets(human, [], 0, cfg.seed, random_needed=False)
     settings = dataclasses.asdict(cfg)
     config: dict[str, Any] = {
-        k: settings[k]
-        for k in (
-            "task",
-            "reward",
-            "episodes",
-            "lr",
-            "epsilon",
-            "gamma",
-            "value_lr",
-            "eta",
-            "agent_state",
-            "zero_terminal_potential",
-            "start_potential",
-            "progress_scale",
-            "monotone_potential",
-        )
+        "task": cfg.domain,  # the key results started before the flag's renaming (--task) resume with
+        **{
+            k: settings[k]
+            for k in (
+                "reward",
+                "episodes",
+                "lr",
+                "epsilon",
+                "gamma",
+                "value_lr",
+                "eta",
+                "agent_state",
+                "zero_terminal_potential",
+                "start_potential",
+                "progress_scale",
+                "monotone_potential",
+            )
+        },
     }
     check_patterns(patterns, make_env(config, 1), task["subgoal_key"])
-    name = cfg.task if cfg.task == "taxi" else f"{cfg.task}_{cfg.reward.replace('-', '_')}"
+    name = cfg.domain if cfg.domain == "taxi" else f"{cfg.domain}_{cfg.reward.replace('-', '_')}"
     config.update(
-        domain=cfg.task,
+        domain=cfg.domain,
         target={"expectile": cfg.expectile, "bootstrap_truncated": cfg.bootstrap_truncated},
         **sweep_entries(cfg, subgoal_file, patterns),
         report={

@@ -15,6 +15,7 @@ them to an ``.npz`` file. Two checkouts agree bit for bit when their files do::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import sys
 import tempfile
@@ -23,7 +24,6 @@ from typing import Any
 
 import numpy as np
 
-RECIPES = Path(__file__).resolve().parent.parent / "recipes"
 SMALL = {
     "four_rooms": ["--learnings", "3", "--episodes", "40", "--random-patterns", "2"],
     "pinball": ["--learnings", "1", "--episodes", "2", "--random-patterns", "1", "--max-steps", "600"],
@@ -40,17 +40,30 @@ def _arrays(obj: Any, names: tuple[str, ...]) -> dict[str, np.ndarray]:
     return out
 
 
+def recipe_module(domain: str) -> Any:
+    """The recipe of ``domain`` in the package on the path (``torchrl_subgoal.recipes``), or, for a checkout
+    from before the recipes moved into the package, its ``recipes/`` script."""
+    try:
+        return importlib.import_module(f"torchrl_subgoal.recipes.{domain}")
+    except ModuleNotFoundError:
+        import torchrl_subgoal
+
+        script = Path(torchrl_subgoal.__file__).resolve().parents[1] / "recipes" / f"{domain}.py"
+        spec = importlib.util.spec_from_file_location(f"recipe_{domain}", script)
+        assert spec is not None and spec.loader is not None
+        recipe = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = recipe
+        spec.loader.exec_module(recipe)
+        return recipe
+
+
 def fingerprint(engine: str) -> dict[str, np.ndarray]:
     """Every chunk's records, tables and potential, keyed ``domain/method/chunk/name``."""
     import torch
 
     found: dict[str, np.ndarray] = {}
     for domain, args in SMALL.items():
-        spec = importlib.util.spec_from_file_location(f"recipe_{domain}", RECIPES / f"{domain}.py")
-        assert spec is not None and spec.loader is not None
-        recipe = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = recipe
-        spec.loader.exec_module(recipe)
+        recipe = recipe_module(domain)
         run = recipe.run_episodes
         count = [0]
 
@@ -78,9 +91,17 @@ def fingerprint(engine: str) -> dict[str, np.ndarray]:
                 found[f"{key}/potential"] = table.detach().numpy().copy()
             return records
 
-        recipe.run_episodes = capture  # type: ignore[attr-defined]
+        recipe.run_episodes = capture
+        plan = recipe.plan
+
+        def no_warm_up(cfg: Any, _plan: Any = plan) -> Any:  # the fingerprint is of the sweep's chunks only
+            made = _plan(cfg)
+            return dataclasses.replace(made, warm_up=None) if hasattr(made, "warm_up") else made
+
+        recipe.plan = no_warm_up
         with tempfile.TemporaryDirectory() as results:
             code = recipe.main([*args, "--workers", "0", "--engine", engine, "--results", results])
+        recipe.run_episodes, recipe.plan = run, plan
         if code:
             raise SystemExit(f"{domain} recipe failed ({code})")
     return found

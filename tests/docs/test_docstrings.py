@@ -22,6 +22,8 @@ def _public() -> dict[str, str]:
     for path in sorted(PACKAGE.rglob("*.py")):
         if any(part.startswith("_") and part != "__init__.py" for part in path.relative_to(PACKAGE).parts):
             continue  # private modules and packages (the compiled kernels)
+        if path.relative_to(PACKAGE).parts[0] == "recipes" and path.name != "__init__.py":
+            continue  # the command's recipes: programs, run end to end by tests/recipes
         module = ".".join(path.relative_to(PACKAGE).with_suffix("").parts)
         for node in ast.parse(path.read_text()).body:
             if isinstance(node, ast.FunctionDef | ast.ClassDef) and not node.name.startswith("_"):

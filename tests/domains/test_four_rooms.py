@@ -45,10 +45,16 @@ def test_the_step_cost_variant_is_a_domain_of_its_own() -> None:
 
 
 def test_the_recipe_runs_on_the_step_cost_variant(tmp_path) -> None:
-    from torchrl_subgoal.experiments.learners import LearnerRecipeConfig, learner_plan, run_learner_chunk
+    from torchrl_subgoal.experiments.learners import (
+        LearnerRecipeConfig,
+        default_learner,
+        learner_plan,
+        run_learner_chunk,
+    )
     from torchrl_subgoal.experiments.store import Chunk
 
-    cfg = LearnerRecipeConfig(domain="four_rooms_step", methods="A2C,NRS", total_frames=512, results=str(tmp_path))
+    a2c = default_learner("a2c", domains.part("four_rooms_step", LearnerDomain), {"total_frames": 512})
+    cfg = LearnerRecipeConfig(domain="four_rooms_step", methods="A2C,NRS", learner=a2c, results=str(tmp_path))
     plan = learner_plan(cfg, "a2c")
     assert plan.config["domain"] == "four_rooms_step" and plan.config["learner"]["total_frames"] == 512
     for spec in plan.specs:

@@ -8,25 +8,49 @@ import json
 import pytest
 
 from torchrl_subgoal import domains, load_patterns
-from torchrl_subgoal.experiments.cli import ConfigError
+from torchrl_subgoal.experiments.cli import ConfigError, parse_config
 from torchrl_subgoal.experiments.learners import (
     LearnerRecipeConfig,
+    default_learner,
     learner_methods,
     learner_plan,
     learner_settings,
 )
-from torchrl_subgoal.training import DQNConfig, LearnerDomain
+from torchrl_subgoal.recipes.train import Config as TrainConfig
+from torchrl_subgoal.training import DQNConfig, LearnerDomain, PPOConfig
 
 
-def test_flags_left_at_zero_keep_the_domains_defaults() -> None:
+def recipe_config(algo: str = "a2c", domain: str = "four_rooms", **changes: object) -> LearnerRecipeConfig:
+    """A learner recipe's settings with the domain's defaults for ``algo`` and ``changes`` to them."""
+    learner = default_learner(algo, domains.part(domain, LearnerDomain), changes.pop("learner", None))  # type: ignore[arg-type]
+    return LearnerRecipeConfig(domain=domain, learner=learner, **changes)  # type: ignore[arg-type]
+
+
+def test_the_learners_flags_default_to_the_domains_settings() -> None:
+    """Every field of the learner's settings is a flag whose default is the domain's (the preset's)."""
     mountain_car = domains.part("mountain_car", LearnerDomain)
-    settings = learner_settings(LearnerRecipeConfig(), "dqn", mountain_car)
-    assert settings == DQNConfig.preset("mountain_car")  # value_lr 0.05 and the rest as the preset's
-    changed = learner_settings(
-        LearnerRecipeConfig(total_frames=3200, lr=1e-3, sees_subgoal="no", reshape_samples=True), "dqn", mountain_car
+    assert learner_settings(LearnerRecipeConfig(domain="mountain_car"), "dqn", mountain_car) == DQNConfig.preset(
+        "mountain_car"
     )
-    assert (changed.total_frames, changed.lr, changed.sees_subgoal) == (3200, 1e-3, False) and changed.reshape_samples
-    assert changed.gradient_steps == 8  # the preset's, untouched
+    args = ["--algo", "dqn", "--domain", "mountain_car", "--total-frames", "3200", "--lr", "1e-3"]
+    changed = parse_config(TrainConfig, [*args, "--sees-subgoal", "False", "--reshape-samples", "--hidden", "32", "32"])
+    settings = changed.learner
+    assert (settings.total_frames, settings.lr, settings.sees_subgoal, settings.hidden) == (3200, 1e-3, False, (32, 32))
+    assert settings.reshape_samples and settings.gradient_steps == 8  # the preset's, untouched
+    ppo = parse_config(TrainConfig, ["--algo", "ppo", "--domain", "pinball", "--clip-epsilon", "0.1"]).learner
+    assert isinstance(ppo, PPOConfig) and ppo.clip_epsilon == 0.1 and ppo.features == "fourier"  # pinball's
+
+
+def test_the_help_lists_the_learners_settings_and_choices_once(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        parse_config(TrainConfig, ["--algo", "dqn", "--domain", "mountain_car", "--help"], prog="torchrl-subgoal train")
+    out = capsys.readouterr().out
+    assert exit_.value.code == 0
+    assert "{a2c,ppo,dqn,ddpg}" in out and "{csv,tensorboard,wandb,none}" in out  # choices, not a metavar
+    assert "--gradient-steps" in out and "--clip-epsilon" not in out  # DQN's own settings
+    assert "(default: 0.004)" in " ".join(out.split())  # mountain_car's DQN learning rate (wrapped anywhere)
+    methods = out[out.index("--methods") : out.index("--learnings")]
+    assert methods.count("(default:") == 1 and "the unshaped learner,HRS,NRS" in methods
 
 
 def test_a_learner_without_defaults_for_the_domain_takes_its_own() -> None:
@@ -36,11 +60,14 @@ def test_a_learner_without_defaults_for_the_domain_takes_its_own() -> None:
 
 
 def test_a_setting_the_learner_refuses_is_a_config_error() -> None:
-    four_rooms = domains.part("four_rooms", LearnerDomain)
-    with pytest.raises(ConfigError, match=r"^minibatch_size \(64\) must divide frames_per_batch \(96\)$"):
-        learner_settings(LearnerRecipeConfig(frames_per_batch=96, num_envs=16), "ppo", four_rooms)
+    with pytest.raises(ConfigError, match=r"^--minibatch-size: minibatch_size \(64\) must divide frames_per_batch"):
+        parse_config(TrainConfig, ["--algo", "ppo", "--frames-per-batch", "96"])
     with pytest.raises(ConfigError, match=r"^--total-frames: 128 is less than one batch of 256 frames"):
-        learner_settings(LearnerRecipeConfig(total_frames=128), "ppo", four_rooms)
+        learner_settings(
+            recipe_config("ppo", learner={"total_frames": 128}), "ppo", domains.part("four_rooms", LearnerDomain)
+        )
+    with pytest.raises(ConfigError, match=r"^--reward-scale: must be > 0, got -1.0"):
+        parse_config(TrainConfig, ["--algo", "a2c", "--reward-scale", "-1"])
 
 
 def test_the_unshaped_method_is_named_after_the_learner() -> None:
@@ -48,7 +75,7 @@ def test_the_unshaped_method_is_named_after_the_learner() -> None:
 
 
 def test_the_plan_stores_the_learner_and_reports_frames() -> None:
-    plan = learner_plan(LearnerRecipeConfig(domain="mountain_car", total_frames=1600, results="r"), "dqn")
+    plan = learner_plan(recipe_config("dqn", "mountain_car", learner={"total_frames": 1600}, results="r"), "dqn")
     assert plan.domain == "dqn_mountain_car" and plan.episodes == 100 and plan.chunk_size == 1
     assert [spec.name for spec in plan.specs] == ["DQN", "HRS", "NRS"]  # in --methods order
     config = plan.config
@@ -76,7 +103,9 @@ def test_monotone_potential_reaches_the_shaped_learners_table(
 
     shaping_parts = learners.shaping_parts
     monkeypatch.setattr(learners, "shaping_parts", recording)
-    cfg = LearnerRecipeConfig(methods="A2C,HRS", total_frames=256, results=str(tmp_path), monotone_potential=monotone)
+    cfg = recipe_config(
+        methods="A2C,HRS", learner={"total_frames": 256}, results=str(tmp_path), monotone_potential=monotone
+    )
     plan = learner_plan(cfg, "a2c")
     # recorded either way: results made before the progress prior (no such entry) do not resume under it
     assert plan.config["monotone_potential"] == monotone and plan.config["progress_scale"] == 1.0
@@ -87,15 +116,16 @@ def test_monotone_potential_reaches_the_shaped_learners_table(
 
 
 def test_the_learner_sees_z_by_its_own_default_unless_told() -> None:
-    """DQN reads z whenever shaped (its default), A2C's and PPO's critics do, DDPG does not; --sees-subgoal
-    yes / no / critic overrides."""
+    """DQN reads z whenever shaped (its default), A2C's and PPO's critics do; --sees-subgoal True, False, None
+    or critic overrides."""
     four_rooms = domains.part("four_rooms", LearnerDomain)
     algos = ("dqn", "ppo", "a2c")
     default = {algo: learner_settings(LearnerRecipeConfig(), algo, four_rooms).sees_subgoal for algo in algos}
     assert default == {"dqn": None, "ppo": "critic", "a2c": "critic"}
-    assert learner_settings(LearnerRecipeConfig(sees_subgoal="critic"), "a2c", four_rooms).sees_subgoal == "critic"
-    assert learner_settings(LearnerRecipeConfig(sees_subgoal="no"), "dqn", four_rooms).sees_subgoal is False
-    assert learner_settings(LearnerRecipeConfig(sees_subgoal="yes"), "ppo", four_rooms).sees_subgoal is True
+    assert parse_config(TrainConfig, ["--algo", "dqn", "--sees-subgoal", "False"]).learner.sees_subgoal is False
+    assert parse_config(TrainConfig, ["--algo", "ppo", "--sees-subgoal", "True"]).learner.sees_subgoal is True
+    assert parse_config(TrainConfig, ["--algo", "ppo", "--sees-subgoal", "None"]).learner.sees_subgoal is None
+    assert parse_config(TrainConfig, ["--algo", "a2c", "--sees-subgoal", "critic"]).learner.sees_subgoal == "critic"
 
 
 def _tables_file(tmp_path, tables) -> str:
@@ -110,8 +140,11 @@ def test_a_frozen_potential_shapes_from_the_first_step_and_never_learns(tmp_path
 
     first = next(iter(load_patterns(domains.part("four_rooms", LearnerDomain).participants, domain="four_rooms")))
     frozen = {first: [0.2, 0.5, 0.9]}
-    cfg = LearnerRecipeConfig(
-        methods="HRS", total_frames=512, results=str(tmp_path / "run"), frozen_potential=_tables_file(tmp_path, frozen)
+    cfg = recipe_config(
+        methods="HRS",
+        learner={"total_frames": 512},
+        results=str(tmp_path / "run"),
+        frozen_potential=_tables_file(tmp_path, frozen),
     )
     with pytest.raises(ConfigError, match=r"no table for pattern 'participant_2' \(HRS\)"):
         learner_plan(cfg, "a2c")  # every participant's pattern needs one

@@ -34,15 +34,20 @@ def four_rooms_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return make_results(tmp_path_factory.mktemp("four_rooms"), "four_rooms")
 
 
-def test_report_writes_markdown_summary_and_pngs(four_rooms_dir: Path, tmp_path: Path) -> None:
+def test_report_writes_markdown_summary_and_figures_in_three_formats(four_rooms_dir: Path, tmp_path: Path) -> None:
     output = write_report(four_rooms_dir, tmp_path, n_boot=200)
     names = sorted(p.name for p in tmp_path.iterdir())
-    assert names == ["learning_curves.png", "patterns.png", "report.md", "summary.json"]
-    for png in ("learning_curves.png", "patterns.png"):
-        assert (tmp_path / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    figures = ["learning_curves", "patterns", "performance_profile"]
+    assert names == sorted(["report.md", "summary.json", *(f + s for f in figures for s in (".png", ".pdf", ".svg"))])
+    assert sorted(p.name for p in output.files) == names
+    for figure in figures:
+        assert (tmp_path / f"{figure}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert (tmp_path / f"{figure}.pdf").read_bytes()[:5] == b"%PDF-"
+        assert b"<svg" in (tmp_path / f"{figure}.svg").read_bytes()[:2000]
     markdown = (tmp_path / "report.md").read_text()
     assert markdown == output.markdown
     assert "![learning curves](learning_curves.png)" in markdown
+    assert "![performance profile](performance_profile.png)" in markdown
     assert "![subgoal patterns](patterns.png)" in markdown
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary == output.summary
@@ -81,8 +86,9 @@ def test_paper_numbers_sit_beside_ours(four_rooms_dir: Path, tmp_path: Path) -> 
     rows = [line for line in markdown.splitlines() if line.startswith("| 500 |")]
     assert any("| HRS |" in r and r.endswith("| 2.68 (1.86) |") for r in rows)
     assert any("| NRS |" in r and r.endswith("| 5.78 (6.39) |") for r in rows)
-    assert any("| SARSA-RS |" in r and r.endswith("| — |") for r in rows)  # no paper column
+    assert any("| SARSA-RS |" in r and r.endswith("| — |") for r in rows)  # no paper number for it
     assert "Okudo" in markdown
+    assert "| method | mean (s.d.) | IQM [CI] |\n" in markdown  # the paper tabulates no asymptote: no column
 
 
 def test_domains_without_a_map_or_paper_get_notes(tmp_path: Path) -> None:
@@ -90,7 +96,7 @@ def test_domains_without_a_map_or_paper_get_notes(tmp_path: Path) -> None:
     markdown = write_report(path, n_boot=100).markdown
     assert not (path / "patterns.png").exists()
     assert "no map is registered for domain 'toy'" in markdown
-    assert "paper mean" in markdown and "2.68" not in markdown
+    assert "paper" not in markdown.lower().split("## notes")[0] and "2.68" not in markdown  # no empty paper column
     assert "moving average of 3 episodes" in markdown
 
 
@@ -232,3 +238,27 @@ def test_learners_that_never_reach_a_threshold_count_as_n_episodes(tmp_path: Pat
     assert stuck["mean"] == 40 and stuck["sd"] == 0
     assert output.summary["time_to_threshold"][1]["methods"]["HRS"]["not_reached"] == 0
     assert "| 100 | STUCK | 40 (0) | 4/4 |" in output.markdown
+
+
+def test_the_reports_robust_statistics_are_rliables(four_rooms_dir: Path) -> None:
+    """IQM, its stratified-bootstrap interval (strata: subgoal patterns, the seed the report derives) and the
+    probability of improvement equal what rliable computes on the same learners."""
+    import numpy as np
+    from rliable import library, metrics
+
+    summary = write_report(four_rooms_dir, four_rooms_dir / "rliable", n_boot=300, seed=4).summary
+    results = load_results(four_rooms_dir)
+    finals = {n: r.table.metric("steps")[:, 35:40].mean(axis=1) for n, r in results.methods.items()}
+    for i, (name, res) in enumerate(results.methods.items()):
+        # HRS: 4 learners of each of 2 patterns, one column per pattern; SARSA: 8 of one pseudo-pattern
+        matrix = np.stack([finals[name][res.patterns == p] for p in np.unique(res.patterns)], axis=1)
+        cell = summary["asymptotic"]["methods"][name]
+        assert cell["iqm"] == pytest.approx(float(metrics.aggregate_iqm(matrix)))
+        np.random.seed(int(np.random.SeedSequence([4, i]).generate_state(1)[0]))
+        _, interval = library.get_interval_estimates(
+            {name: matrix}, lambda m: np.array([metrics.aggregate_iqm(m)]), reps=300
+        )
+        assert cell["iqm_ci"] == pytest.approx(interval[name][:, 0].tolist())
+    for pair in summary["asymptotic"]["probability_of_improvement"]:  # fewer steps is better: negated
+        x, y = -finals[pair["first"]][:, None], -finals[pair["second"]][:, None]
+        assert pair["p"] == pytest.approx(float(metrics.probability_of_improvement(x, y)))

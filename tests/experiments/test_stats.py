@@ -85,42 +85,57 @@ def test_pairwise_tests_apply_holm_like_statsmodels() -> None:
 
 
 def test_iqm_on_known_data_and_against_scipy() -> None:
-    assert float(stats.iqm([1, 2, 3, 4, 5, 6, 7, 100])) == 4.5  # mean of 3, 4, 5, 6
-    assert float(stats.iqm(np.arange(1, 10))) == 5.0  # drops 2 each end: mean of 3..7
-    x = np.random.default_rng(2).normal(size=(7, 33))
-    np.testing.assert_allclose(stats.iqm(x, axis=-1), sps.trim_mean(x, 0.25, axis=-1))
-    np.testing.assert_allclose(stats.iqm(x, axis=0), sps.trim_mean(x, 0.25, axis=0))
+    assert stats.iqm([1, 2, 3, 4, 5, 6, 7, 100]) == 4.5  # mean of 3, 4, 5, 6
+    assert stats.iqm(np.arange(1, 10)) == 5.0  # drops 2 each end: mean of 3..7
+    x = np.random.default_rng(2).normal(size=33)
+    assert stats.iqm(x) == pytest.approx(sps.trim_mean(x, 0.25))
+
+
+def test_runs_by_task_arranges_learners_by_pattern() -> None:
+    scores, strata = np.arange(6.0), np.array(["b", "a", "b", "a", "b", "a"])
+    np.testing.assert_array_equal(stats.runs_by_task(scores, strata), [[1, 0], [3, 2], [5, 4]])
+    assert stats.runs_by_task(scores, None).shape == (6, 1)
+    assert stats.runs_by_task(scores, np.arange(6)).shape == (6, 1)  # one learner per pattern: one stratum
+    assert stats.runs_by_task(scores, np.array(list("aabbbb"))).shape == (6, 1)  # uneven: one stratum
+    with pytest.raises(ValueError, match="5 strata labels for 6 runs"):
+        stats.runs_by_task(scores, strata[:5])
 
 
 def test_bootstrap_ci_contains_estimate_and_is_reproducible() -> None:
     scores = np.random.default_rng(3).normal(10, 2, size=200)
     strata = np.repeat(["p1", "p2", "p3", "p4"], 50)
+    state = np.random.get_state()
     low, high = stats.stratified_bootstrap_ci(scores, strata, seed=5)
-    assert low < float(stats.iqm(scores)) < high
+    assert np.random.get_state()[1].tolist() == state[1].tolist()  # the global state is given back
+    assert low < stats.iqm(scores) < high
     assert (low, high) == stats.stratified_bootstrap_ci(scores, strata, seed=5)
     assert (low, high) != stats.stratified_bootstrap_ci(scores, strata, seed=6)
     wider = stats.stratified_bootstrap_ci(scores, strata, seed=5, confidence=0.99)
     assert wider[0] < low and wider[1] > high
 
 
-def test_bootstrap_keeps_stratum_sizes() -> None:
-    # each stratum is constant: a stratified resample always holds three 0s and one 10
-    scores, strata = np.array([0.0, 0.0, 0.0, 10.0]), np.array(["a", "a", "a", "b"])
-    assert stats.stratified_bootstrap_ci(scores, strata, statistic=np.mean) == (2.5, 2.5)
-    low, high = stats.stratified_bootstrap_ci(scores, None, statistic=np.mean)
-    assert low < 2.5 < high  # unstratified, the mix varies
+def test_bootstrap_resamples_within_each_pattern() -> None:
+    # each pattern constant: a stratified resample always holds two 0s and two 10s
+    matrix = stats.runs_by_task(np.array([0.0, 10.0, 0.0, 10.0]), np.array(["a", "b", "a", "b"]))
+    np.testing.assert_array_equal(stats.bootstrap_ci(matrix, lambda m: np.array([m.mean()])), [[5.0], [5.0]])
+    low, high = stats.bootstrap_ci(stats.runs_by_task(np.array([0.0, 10.0, 0.0, 10.0])), lambda m: np.array([m.mean()]))
+    assert low[0] < 5.0 < high[0]  # unstratified, the mix varies
 
 
-def test_bootstrap_pools_strata_of_one_run() -> None:
-    # one learner per pattern: resampled within its own stratum the CI would have zero width
-    scores, strata = np.arange(5.0), np.arange(5)
-    low, high = stats.stratified_bootstrap_ci(scores, strata, statistic=np.mean, seed=3)
-    assert low < 2.0 < high
-    assert (low, high) == stats.stratified_bootstrap_ci(scores, None, statistic=np.mean, seed=3)
-    # a stratum of several runs is still resampled within itself, beside the pooled singletons
-    scores, strata = np.array([0.0, 0.0, 0.0, 10.0, 20.0]), np.array(["a", "a", "a", "b", "c"])
-    low, high = stats.stratified_bootstrap_ci(scores, strata, statistic=np.mean, seed=3)
-    assert low >= 4.0 and high <= 8.0 and low < high  # three 0s always; b/c mixed
+def test_curve_band_brackets_the_mean() -> None:
+    curves = np.random.default_rng(5).normal(size=(12, 300)).cumsum(axis=1)
+    columns, mean, band = stats.curve_band(curves, np.repeat(["a", "b", "c"], 4), points=50, n_boot=200)
+    assert columns[0] == 0 and columns[-1] == 299 and len(columns) == 50
+    np.testing.assert_allclose(mean, curves[:, columns].mean(axis=0))
+    assert np.all(band[0] <= mean + 1e-12) and np.all(mean <= band[1] + 1e-12) and np.any(band[0] < band[1])
+
+
+def test_performance_profile_counts_learners_beyond_each_tau() -> None:
+    profile, band = stats.performance_profile({"A": [1.0, 2.0, 3.0, 4.0]}, {}, [0.0, 2.5, 5.0], n_boot=100)["A"]
+    np.testing.assert_array_equal(profile, [1.0, 0.5, 0.0])
+    low = stats.performance_profile({"A": [1.0, 2.0, 3.0, 4.0]}, {}, [0.0, 2.5, 5.0], lower_is_better=True)["A"][0]
+    np.testing.assert_array_equal(low, [0.0, 0.5, 1.0])
+    assert band.shape == (2, 3) and band[0, 1] <= 0.5 <= band[1, 1]
 
 
 def test_probability_of_improvement() -> None:
@@ -133,10 +148,3 @@ def test_probability_of_improvement() -> None:
     pairs = (x[:, None] > y[None, :]) + 0.5 * (x[:, None] == y[None, :])
     assert stats.probability_of_improvement(x, y) == pytest.approx(pairs.mean())
     assert stats.probability_of_improvement(x, y, lower_is_better=True) == pytest.approx(1 - pairs.mean())
-
-
-def test_mean_and_sem() -> None:
-    curves = np.array([[1.0, 2.0], [3.0, 6.0]])
-    mean, sem = stats.mean_and_sem(curves)
-    np.testing.assert_allclose(mean, [2.0, 4.0])
-    np.testing.assert_allclose(sem, [1.0, 2.0])  # s.d. (ddof 1) / sqrt(2)

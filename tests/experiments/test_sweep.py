@@ -321,3 +321,34 @@ def test_an_experiment_without_finished_chunks_is_replaced_without_overwrite(
     monkeypatch.delenv("TOY_FAIL")
     results = make_sweep(tmp_path, seed=8).run(workers=0, progress=False)  # a different experiment
     assert results.manifest["seed"] == 8
+
+
+def test_a_warm_up_runs_once_before_pending_chunks_and_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """What compiles the kernels runs before the first chunk, between two lines on stderr; not at all when
+    nothing is left to run; and a warm-up that fails leaves the chunks to run (and fail) on their own."""
+    calls: list[int] = []
+    make_sweep(tmp_path / "a", warm_up=lambda: calls.append(1)).run(workers=0, progress=False)
+    err = capsys.readouterr().err
+    assert calls == [1] and "compiling the engine's numba kernels" in err and "engine ready in" in err
+    make_sweep(tmp_path / "a", warm_up=lambda: calls.append(1)).run(workers=0, progress=False)
+    assert calls == [1] and "compiling" not in capsys.readouterr().err  # all chunks done: no warm-up
+
+    def broken() -> None:
+        raise RuntimeError("no compiler here")
+
+    make_sweep(tmp_path / "b", warm_up=broken).run(workers=0, progress=False)
+    assert "engine ready" not in capsys.readouterr().err and load_frame(tmp_path / "b").shape[0] > 0
+
+
+def test_runtime_settings_reach_the_chunks_but_not_the_experiment(tmp_path: Path) -> None:
+    """``runtime`` (a recipe's logger) is handed to ``run_chunk`` with the config and recorded, but a resumed
+    sweep may change it; ``provenance`` is recorded when the sweep starts."""
+    import json
+
+    sweep = make_sweep(tmp_path, runtime={"logger": "csv"}, provenance={"command": "x --flag"})
+    sweep.run(workers=0, progress=False)
+    manifest = json.loads((tmp_path / "config.json").read_text())
+    assert manifest["runtime"] == {"logger": "csv"} and manifest["provenance"] == {"command": "x --flag"}
+    make_sweep(tmp_path, runtime={"logger": "tensorboard"}).run(workers=0, progress=False)  # no mismatch

@@ -574,7 +574,11 @@ CANNOT_FIT = [
         ["--algo", "a2c", "--seed-batch", str(10**9), "--learnings", str(10**7)],
         f"--seed-batch {10**9}: 2 chunks at once (--workers 2) of 100,000,000 learners hold at least",
     ),
-    ("qlearning", ["--task", "taxi", "--reward", "goal"], "--reward goal: applies to --task four_rooms only"),
+    (
+        "qlearning",
+        ["--domain", "taxi", "--reward", "goal"],
+        "--reward goal: applies to --domain four_rooms and sparse_rooms only",
+    ),
 ]
 
 

@@ -138,7 +138,7 @@ def test_collector_workers_shape_with_the_trained_potential_and_act_with_the_tra
     close_collector(collector)
 
 
-TINY = ["--preset", "tiny", "--learnings", "1", "--envs", "1", "--collector-workers", "0", "--workers", "0"]
+TINY = ["--preset", "tiny", "--learnings", "1", "--num-envs", "1", "--collector-workers", "0", "--workers", "0"]
 
 
 def test_recipe_all_methods_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -159,7 +159,7 @@ def test_recipe_all_methods_and_report(tmp_path: Path, capsys: pytest.CaptureFix
     "processes",
     [
         [],
-        ["--envs", "2", "--collector-workers", "2"],  # MuJoCo, policy noise and shaping in 2 worker processes
+        ["--num-envs", "2", "--collector-workers", "2"],  # MuJoCo, policy noise and shaping in 2 worker processes
     ],
     ids=["in-process", "collector-workers"],
 )
@@ -198,13 +198,15 @@ def test_kill_and_resume_equals_an_uninterrupted_learning(
 
 def test_bad_settings_name_the_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pick_and_place = recipe("pick_and_place")
-    assert pick_and_place.main(["--envs", "4", "--results", str(tmp_path)]) == 2
-    assert "--envs: a cycle's 300 steps must split into whole 50-step episodes over 4 envs" in capsys.readouterr().err
+    assert pick_and_place.main(["--num-envs", "4", "--results", str(tmp_path)]) == 2
+    assert (
+        "--num-envs: a cycle's 300 steps must split into whole 50-step episodes over 4 envs" in capsys.readouterr().err
+    )
     assert pick_and_place.main(["--shaping", "{bad", "--results", str(tmp_path)]) == 2
     assert "--shaping: not valid JSON" in capsys.readouterr().err
-    assert pick_and_place.main(["--envs", "6", "--collector-workers", "4", "--results", str(tmp_path)]) == 2
+    assert pick_and_place.main(["--num-envs", "6", "--collector-workers", "4", "--results", str(tmp_path)]) == 2
     assert (
-        "--envs: 6 envs do not split evenly over --collector-workers 4 x --env-processes 0" in capsys.readouterr().err
+        "--num-envs: 6 envs do not split evenly over --collector-workers 4 x --env-workers 0" in capsys.readouterr().err
     )
 
 

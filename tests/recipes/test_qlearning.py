@@ -14,7 +14,7 @@ from .test_recipes import recipe
 def test_qlearning_recipe_four_rooms_every_method(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     qlearning = recipe("qlearning")
     args = [
-        "--task",
+        "--domain",
         "four_rooms",
         "--reward",
         "goal",
@@ -44,7 +44,7 @@ def test_qlearning_recipe_four_rooms_every_method(tmp_path: Path, capsys: pytest
 def test_qlearning_recipe_taxi_runs(tmp_path: Path) -> None:
     qlearning = recipe("qlearning")
     args = [
-        "--task",
+        "--domain",
         "taxi",
         "--methods",
         "Q,HRS",
@@ -76,5 +76,5 @@ def test_qlearning_bad_settings_name_the_flag(
 
 def test_qlearning_unknown_task_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exit_info:
-        recipe("qlearning").main(["--task", "cartpole"])
+        recipe("qlearning").main(["--domain", "cartpole"])
     assert exit_info.value.code == 2 and "invalid choice: 'cartpole'" in capsys.readouterr().err

@@ -15,7 +15,18 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 
 
+#: the recipes the package ships (``torchrl-subgoal``); their scripts in recipes/ run the same ``main``
+PACKAGED = ("four_rooms", "pinball", "pick_and_place", "train")
+
+
 def recipe(name: str) -> ModuleType:
+    """The recipe ``name``: its module in the package, or the repository's script."""
+    if name in PACKAGED:
+        return importlib.import_module(f"torchrl_subgoal.recipes.{name}")
+    return script(name)
+
+
+def script(name: str) -> ModuleType:
     spec = importlib.util.spec_from_file_location(f"recipe_{name}", ROOT / "recipes" / f"{name}.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
@@ -240,3 +251,8 @@ def test_four_rooms_greedy_recipe(capsys: pytest.CaptureFixture[str]) -> None:
     assert len(rows) == 1 + len(greedy.CONVENTIONS) and "10 HRS learners" in rows[0]
     assert greedy.main(["--episodes", "0"]) == 2
     assert capsys.readouterr().err == "error: --episodes: must be >= 1, got 0\n"
+
+
+@pytest.mark.parametrize("name", PACKAGED)
+def test_the_scripts_run_the_packaged_recipes(name: str) -> None:
+    assert script(name).main is recipe(name).main

@@ -1,5 +1,5 @@
-"""recipes/train.py end to end on tiny budgets (each learner on a domain it fits), resume, and the checks made
-before the first chunk: one line on stderr naming the flag, nothing written."""
+"""``torchrl-subgoal train`` end to end on tiny budgets (each learner on a domain it fits), resume, ``--config``,
+the loggers, and the checks made before the first chunk: one line on stderr naming the flag, nothing written."""
 
 from __future__ import annotations
 
@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from .test_recipes import recipe
+from torchrl_subgoal.recipes import train
 
 
 def run(tmp_path: Path, *args: str) -> int:
-    return int(recipe("train").main([*args, "--workers", "0", "--results", str(tmp_path / "res")]))
+    return int(train.main([*args, "--workers", "0", "--results", str(tmp_path / "res")]))
 
 
 def test_dqn_on_mountain_car_reports_frames_and_resumes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -46,7 +46,7 @@ def test_on_policy_learners_on_four_rooms(tmp_path: Path, algo: str) -> None:
         "--total-frames",
         "512",
         "--sees-subgoal",
-        "yes",
+        "True",
     ]
     assert run(tmp_path, *args) == 0
     summary = json.loads((tmp_path / "res" / "summary.json").read_text())
@@ -115,12 +115,13 @@ def test_continuous_learners_on_point_maze(tmp_path: Path, algo: str, batch: str
             ["--algo", "a2c", "--domain", "point_maze_medium"],
             "--algo: a2c needs discrete actions; point_maze_medium's are continuous: choose ppo or ddpg",
         ),
+        (["--algo", "ppo", "--reshape-samples"], "--reshape-samples: a setting of dqn and ddpg, not of ppo"),
+        (["--algo", "dqn", "--clip-epsilon", "0.1"], "--clip-epsilon: a setting of ppo, not of dqn"),
         (
-            ["--algo", "ppo", "--reshape-samples"],
-            "--reshape-samples: ppo learns on-policy and keeps no replay samples; only dqn and ddpg re-shape them",
+            ["--domain", "pick_and_place"],
+            "--domain: domain 'pick_and_place' registered no LearnerDomain; the domains that did: four_rooms, ",
         ),
-        (["--domain", "pick_and_place"], "--domain: domain 'pick_and_place' registered no LearnerDomain; these did: "),
-        (["--domain", "chess"], "--domain: unknown domain 'chess'; these did: "),
+        (["--domain", "chess"], "--domain: unknown domain 'chess'; choose from four_rooms, four_rooms_step, "),
         (
             ["--algo", "dqn", "--domain", "mountain_car", "--methods", "DQN,SARSA-RS"],
             "--methods: SARSA-RS needs an aggregation g(s), which mountain_car does not register",
@@ -128,7 +129,10 @@ def test_continuous_learners_on_point_maze(tmp_path: Path, algo: str, batch: str
         (["--algo", "dqn", "--methods", "PPO"], "--methods: unknown method(s) ['PPO']"),
         (["--algo", "ppo", "--num-envs", "3"], "frames_per_batch (256) must be a multiple of num_envs"),
         (["--algo", "ppo", "--total-frames", "100"], "--total-frames: 100 is less than one batch of 256 frames"),
-        (["--algo", "dqn", "--value-lr", "0"], "--value-lr: must be positive, got 0.0"),
+        (["--algo", "dqn", "--value-lr", "0"], "--value-lr: must lie in (0, 1], got 0.0"),
+        (["--algo", "ppo", "--clip-epsilon", "nan"], "--clip-epsilon: must be a finite number, got nan"),
+        (["--algo", "ppo", "--epochs", "many"], "argument --epochs: invalid int value: 'many'"),
+        (["--logger", "mlflow"], "argument --logger: invalid choice: 'mlflow'"),
         (["--algo", "dqn", "--learnings", "0"], "--learnings: must be >= 1, got 0"),
         (["--algo", "sac"], "argument --algo: invalid choice: 'sac'"),
         (
@@ -162,3 +166,46 @@ def test_a_point_maze_file_whose_pattern_names_no_route(tmp_path: Path, capsys: 
     assert run(tmp_path, "--algo", "ppo", "--domain", "point_maze_umaze", "--subgoals", str(subgoals)) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: --subgoals: ") and "pattern 'alice' names no route of the umaze maze" in err
+
+
+MOUNTAIN_CAR = ["--algo", "dqn", "--domain", "mountain_car", "--total-frames", "320"]
+
+
+def test_config_json_records_the_run_and_config_reruns_it(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """The command, its settings (a learner's own flag among them) and the code's version are recorded;
+    ``--config`` runs the same experiment again elsewhere, and TorchRL's INFO lines stay off the terminal."""
+    from torchrl_subgoal.experiments import load_frame
+
+    args = [*MOUNTAIN_CAR, "--methods", "DQN,HRS", "--lr", "0.002", "--workers", "0"]
+    assert train.main([*args, "--results", str(tmp_path / "first")], prog="torchrl-subgoal train") == 0
+    assert "[torchrl][INFO]" not in capfd.readouterr().err
+    manifest = json.loads((tmp_path / "first" / "config.json").read_text())
+    provenance = manifest["provenance"]
+    assert provenance["command"].startswith("torchrl-subgoal train --algo dqn --domain mountain_car")
+    assert provenance["settings"]["learner"]["lr"] == 0.002 and provenance["version"] == "0.1.0"
+    assert manifest["config"]["learner"]["lr"] == 0.002 and manifest["runtime"] == {"logger": "csv"}
+    again = ["--config", str(tmp_path / "first" / "config.json"), "--results", str(tmp_path / "again")]
+    assert train.main(again, prog="torchrl-subgoal train") == 0
+    rerun = json.loads((tmp_path / "again" / "config.json").read_text())["config"]
+    assert {**rerun, "log_dir": ""} == {**manifest["config"], "log_dir": ""}
+    assert load_frame(tmp_path / "again").equals(load_frame(tmp_path / "first"))
+    capfd.readouterr()
+    assert train.main(["--config", str(tmp_path / "missing.json")]) == 2
+    assert capfd.readouterr().err.startswith(f"error: --config: {tmp_path / 'missing.json'}: cannot read it")
+
+
+@pytest.mark.parametrize("logger", ["tensorboard", "wandb"])
+def test_loggers_on_the_command_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, logger: str) -> None:
+    """``--logger tensorboard`` writes TensorBoard event files, ``--logger wandb`` W&B runs (offline here), one per
+    learner; a resumed sweep may log with another logger (it does not change the results)."""
+    monkeypatch.setenv("WANDB_MODE", "offline")
+    monkeypatch.setenv("WANDB_SILENT", "true")
+    monkeypatch.setenv("WANDB_DIR", str(tmp_path / "wandb"))
+    assert run(tmp_path, *MOUNTAIN_CAR, "--methods", "DQN,NRS", "--logger", logger) == 0
+    logs = tmp_path / "res" / "logs"
+    if logger == "tensorboard":
+        assert len(list(logs.glob("*/events.out.tfevents.*"))) == 2
+    else:
+        runs = list(logs.glob("wandb/offline-run-*/run-*.wandb"))
+        assert len(runs) == 2 and all(r.stat().st_size > 0 for r in runs)
+    assert run(tmp_path, *MOUNTAIN_CAR, "--methods", "DQN,NRS", "--logger", "none") == 0  # resumes

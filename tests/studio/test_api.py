@@ -91,7 +91,7 @@ def test_save_open_round_trip_with_names_partial_order_and_several_patterns(clie
     assert saved.status_code == 200, saved.json
     path = Path(saved.json["path"])
     assert path.name == "mine.yaml" and path.parent == app.extensions["studio"].folder.resolve()
-    assert "recipes/four_rooms.py --subgoals" in saved.json["recipe"]
+    assert "torchrl-subgoal reproduce four-rooms --subgoals" in saved.json["recipe"]
     patterns = load_patterns(path, domain="four_rooms")  # what the recipes read
     assert patterns["chain"].predicates == (Cell(3, 6), Cell(7, 9)) and patterns["chain"].is_chain
     assert patterns["dag"].order == ((0, 2), (1, 2)) and patterns["dag"].names == ("west", "east", "door")

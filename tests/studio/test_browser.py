@@ -49,7 +49,9 @@ def test_place_two_subgoals_save_reload_and_train_with_the_recipe(
     click_cell(page, 3, 6)
     click_cell(page, 7, 9)
     expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
-    save_and_reload(page, "hallways", f"recipes/four_rooms.py --subgoals {folder.resolve()}/hallways.yaml")
+    save_and_reload(
+        page, "hallways", f"torchrl-subgoal reproduce four-rooms --subgoals {folder.resolve()}/hallways.yaml"
+    )
     expect(page.locator("#subgoals li")).to_have_count(2, timeout=TIMEOUT_MS)
     assert subgoal_rows(page) == ["(3, 6)", "(7, 9)"]
     assert page.locator("#map-view g.subgoal").count() == 2
@@ -234,7 +236,7 @@ def test_pick_and_place_form_two_boxes_save_reload(browser: Any, studio: Studio)
     page.fill('[aria-label="margin of subgoal 1"]', "0.01")
     page.locator('[aria-label="margin of subgoal 1"]').press("Tab")
     expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
-    save_and_reload(page, "grasp", f"recipes/pick_and_place.py --subgoals {folder.resolve()}/grasp.yaml")
+    save_and_reload(page, "grasp", f"torchrl-subgoal reproduce pick-and-place --subgoals {folder.resolve()}/grasp.yaml")
     expect(page.locator("#box-form .box-card")).to_have_count(2, timeout=TIMEOUT_MS)
     assert page.input_value("#domain") == "pick_and_place"
     assert page.input_value("#pattern-name") == "grasp"
@@ -273,7 +275,9 @@ def test_point_maze_circles_in_maze_coordinates_y_up(browser: Any, studio: Studi
     expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
     assert page.locator("#map-view g.subgoal.invalid").count() == 0
     save_as(page, "corners")
-    expect(page.locator("#recipe")).to_contain_text("recipes/train.py --algo ppo --domain point_maze_umaze --subgoals")
+    expect(page.locator("#recipe")).to_contain_text(
+        "torchrl-subgoal train --algo ppo --domain point_maze_umaze --subgoals"
+    )
     series = load_patterns(folder / "corners.yaml", domain="point_maze_umaze")["bottom_to_top"]
     circles = [p for p in series.predicates if isinstance(p, Circle)]
     assert [p.radius for p in circles] == [0.65, 0.65]
@@ -295,6 +299,6 @@ def test_mountain_car_form_after_pick_and_place(browser: Any, studio: Studio) ->
     page.locator('[aria-label="position[0] of subgoal 1"]').press("Tab")
     expect(page.locator("#message")).to_have_class("ok", timeout=TIMEOUT_MS)
     save_as(page, "car")
-    expect(page.locator("#recipe")).to_contain_text("recipes/train.py --algo dqn --domain mountain_car --subgoals")
+    expect(page.locator("#recipe")).to_contain_text("torchrl-subgoal train --algo dqn --domain mountain_car --subgoals")
     series = load_patterns(folder / "car.yaml", domain="mountain_car")["pattern_1"]
     assert series.predicates == (Box((-1.0,), (0.05,), (0,)),)

@@ -108,4 +108,4 @@ def test_console_script_dispatches(capsys: pytest.CaptureFixture[str]) -> None:
         console(["studio", "--help"])
     assert exit_.value.code == 0 and "--pinball-map" in capsys.readouterr().out
     installed = subprocess.run([str(BIN / "torchrl-subgoal"), "--help"], capture_output=True, text=True, timeout=300)
-    assert installed.returncode == 0 and "studio   draw subgoal series" in installed.stdout
+    assert installed.returncode == 0 and "studio     draw subgoal series" in installed.stdout

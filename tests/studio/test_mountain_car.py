@@ -36,7 +36,7 @@ def test_the_shipped_file_opens_and_saves_back(client: FlaskClient, tmp_path: Pa
     shutil.copy(mountain_car.SUBGOAL_FILE, folder / "car.yaml")  # names no domain: inferred
     opened = client.get("/api/files/car.yaml").json
     assert opened["domain"] == "mountain_car", opened
-    assert "python recipes/train.py --algo dqn --domain mountain_car --subgoals" in opened["recipe"]
+    assert "torchrl-subgoal train --algo dqn --domain mountain_car --subgoals" in opened["recipe"]
     assert [s["box"] for s in opened["patterns"][0]["subgoals"]] == [
         {"components": ["position"], "centre": [-1.025], "margin": 0.175},
         {"components": ["position", "velocity"], "centre": [0.15, 0.0525], "margin": [0.45, 0.0175]},

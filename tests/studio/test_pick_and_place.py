@@ -44,7 +44,7 @@ def test_save_writes_what_the_recipe_loads_and_opens_back(client: FlaskClient, t
     )
     response = client.put("/api/files/mine", json=request)
     assert response.status_code == 200, response.get_json()
-    assert response.get_json()["recipe"].startswith("python recipes/pick_and_place.py --subgoals ")
+    assert response.get_json()["recipe"].startswith("torchrl-subgoal reproduce pick-and-place --subgoals ")
     saved = tmp_path / "files" / "mine.yaml"
     patterns = fetch.human_patterns(str(saved))  # the recipe's loader
     assert list(patterns) == ["participants", "lift"]

@@ -28,7 +28,7 @@ def test_both_mazes_are_listed_without_try_it(client: FlaskClient) -> None:
     for maze in ("umaze", "medium"):
         listed = domains[f"point_maze_{maze}"]
         assert listed["title"] == f"PointMaze {maze.capitalize()}" and listed["maps"] == [] and listed["limits"] == {}
-        assert f"recipes/train.py --algo ppo --domain point_maze_{maze} --subgoals FILE" in listed["try_note"]
+        assert f"torchrl-subgoal train --algo ppo --domain point_maze_{maze} --subgoals FILE" in listed["try_note"]
         assert listed["pattern_names"] == [route.name for route in point_maze.ROUTES[maze]]
 
 
@@ -50,7 +50,7 @@ def test_the_shipped_file_opens_validates_and_saves_back(client: FlaskClient, tm
     shutil.copy(point_maze.SUBGOAL_FILES[maze], folder / "waypoints.yaml")  # names no domain: inferred
     opened = client.get("/api/files/waypoints.yaml").json
     assert opened["domain"] == f"point_maze_{maze}", opened
-    assert f"python recipes/train.py --algo ppo --domain point_maze_{maze} --subgoals" in opened["recipe"]
+    assert f"torchrl-subgoal train --algo ppo --domain point_maze_{maze} --subgoals" in opened["recipe"]
     request = {"domain": opened["domain"], "description": opened["description"], "patterns": opened["patterns"]}
     assert client.post("/api/validate", json=request).status_code == 200
     saved = client.put("/api/files/again", json=request)

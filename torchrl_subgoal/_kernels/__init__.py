@@ -18,4 +18,12 @@ potentials); the tests check the two agree.
 Arrays are numpy views of torch tensors (no copies); batch dimensions are
 flattened, per-learner scalars have a trailing singleton. Import the module you
 need (``from torchrl_subgoal._kernels import shaping``): this package imports none.
+
+numba is optional (the ``fast`` and ``experiments`` extras): without it, :data:`NUMBA` is false, the
+shaping transform's ``backend="auto"`` steps in torch and nothing here is imported.
 """
+
+from importlib.util import find_spec
+
+#: Whether numba is installed, so that the compiled kernels can be imported.
+NUMBA = find_spec("numba") is not None

@@ -182,13 +182,20 @@ def part(name: str, kind: type[T]) -> T:
         >>> part("pick_and_place", LearnerDomain)  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        ValueError: domain 'pick_and_place' registered no LearnerDomain; these did: four_rooms, ...
+        ValueError: domain 'pick_and_place' registered no LearnerDomain; the domains that did: four_rooms, ...
+        >>> part("cartpole", LearnerDomain)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: unknown domain 'cartpole'; the domains with a LearnerDomain: four_rooms, ...
     """
     domain = find(name)
     found = domain.part(kind) if domain is not None else None
     if found is None:
-        problem = f"unknown domain {name!r}" if domain is None else f"domain {name!r} registered no {kind.__name__}"
-        raise ValueError(f"{problem}; these did: {', '.join(having(kind))}")
+        if domain is None:
+            raise ValueError(f"unknown domain {name!r}; the domains with a {kind.__name__}: {', '.join(having(kind))}")
+        raise ValueError(
+            f"domain {name!r} registered no {kind.__name__}; the domains that did: {', '.join(having(kind))}"
+        )
     return found
 
 

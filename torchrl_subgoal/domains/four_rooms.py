@@ -179,7 +179,7 @@ PAPER = PaperResults(
 STUDIO = StudioDomain(
     _geometry,
     limits={"episodes": Limit(300, 1, 2000), "learners": Limit(20, 1, 200), "max_steps": Limit(1000, 50, 1000)},
-    recipe="recipes/four_rooms.py",
+    recipe="torchrl-subgoal reproduce four-rooms",
     to_page=_cell_of_state,
     learner=_sarsa,
     position=0,

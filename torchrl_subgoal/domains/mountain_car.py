@@ -98,13 +98,13 @@ FORM = BoxForm(
 
 STUDIO = StudioDomain(
     FORM.geometry,
-    recipe="recipes/train.py --algo dqn --domain mountain_car",
+    recipe="torchrl-subgoal train --algo dqn --domain mountain_car",
     to_page=FORM.to_page,
     from_page=FORM.from_page,
     try_note=(
         "Not offered for MountainCar: it is learned by deep learners only (DQN, PPO, A2C; 120,000 frames "
         "or more), not by the quick learners Try it runs. Save the file and run the command shown "
-        "under File: python recipes/train.py --algo dqn --domain mountain_car --subgoals FILE"
+        "under File: torchrl-subgoal train --algo dqn --domain mountain_car --subgoals FILE"
     ),
     position=5,
 )

@@ -57,7 +57,7 @@ PAPER = PaperResults(
 
 STUDIO = StudioDomain(
     FORM.geometry,
-    recipe="recipes/pick_and_place.py",
+    recipe="torchrl-subgoal reproduce pick-and-place",
     to_page=FORM.to_page,
     from_page=FORM.from_page,
     try_note=TRY_NOTE,

@@ -173,7 +173,7 @@ STUDIO = StudioDomain(
     maps={"simple": "simple", "hard": "hard"},
     map_check=_map_check,
     limits={"episodes": Limit(30, 1, 100), "learners": Limit(5, 1, 10), "max_steps": Limit(10_000, 100, 10_000)},
-    recipe="recipes/pinball.py",
+    recipe="torchrl-subgoal reproduce pinball",
     learner=_actor_critic,
     position=1,
 )

@@ -185,11 +185,11 @@ def _studio(maze: str) -> StudioDomain:
     name = f"point_maze_{maze}"
     return StudioDomain(
         functools.partial(_geometry, maze),
-        recipe=f"recipes/train.py --algo ppo --domain {name}",
+        recipe=f"torchrl-subgoal train --algo ppo --domain {name}",
         try_note=(
             "Not offered for PointMaze: it is learned by deep learners only (PPO, DDPG; 100,000 frames or more), "
             "not by the quick learners Try it runs. Save the file and run the command shown under "
-            f"File: python recipes/train.py --algo ppo --domain {name} --subgoals FILE"
+            f"File: torchrl-subgoal train --algo ppo --domain {name} --subgoals FILE"
         ),
         pattern_names=tuple(route.name for route in point_maze.ROUTES[maze]),
         position=3 if maze == "umaze" else 4,

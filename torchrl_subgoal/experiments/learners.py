@@ -1,10 +1,13 @@
 """What the learner recipes share: a sweep of one TorchRL learner (A2C, PPO, DQN or DDPG) on a registered
 domain, unshaped and with the paper's shaping methods, through the experiment engine.
 
-``recipes/train.py`` (any learner, any domain with a
+``torchrl-subgoal train`` (:mod:`torchrl_subgoal.recipes.train`: any learner, any domain with a
 :class:`~torchrl_subgoal.training.LearnerDomain`) and ``recipes/a2c.py`` (A2C on
-four-rooms and PinBall with the A2C flags) are :class:`LearnerRecipeConfig`
-subclasses whose ``plan`` is :func:`learner_plan`. Every setting is checked
+four-rooms and PinBall with the settings of the A2C figures) are :class:`LearnerRecipeConfig`
+subclasses whose ``plan`` is :func:`learner_plan`. Every field of the learner's settings
+(:class:`~torchrl_subgoal.training.PPOConfig`, ...) is a flag (``--clip-epsilon``,
+``--hidden 32 32``...) whose default is the domain's (``--help`` with ``--algo`` and
+``--domain`` shows them). Every setting is checked
 before the first chunk runs (the learner's settings, the learner against the
 domain's actions, the subgoal patterns against its observation), each failure
 one line naming the flag. One learner is one chunk (:func:`run_learner_chunk`):
@@ -22,8 +25,9 @@ import json
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from importlib.util import find_spec
 from pathlib import Path
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar, Literal, cast
 
 import numpy as np
 import torch
@@ -31,7 +35,7 @@ from torchrl.envs import EnvBase
 
 from torchrl_subgoal import TabularPotential, domains, load_patterns
 from torchrl_subgoal.experiments.budget import Budget
-from torchrl_subgoal.experiments.cli import ConfigError, check, setting
+from torchrl_subgoal.experiments.cli import ConfigError, check, flag_of, setting
 from torchrl_subgoal.experiments.recipe import (
     PatternSets,
     Plan,
@@ -44,6 +48,7 @@ from torchrl_subgoal.experiments.recipe import (
     pattern_config,
     pattern_sets,
     pattern_sources,
+    quiet_torchrl,
 )
 from torchrl_subgoal.experiments.results import Chunk, EpisodeTable
 from torchrl_subgoal.methods import Method, all_methods, shaping_parts
@@ -56,10 +61,13 @@ from torchrl_subgoal.training import (
 )
 
 __all__ = [
+    "LOGGERS",
     "LearnerRecipeConfig",
     "check_seed_batch",
+    "default_learner",
     "frozen_tables",
     "learner_budget",
+    "learner_domain",
     "learner_methods",
     "learner_plan",
     "learner_settings",
@@ -67,22 +75,61 @@ __all__ = [
 ]
 
 
-#: ``--sees-subgoal`` as the learner configs' ``sees_subgoal``
-SEES_SUBGOAL: dict[str, bool | str] = {"yes": True, "no": False, "critic": "critic"}
+#: What ``--logger`` takes: TorchRL's loggers (``none``: no log).
+LOGGERS = ("csv", "tensorboard", "wandb", "none")
+
+
+def learner_domain(name: str) -> LearnerDomain:
+    """The :class:`~torchrl_subgoal.training.LearnerDomain` of the domain ``name``.
+
+    Raises:
+        ConfigError: naming ``--domain`` and the domains to choose from.
+
+    Examples:
+        >>> learner_domain("four_rooms").subgoal_key
+        'cell'
+        >>> learner_domain("cartpole")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.experiments.cli.ConfigError: --domain: unknown domain 'cartpole'; choose from four_rooms, ...
+    """
+    if domains.find(name) is None:
+        raise ConfigError(
+            f"--domain: unknown domain {name!r}; choose from {', '.join(domains.having(LearnerDomain))} "
+            "(or register your own: docs/adding_a_domain.md)"
+        )
+    try:
+        return domains.part(name, LearnerDomain)
+    except ValueError as exc:
+        raise ConfigError(f"--domain: {exc}") from None
+
+
+def default_learner(algo: str, domain: LearnerDomain, changes: Mapping[str, Any] | None = None) -> Any:
+    """The settings of learner ``algo`` on ``domain``: the domain's defaults for it (the learner's own
+    where the domain has none), with ``changes``.
+
+    Examples:
+        >>> default_learner("ppo", learner_domain("four_rooms"), {"total_frames": 512}).total_frames
+        512
+    """
+    base = domain.defaults.get(algo) or LEARNERS[algo].config()
+    try:
+        return dataclasses.replace(base, **(changes or {}))
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 @dataclass
 class LearnerRecipeConfig(RecipeConfig):
-    """The settings of a learner recipe: the domain, the methods, the budget and the shaping options.
-
-    A numeric setting left at 0 takes the learner's default for the domain
-    (:attr:`~torchrl_subgoal.training.LearnerDomain.defaults`).
+    """The settings of a learner recipe: the domain, the methods, the shaping options, the logger, and the
+    learner's own settings (``learner``: on the command line one flag per field, ``--total-frames``,
+    ``--lr``, ``--clip-epsilon`` ..., whose defaults are the domain's for the learner).
 
     Examples:
-        >>> LearnerRecipeConfig(value_lr=0.0)
-        Traceback (most recent call last):
-        ...
-        torchrl_subgoal.experiments.cli.ConfigError: --value-lr: must be positive, got 0.0
+        >>> from torchrl_subgoal.experiments.cli import parse_config
+        >>> cfg = parse_config(LearnerRecipeConfig, ["--domain", "four_rooms_step", "--total-frames", "512"])
+        >>> type(cfg.learner).__name__, cfg.learner.total_frames, cfg.learner.num_envs
+        ('A2CConfig', 512, 16)
     """
 
     domain: str = setting(
@@ -92,34 +139,13 @@ class LearnerRecipeConfig(RecipeConfig):
     )
     methods: str = setting(
         "",
-        "comma-separated methods: the learner's name for the unshaped learner (A2C, PPO, "
-        "DQN, DDPG), HRS, NRS, RRS, SARSA-RS (default: unshaped, HRS, NRS)",
+        "comma-separated methods: the learner's name for the unshaped learner (A2C, PPO, DQN, DDPG), HRS, NRS, "
+        "RRS, SARSA-RS, SRS",
+        shown_default="the unshaped learner,HRS,NRS",
     )
     learnings: int = setting(1, "learnings per subgoal pattern (unshaped: as many per pattern of the file)")
-    subgoals: str = setting("", "subgoal file of the human patterns (default: the domain's)")
+    subgoals: str = setting("", "subgoal file of the human patterns", shown_default="the domain's")
     random_patterns: int = setting(10, "random subgoal patterns for RRS")
-    total_frames: int = setting(0, "frames per learner (0: the domain's default)")
-    num_envs: int = setting(0, "envs per learner (0: the domain's default)")
-    frames_per_batch: int = setting(0, "frames per collected batch (0: the domain's default)")
-    env_workers: int = setting(0, "ParallelEnv workers per learner (0: the batched env in the collector)")
-    collector_workers: int = setting(0, "0: Collector; k: MultiSyncCollector of k processes")
-    lr: float = setting(0.0, "the learner's learning rate (0: the domain's default)")
-    reward_scale: float = setting(0.0, "env reward x this, before shaping and learning (0: the domain's default)")
-    value_lr: float = setting(
-        0.05, "step size of the potential's online update (with --no-online-potential: its Adam learning rate)"
-    )
-    online_potential: bool = setting(
-        True, "train the potential in the transform at every step (else one Adam step per batch)"
-    )
-    sees_subgoal: str = setting(
-        "default",
-        "the shaped learners' networks also read the subgoal index z (one-hot): yes, no, critic (A2C, PPO: "
-        "the value network only), or default (the learner's: DQN yes, A2C and PPO critic, DDPG no)",
-        choices=["default", "yes", "no", "critic"],
-    )
-    reshape_samples: bool = setting(
-        False, "the shaped learners re-shape replay samples with the potential as it is now (DQN, DDPG)"
-    )
     zero_terminal_potential: bool = setting(True, "Φ = 0 at the goal (exact policy invariance)")
     start_potential: str = setting(
         "nonpositive",
@@ -145,25 +171,28 @@ class LearnerRecipeConfig(RecipeConfig):
         "networks, a replay buffer and a table per learner); 1: one learner at a time",
     )
     seed: int = setting(0, "sweep seed (random patterns, learner seeds)")
-    results: str = setting("", "results directory (default results/<algo>_<domain>; re-run to resume)")
+    results: str = setting("", "results directory (re-run to resume)", shown_default="results/<algo>_<domain>")
     backend: Literal["local", "ray"] = setting("local", "where learners run")
     workers: int = setting(2, "learners run at once (processes; 0: in this process)")
-
-    AT_LEAST_ONE: ClassVar[tuple[str, ...]] = ("learnings", "random_patterns", "seed_batch")
-    AT_LEAST_ZERO: ClassVar[tuple[str, ...]] = (
-        "total_frames",
-        "num_envs",
-        "frames_per_batch",
-        "env_workers",
-        "collector_workers",
-        "workers",
+    logger: str = setting(
+        "csv",
+        "each learner's log under RESULTS/logs: TorchRL's CSVLogger, TensorboardLogger (the tensorboard extra) "
+        "or WandbLogger (the wandb extra; WANDB_MODE=offline logs without an account), or none",
+        choices=LOGGERS,
     )
+    learner: Any = dataclasses.field(default=None, metadata={"nested": True})
+
+    #: the learner of a recipe of one (``recipes/a2c.py``); ``None``: the ``algo`` field's
+    ALGO: ClassVar[str | None] = "a2c"
+    #: what the learner's settings depend on: read from the command line before the rest
+    EARLY: ClassVar[tuple[str, ...]] = ("domain",)
+    #: this recipe's changes to the domain's defaults for the learner (shown as the defaults in ``--help``)
+    LEARNER_DEFAULTS: ClassVar[Mapping[str, Any]] = {}
+    AT_LEAST_ONE: ClassVar[tuple[str, ...]] = ("learnings", "random_patterns", "seed_batch")
+    AT_LEAST_ZERO: ClassVar[tuple[str, ...]] = ("workers",)
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        check(self.value_lr > 0, "value_lr", f"must be positive, got {self.value_lr}")
-        check(self.lr >= 0, "lr", f"must be >= 0, got {self.lr}")
-        check(self.reward_scale >= 0, "reward_scale", f"must be >= 0, got {self.reward_scale}")
         check(
             math.isfinite(self.progress_scale) and self.progress_scale >= 0,
             "progress_scale",
@@ -174,6 +203,31 @@ class LearnerRecipeConfig(RecipeConfig):
             "progress_scale",
             "SRS shapes with the progress prior: give it a scale > 0",
         )
+
+    @classmethod
+    def nested_settings(cls, early: Mapping[str, Any]) -> dict[str, tuple[str, Any]]:
+        """The learner's settings, as the defaults of its flags: the domain's, with :attr:`LEARNER_DEFAULTS`."""
+        algo = str(early.get("algo", cls.ALGO))
+        if algo not in LEARNERS:  # the --algo flag refuses it, naming the choices
+            algo = str(next(f.default for f in dataclasses.fields(cls) if f.name == "algo"))
+        return {"learner": (algo, default_learner(algo, learner_domain(str(early["domain"])), cls.LEARNER_DEFAULTS))}
+
+    @classmethod
+    def check_flags(cls, early: Mapping[str, Any], flags: Sequence[str]) -> None:
+        """Refuse a flag of another learner's settings, naming the learners it is a setting of."""
+        algo = str(early.get("algo", cls.ALGO))
+        if algo not in LEARNERS:
+            return
+        own = {flag_of(f.name) for f in dataclasses.fields(LEARNERS[algo].config)}
+        for flag in flags:
+            names = {flag, "--" + flag.removeprefix("--no-")}
+            owners = [
+                name
+                for name, learner in LEARNERS.items()
+                if name != algo and names & {flag_of(f.name) for f in dataclasses.fields(learner.config)}
+            ]
+            if owners and not names & own:
+                raise ConfigError(f"{flag}: a setting of {' and '.join(owners)}, not of {algo}")
 
 
 def learner_methods(algo: str) -> dict[str, Method]:
@@ -186,56 +240,31 @@ def learner_methods(algo: str) -> dict[str, Method]:
     return all_methods(baseline=LEARNERS[algo].title)
 
 
-def learner_settings(
-    cfg: LearnerRecipeConfig, algo: str, domain: LearnerDomain, extra: Mapping[str, Any] | None = None
-) -> Any:
-    """The learners' settings: the domain's defaults for ``algo`` with the recipe's flags (and ``extra``).
+def learner_settings(cfg: LearnerRecipeConfig, algo: str, domain: LearnerDomain) -> Any:
+    """The learners' settings: ``cfg.learner`` (from the flags), or the domain's defaults for ``algo`` with the
+    recipe's :attr:`~LearnerRecipeConfig.LEARNER_DEFAULTS` when it has none; checked against one batch.
 
     Raises:
-        ConfigError: a setting the learner refuses (the message names it), or a flag it does not have.
+        ConfigError: the settings are another learner's, or the budget is less than one batch.
 
     Examples:
-        >>> four_rooms = domains.part("four_rooms", LearnerDomain)
-        >>> learner_settings(LearnerRecipeConfig(total_frames=512), "dqn", four_rooms).total_frames
-        512
-        >>> learner_settings(LearnerRecipeConfig(reshape_samples=True), "ppo", four_rooms)
+        >>> four_rooms = learner_domain("four_rooms")
+        >>> learner_settings(LearnerRecipeConfig(), "dqn", four_rooms).total_frames
+        100000
+        >>> learner_settings(LearnerRecipeConfig(learner=default_learner("ppo", four_rooms)), "dqn", four_rooms)
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.experiments.cli.ConfigError: --reshape-samples: ppo learns on-policy and keeps no ...
+        torchrl_subgoal.experiments.cli.ConfigError: --algo: the learner settings are PPOConfig's, not dqn's (DQNConfig)
     """
     learner = LEARNERS[algo]
-    base = domain.defaults.get(algo) or learner.config()
-    changes: dict[str, Any] = {
-        name: value
-        for name, value in (
-            ("total_frames", cfg.total_frames),
-            ("num_envs", cfg.num_envs),
-            ("frames_per_batch", cfg.frames_per_batch),
-            ("lr", cfg.lr),
-            ("reward_scale", cfg.reward_scale),
-        )
-        if value
-    }
-    changes.update(
-        env_workers=cfg.env_workers,
-        collector_workers=cfg.collector_workers,
-        value_lr=cfg.value_lr,
-        online_potential=cfg.online_potential,
-        **({} if cfg.sees_subgoal == "default" else {"sees_subgoal": SEES_SUBGOAL[cfg.sees_subgoal]}),
-        **(extra or {}),
+    settings: Any = (
+        cfg.learner if cfg.learner is not None else default_learner(algo, domain, type(cfg).LEARNER_DEFAULTS)
     )
-    if cfg.reshape_samples:
-        replaying = [name for name, one in LEARNERS.items() if one.has_setting("reshape_samples")]
-        check(
-            learner.has_setting("reshape_samples"),
-            "reshape_samples",
-            f"{algo} learns on-policy and keeps no replay samples; only {' and '.join(replaying)} re-shape them",
+    fits = isinstance(settings, learner.config)
+    if not fits:
+        raise ConfigError(
+            f"--algo: the learner settings are {type(settings).__name__}'s, not {algo}'s ({learner.config.__name__})"
         )
-        changes["reshape_samples"] = True
-    try:
-        settings = dataclasses.replace(base, **changes)
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from None
     check(
         settings.total_frames >= settings.frames_per_batch,
         "total_frames",
@@ -245,38 +274,37 @@ def learner_settings(
     return settings
 
 
-def learner_plan(
-    cfg: LearnerRecipeConfig, algo: str, *, extra: Mapping[str, Any] | None = None, final_updates: int | None = None
-) -> Plan:
+def learner_plan(cfg: LearnerRecipeConfig, algo: str, *, final_updates: int | None = None) -> Plan:
     """The sweep of learner ``algo`` on ``cfg.domain``: one chunk per learner, the stored configuration,
     the report's thresholds (episode lengths; times in updates and frames).
 
     Args:
         cfg: the recipe's settings.
         algo: ``"a2c"``, ``"ppo"``, ``"dqn"`` or ``"ddpg"``.
-        extra: more of the learner's settings (a recipe's own flags).
         final_updates: the updates the asymptotic performance averages (default: the last 5%, at least 10).
 
     Raises:
         ConfigError: naming the flag; SubgoalFileError: naming the file, the pattern and the field.
 
     Examples:
-        >>> cfg = LearnerRecipeConfig(domain="four_rooms", methods="DDPG")
+        >>> from torchrl_subgoal.training import DDPGTrainConfig
+        >>> cfg = LearnerRecipeConfig(domain="four_rooms", methods="DDPG", learner=DDPGTrainConfig())
         >>> learner_plan(cfg, "ddpg")
         Traceback (most recent call last):
         ...
         torchrl_subgoal.experiments.cli.ConfigError: --algo: ddpg needs continuous actions; ...
     """
     check(algo in LEARNERS, "algo", f"unknown learner {algo!r}; choose from {', '.join(LEARNERS)}")
-    try:
-        domain = domains.part(cfg.domain, LearnerDomain)
-    except ValueError as exc:
-        raise ConfigError(f"--domain: {exc}") from None
+    domain = learner_domain(cfg.domain)
+    if cfg.logger in ("tensorboard", "wandb") and find_spec(cfg.logger) is None:
+        raise ConfigError(
+            f"--logger: {cfg.logger} needs the {cfg.logger} package: pip install 'torchrl_subgoal[{cfg.logger}]'"
+        )
     methods = learner_methods(algo)
     names = check_methods(methods, cfg.method_names or [LEARNERS[algo].title, "HRS", "NRS"])
     if "SARSA-RS" in names and domain.aggregation() is None:
         raise ConfigError(f"--methods: SARSA-RS needs an aggregation g(s), which {cfg.domain} does not register")
-    settings = learner_settings(cfg, algo, domain, extra)
+    settings = learner_settings(cfg, algo, domain)
     probe = domain.make_env(1)
     try:
         check_actions(algo, probe, cfg.domain)
@@ -335,6 +363,7 @@ def learner_plan(
         episodes=iterations,
         chunk_size=cfg.seed_batch,
         results=results,
+        runtime={"logger": cfg.logger},
         budget=learner_budget(settings, probe),
     )
 
@@ -447,13 +476,15 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
 
     Examples:
         >>> import tempfile
-        >>> cfg = LearnerRecipeConfig(domain="four_rooms", methods="A2C", total_frames=512, results=tempfile.mkdtemp())
+        >>> a2c = default_learner("a2c", learner_domain("four_rooms"), {"total_frames": 512})
+        >>> cfg = LearnerRecipeConfig(domain="four_rooms", methods="A2C", learner=a2c, results=tempfile.mkdtemp())
         >>> plan = learner_plan(cfg, "a2c")
         >>> table = run_learner_chunk(Chunk("A2C", 0, (("none", 0),), seed=1), plan.config, lambda done: None)
         >>> table.n_learners, table.n_episodes  # one learner, one column per batch of 256 frames
         (1, 2)
     """
     torch.set_num_threads(1)
+    quiet_torchrl()
     domain = domains.part(config["domain"], LearnerDomain)
     learner = LEARNERS[config["algo"]]
     method = learner_methods(config["algo"])[chunk.method]
@@ -492,7 +523,12 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
         # a pattern-less learner (unshaped, SARSA-RS) runs the task its learning number picks
         make_env = domain.env_for(pattern if pattern in routes else routes[learning % len(routes)], seed)
         # fresh: a learner run again after an interruption starts its log over, as its results do
-        logger = experiment_logger(Path(config["log_dir"]), f"{chunk.method}_{pattern}_{learning}", fresh=True)
+        logger = experiment_logger(
+            Path(config["log_dir"]),
+            f"{chunk.method}_{pattern}_{learning}",
+            cast(Any, config.get("logger", "csv")),
+            fresh=True,
+        )
         runs.append((make_env, Shaping(*parts) if parts is not None else None, seed, logger))
     # the chunk's learners as one batch (one learner is a batch of one); each its own task where the
     # domain gives one per learner (the plan checked that the learners can share one env batch)

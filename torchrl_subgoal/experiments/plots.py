@@ -1,7 +1,10 @@
-"""Figures of a report: learning curves, and the subgoal patterns drawn on the domain's map.
+"""Figures of a report: learning curves, performance profiles, and the subgoal patterns drawn on the domain's map.
 
 Figures are drawn with matplotlib's object API (no pyplot), so making a report
-neither needs a display nor changes the caller's matplotlib backend.
+neither needs a display nor changes the caller's matplotlib backend; each is
+written as PNG (for the Markdown report), PDF and SVG (for a paper). The
+uncertainty bands are stratified-bootstrap intervals computed by rliable
+(:mod:`~torchrl_subgoal.experiments.stats`).
 
 Maps are drawn by the :class:`ReportMap` part of the domain registered under the
 sweep's domain name (:mod:`torchrl_subgoal.domains`). A domain plugin is imported
@@ -22,7 +25,7 @@ import numpy.typing as npt
 from matplotlib.figure import Figure
 
 from torchrl_subgoal import domains
-from torchrl_subgoal.experiments.stats import mean_and_sem, moving_average
+from torchrl_subgoal.experiments.stats import curve_band, moving_average, performance_profile
 
 T = TypeVar("T")
 
@@ -67,17 +70,44 @@ def numbered_subgoals(patterns: Mapping[str, Any], kind: type[T]) -> Iterator[tu
             yield name, f"C{k % 10}", i + 1, predicate
 
 
+#: The formats every figure is written in, beside each other: the PNG the report shows, then PDF and SVG.
+FORMATS = (".png", ".pdf", ".svg")
+
+
 @dataclass(frozen=True)
 class FigureFile:
-    """A written figure, or why it was not drawn.
+    """A written figure (its PNG; the PDF and SVG beside it), or why it was not drawn.
 
     Examples:
         >>> FigureFile(None, "no subgoal patterns").note
         'no subgoal patterns'
+        >>> [p.name for p in FigureFile(Path("curves.png")).paths]
+        ['curves.png', 'curves.pdf', 'curves.svg']
     """
 
     path: Path | None
     note: str = ""
+
+    @property
+    def paths(self) -> tuple[Path, ...]:
+        """Every file of the figure, one per format."""
+        return () if self.path is None else tuple(self.path.with_suffix(f) for f in FORMATS)
+
+
+def save_figure(fig: Figure, path: Path, dpi: int = 150) -> FigureFile:
+    """Write ``fig`` as ``path`` (a PNG) and as PDF and SVG beside it.
+
+    Examples:
+        >>> import tempfile
+        >>> fig = Figure()
+        >>> _ = fig.subplots().plot([0, 1], [0, 1])
+        >>> [p.exists() for p in save_figure(fig, Path(tempfile.mkdtemp()) / "line.png").paths]
+        [True, True, True]
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    for suffix in FORMATS:
+        fig.savefig(path.with_suffix(suffix), dpi=dpi, metadata={"Date": None} if suffix == ".svg" else None)
+    return FigureFile(path)
 
 
 def plot_learning_curves(
@@ -89,46 +119,111 @@ def plot_learning_curves(
     thresholds: Sequence[float] = (),
     log_scale: bool = False,
     unit: str = "episode",
+    frames_per_unit: int = 0,
+    strata: Mapping[str, npt.ArrayLike] | None = None,
+    n_boot: int = 500,
+    seed: int = 0,
 ) -> FigureFile:
-    """Mean ± standard error across learners, one line per method, in one PNG.
+    """The mean across learners with its 95% stratified-bootstrap band (at up to 100 points), one line per method
+    (PNG, PDF, SVG).
 
     Args:
-        curves: method -> ``[n_learners, n_episodes]``.
+        curves: method -> ``[n_learners, n_columns]``.
         path: the PNG to write.
         metric: y-axis label.
         window: moving average applied to each learner before averaging (1 = none).
         thresholds: drawn as dashed horizontal lines.
         log_scale: logarithmic y axis (useful for steps that fall by orders of magnitude).
-        unit: x-axis label.
+        unit: what a column is (the x axis when ``frames_per_unit`` is 0: the paper's episodes or epochs).
+        frames_per_unit: env frames per column; when set, the x axis is frames (environment steps).
+        strata: method -> each learner's subgoal pattern, the bootstrap's strata.
+        n_boot: bootstrap samples of the band.
+        seed: the bootstrap's seed.
 
     Examples:
         >>> import tempfile
         >>> out = Path(tempfile.mkdtemp()) / "curves.png"
-        >>> plot_learning_curves({"A": np.ones((3, 5))}, out).path == out
+        >>> plot_learning_curves({"A": np.ones((3, 5))}, out, n_boot=50).path == out
         True
     """
     fig = Figure(figsize=(7, 4.2))
     ax = fig.subplots()
-    for name, values in curves.items():
+    for k, (name, values) in enumerate(curves.items()):
         smoothed = moving_average(values, window)
-        mean, sem = mean_and_sem(smoothed)
-        x = np.arange(window, window + mean.size)
-        (line,) = ax.plot(x, mean, label=f"{name} (n={smoothed.shape[0]})", linewidth=1.2)
-        ax.fill_between(x, mean - sem, mean + sem, color=line.get_color(), alpha=0.25, linewidth=0)
+        band_seed = int(np.random.SeedSequence([seed, k]).generate_state(1)[0])
+        columns, _, band = curve_band(smoothed, (strata or {}).get(name), n_boot=n_boot, seed=band_seed)
+        scale = frames_per_unit or 1
+        x = (np.arange(smoothed.shape[1]) + window) * scale
+        (line,) = ax.plot(x, smoothed.mean(axis=0), label=f"{name} (n={smoothed.shape[0]})", linewidth=1.2)
+        ax.fill_between((columns + window) * scale, band[0], band[1], color=line.get_color(), alpha=0.25, linewidth=0)
     for threshold in thresholds:
         ax.axhline(threshold, color="grey", linestyle="--", linewidth=0.7)
     if log_scale:
         ax.set_yscale("log")
-    smoothing = f", moving average of {window}" if window > 1 else ""
-    ax.set_xlabel(unit)
+    smoothing = f", moving average of {window} {unit}s" if window > 1 else ""
+    ax.set_xlabel("frames (environment steps)" if frames_per_unit else unit)
     ax.set_ylabel(metric)
-    ax.set_title(f"{metric} per {unit}: mean ± s.e. across learners{smoothing}")
+    ax.set_title(f"{metric} per {unit}: mean and 95% bootstrap CI across learners{smoothing}", fontsize=10)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    return FigureFile(path)
+    return save_figure(fig, path)
+
+
+def plot_performance_profile(
+    scores: Mapping[str, npt.ArrayLike],
+    path: Path,
+    *,
+    label: str,
+    lower_is_better: bool,
+    strata: Mapping[str, npt.ArrayLike] | None = None,
+    log_scale: bool = False,
+    n_boot: int = 500,
+    seed: int = 0,
+) -> FigureFile:
+    """Performance profiles (rliable's score distributions): for each method, the fraction of learners whose
+    score is better than τ, over τ, with 95% stratified-bootstrap bands (PNG, PDF, SVG).
+
+    Args:
+        scores: method -> one score per learner (e.g. its asymptotic performance).
+        path: the PNG to write.
+        label: what a score is (the x axis).
+        lower_is_better: whether a learner does better below τ.
+        strata: method -> each learner's subgoal pattern.
+        log_scale: τ on a logarithmic axis (positive scores, such as steps).
+        n_boot: bootstrap samples.
+        seed: the bootstrap's seed.
+
+    Examples:
+        >>> import tempfile
+        >>> out = Path(tempfile.mkdtemp()) / "profile.png"
+        >>> plot_performance_profile({"A": [3.0, 5.0, 9.0]}, out, label="steps", lower_is_better=True).path == out
+        True
+    """
+    values = {name: np.asarray(x, dtype=np.float64).ravel() for name, x in scores.items()}
+    pooled = np.concatenate(list(values.values()))
+    low, high = float(pooled.min()), float(pooled.max())
+    high = high if high > low else low + 1.0
+    log_scale = log_scale and low > 0
+    taus = np.geomspace(low, high, 101) if log_scale else np.linspace(low, high, 101)
+    profiles = performance_profile(
+        values, dict(strata or {}), taus, lower_is_better=lower_is_better, n_boot=n_boot, seed=seed
+    )
+    fig = Figure(figsize=(6, 4))
+    ax = fig.subplots()
+    for name, (profile, band) in profiles.items():
+        (line,) = ax.plot(taus, profile, label=f"{name} (n={values[name].size})", linewidth=1.2)
+        ax.fill_between(taus, band[0], band[1], color=line.get_color(), alpha=0.2, linewidth=0)
+    if log_scale:
+        ax.set_xscale("log")
+    ax.set_xlabel(f"τ ({label})")
+    ax.set_ylabel(f"fraction of learners {'below' if lower_is_better else 'above'} τ")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_title("performance profile: 95% bootstrap CI (rliable)", fontsize=10)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return save_figure(fig, path)
 
 
 def plot_pattern_maps(
@@ -146,7 +241,7 @@ def plot_pattern_maps(
         patterns: pattern name -> its subgoals, as in a sweep's ``config["patterns"]``: a
             list of subgoal dicts (``{"cell": [4, 9]}``, ``{"circle": {"centre": [x, y],
             "radius": 0.04}}``) or a subgoal-file pattern body.
-        path: the PNG to write.
+        path: the PNG to write (the PDF and SVG beside it).
         options: extra keyword arguments for the map (e.g. ``{"config": "hard"}`` for PinBall).
         max_panels: draw at most this many patterns (a note says how many were left out).
 
@@ -187,8 +282,7 @@ def plot_pattern_maps(
         for ax in list(axes.flat)[len(names) :]:
             ax.axis("off")
         fig.tight_layout()
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=110)
+        save_figure(fig, path, dpi=110)
     except Exception as exc:  # a broken hook costs the map, not the report
         return FigureFile(None, f"map for domain {domain!r} skipped: {type(exc).__name__}: {exc}")
     note = f"{left_out} more pattern(s) not drawn" if left_out else ""

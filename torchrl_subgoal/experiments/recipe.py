@@ -1,29 +1,35 @@
 """What the recipes share: one settings base, one ``main``, patterns, learners per method, chunk decoding,
 run + report.
 
-A recipe (``recipes/four_rooms.py``, ``recipes/pinball.py``, ``recipes/a2c.py``,
-``recipes/pick_and_place.py``) is a :class:`RecipeConfig` subclass (a paper
+A recipe (:mod:`torchrl_subgoal.recipes`: ``torchrl-subgoal reproduce four-rooms``, ``... pinball``,
+``... pick-and-place``, ``torchrl-subgoal train``; ``recipes/a2c.py`` and ``recipes/qlearning.py`` in
+the repository) is a :class:`RecipeConfig` subclass (a paper
 reproduction: a :class:`ReproductionConfig`), a ``plan`` that turns its settings
 into a :class:`Plan` (the domain's pieces: the human patterns, candidate subgoals
 for RRS, a ``run_chunk`` making an env and an agent per chunk) and
 ``main = recipe_main(Config, plan)``; these helpers do the rest the same way for
-every domain.
+every domain, and record in the results' ``config.json`` the command, its settings
+(what ``--config`` reads back) and the package's version and commit.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import logging
+import os
+import shlex
 import sys
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal, TypeVar
 
 import torch
 from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal.experiments.budget import Budget, check_budget, check_learnings
-from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting
+from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting, settings_data
 from torchrl_subgoal.experiments.results import Chunk, ResultsError, UnknownMethodError
+from torchrl_subgoal.experiments.store import code_version
 from torchrl_subgoal.experiments.sweep import (
     BackendUnavailableError,
     ChunkFailedError,
@@ -56,9 +62,11 @@ __all__ = [
     "pattern_sources",
     "potential_entries",
     "potential_options",
+    "quiet_torchrl",
     "recipe_main",
     "sweep_and_report",
     "sweep_entries",
+    "warm_up_chunks",
 ]
 
 PatternSets = dict[str, dict[str, SubgoalSeries]]
@@ -67,6 +75,20 @@ T = TypeVar("T")
 
 #: What a recipe reports as one line on stderr instead of a traceback (see :func:`fail`).
 RECIPE_ERRORS = (ConfigError, SubgoalFileError, ResultsError, ChunkFailedError, BackendUnavailableError)
+
+
+def quiet_torchrl() -> None:
+    """Keep TorchRL's INFO lines (``Initialized LazyTensorStorage ...``) out of a recipe's progress bar:
+    its logger at WARNING, here and in the worker processes this one starts (``RL_LOGGING_LEVEL``,
+    which a user's own setting overrides).
+
+    Examples:
+        >>> quiet_torchrl()
+        >>> logging.getLogger("torchrl").level >= logging.WARNING or "RL_LOGGING_LEVEL" in os.environ
+        True
+    """
+    level = os.environ.setdefault("RL_LOGGING_LEVEL", "WARNING")
+    logging.getLogger("torchrl").setLevel(level)
 
 
 def fail(exc: BaseException) -> int:
@@ -335,20 +357,18 @@ def chunk_patterns(chunk: Chunk, config: Mapping[str, Any]) -> tuple[list[Subgoa
 
 
 def sweep_and_report(
-    domain: str,
+    plan: Plan,
     results: str,
-    specs: Sequence[MethodSpec],
-    run_chunk: RunChunk,
-    config: Mapping[str, Any],
     *,
     seed: int,
-    chunk_size: int,
-    episodes: int,
     overwrite: bool,
     backend: Literal["local", "ray"],
     workers: int,
+    provenance: Mapping[str, Any] | None = None,
 ) -> int:
-    """Run (or resume) the sweep, write the report, print its Markdown; the recipe's exit code.
+    """Run (or resume) the sweep of ``plan`` into ``results``, write the report, print its Markdown; the
+    recipe's exit code. ``provenance`` (what made the results) goes to ``config.json``, as the plan's
+    ``runtime`` does (see :class:`~torchrl_subgoal.experiments.Sweep`).
 
     Raises:
         ConfigError: a setting the sweep cannot use, naming its flag.
@@ -357,8 +377,8 @@ def sweep_and_report(
         ChunkFailedError: a chunk failed; the message says what was saved and what to do.
 
     Examples:
-        >>> sweep_and_report("four_rooms", "results/demo", [], print, {}, seed=-1, chunk_size=1, episodes=1,
-        ...                  overwrite=False, backend="local", workers=0)  # settings are checked before anything runs
+        >>> plan = Plan("four_rooms", [], print, {}, episodes=1, chunk_size=1)
+        >>> sweep_and_report(plan, "results/demo", seed=-1, overwrite=False, backend="local", workers=0)
         Traceback (most recent call last):
         ...
         torchrl_subgoal.experiments.cli.ConfigError: --seed: must be >= 0, got -1
@@ -367,8 +387,8 @@ def sweep_and_report(
 
     for flag, value, low in (
         ("seed", seed, 0),
-        ("chunk_size", chunk_size, 1),
-        ("episodes", episodes, 1),
+        ("chunk_size", plan.chunk_size, 1),
+        ("episodes", plan.episodes, 1),
         ("workers", workers, 0),
     ):
         if value < low:
@@ -376,15 +396,18 @@ def sweep_and_report(
     if not results.strip():
         raise ConfigError("--results: give a directory")
     sweep = Sweep(
-        domain,
+        plan.domain,
         results,
-        specs,
-        run_chunk,
-        config,
+        plan.specs,
+        plan.run_chunk,
+        plan.config,
         seed=seed,
-        chunk_size=chunk_size,
-        n_episodes=episodes,
+        chunk_size=plan.chunk_size,
+        n_episodes=plan.episodes,
         overwrite=overwrite,
+        runtime=plan.runtime,
+        provenance=provenance,
+        warm_up=plan.warm_up,
     )
     try:
         sweep.run(backend=backend, workers=workers)
@@ -394,6 +417,7 @@ def sweep_and_report(
             file=sys.stderr,
         )
         return 130
+    print("writing the report: statistics (rliable's bootstrap intervals), figures ...", file=sys.stderr, flush=True)
     report = write_report(results)
     print(report.markdown)
     print(f"results, report.md, summary.json and plots in {results}", file=sys.stderr)
@@ -567,6 +591,9 @@ class Plan:
         episodes: the report's columns per learner (episodes, updates or epochs).
         chunk_size: learners per chunk.
         results: the results directory (default: the recipe's ``--results``).
+        runtime: settings that change how chunks run but not their results (the logger): handed to
+            ``run_chunk`` with ``config``, not part of what identifies the experiment.
+        warm_up: run before the sweep's chunks, saying so (what compiles numba kernels: :func:`warm_up_chunks`).
         budget: what one learner costs at least, checked before anything runs (:func:`check_budget`);
             default: ``episodes`` episodes (``--episodes``) of at least one step, ``--chunk-size`` learners a chunk.
 
@@ -582,7 +609,33 @@ class Plan:
     episodes: int
     chunk_size: int
     results: str | None = None
+    runtime: Mapping[str, Any] = field(default_factory=dict)
+    warm_up: Callable[[], object] | None = None
     budget: Budget | None = None
+
+
+def warm_up_chunks(
+    run_chunk: RunChunk, specs: Sequence[MethodSpec], config: Mapping[str, Any], episodes_key: str = "episodes"
+) -> Callable[[], object]:
+    """What compiles a fused-engine recipe's numba kernels once, in the process that starts the sweep: one
+    learner of each method for one episode, whose records are dropped. numba caches what it compiles on disk,
+    so the sweep's worker processes load it instead of each compiling it at 0% of the progress bar (some 20 s
+    of CPU on a first run after an install; a fraction of a second afterwards).
+
+    Examples:
+        >>> calls = []
+        >>> warm = warm_up_chunks(lambda chunk, config, progress: calls.append((chunk.method, config["episodes"])),
+        ...                       [MethodSpec("HRS", ["p1"], 3)], {"episodes": 1000})
+        >>> _ = warm(); calls
+        [('HRS', 1)]
+    """
+
+    def warm() -> None:
+        for spec in specs:
+            chunk = Chunk(spec.name, 0, ((spec.patterns[0], 0),), seed=0)
+            run_chunk(chunk, {**config, episodes_key: 1}, lambda done: None)
+
+    return warm
 
 
 def config_main(
@@ -593,6 +646,7 @@ def config_main(
     description: str | None = None,
     threads: int | None = 1,
     errors: tuple[type[BaseException], ...] = RECIPE_ERRORS,
+    prog: str | None = None,
 ) -> int:
     """A script's ``main``: parse the flags into ``config_cls`` and ``run`` it; its exit code, or a
     one-line error on stderr (see :func:`fail`; a bad flag exits with code 2, as argparse does).
@@ -606,6 +660,7 @@ def config_main(
         description: the ``--help`` description (default: the settings' docstring's first line).
         threads: ``torch.set_num_threads`` first (batched small ops run fastest on one thread); ``None``: leave it.
         errors: what is reported as one line on stderr instead of a traceback.
+        prog: the command's name in its help and errors (default: the script's file name).
 
     Examples:
         >>> from dataclasses import dataclass
@@ -620,8 +675,9 @@ def config_main(
     """
     if threads is not None:
         torch.set_num_threads(threads)
+    quiet_torchrl()
     try:
-        return run(parse_config(config_cls, argv, description=description))
+        return run(parse_config(config_cls, argv, description=description, prog=prog))
     except errors as exc:
         return fail(exc)
 
@@ -634,15 +690,18 @@ def recipe_main(
     description: str | None = None,
     threads: int | None = 1,
     errors: tuple[type[BaseException], ...] = RECIPE_ERRORS,
+    prog: str | None = None,
 ) -> int:
     """A recipe's ``main``: parse the flags into ``config_cls``, make the :class:`Plan`, check that it fits
     this machine's memory and a year (:func:`~torchrl_subgoal.experiments.budget.check_budget`), run (or
     resume) the sweep, write the report and print it; the exit code (see :func:`fail`, :func:`sweep_and_report`).
+    The results' ``config.json`` records the command, its settings (``--config`` reads them back) and
+    the package's version and commit.
 
     Args:
         config_cls: the recipe's settings (a :class:`RecipeConfig`).
         plan: the recipe's settings -> its sweep.
-        argv: the command line; ``description``, ``threads``, ``errors``: as in :func:`config_main`.
+        argv: the command line; ``description``, ``threads``, ``errors``, ``prog``: as in :func:`config_main`.
 
     Examples:
         >>> def plan(cfg: RecipeConfig) -> Plan:
@@ -651,9 +710,13 @@ def recipe_main(
         2
     """
 
+    args = list(sys.argv[1:] if argv is None else argv)
+    command = shlex.join([*(prog or os.path.basename(sys.argv[0])).split(), *args])
+
     def run(cfg: C) -> int:
         check_learnings(cfg.learnings)  # before the plan, which may draw a pattern per learning
         sweep = plan(cfg)
+        provenance = {"command": command, "settings": settings_data(cfg), **code_version()}
         check_budget(
             sweep.specs,
             sweep.episodes,
@@ -664,17 +727,13 @@ def recipe_main(
             backend=cfg.backend,
         )
         return sweep_and_report(
-            sweep.domain,
+            sweep,
             sweep.results or cfg.results,
-            sweep.specs,
-            sweep.run_chunk,
-            sweep.config,
             seed=cfg.seed,
-            chunk_size=sweep.chunk_size,
-            episodes=sweep.episodes,
             overwrite=cfg.overwrite,
             backend=cfg.backend,
             workers=cfg.workers,
+            provenance=provenance,
         )
 
-    return config_main(config_cls, run, argv, description=description, threads=threads, errors=errors)
+    return config_main(config_cls, run, args, description=description, threads=threads, errors=errors, prog=prog)

@@ -1,9 +1,9 @@
-"""The report of a results directory: ``report.md``, ``summary.json`` and PNGs.
+"""The report of a results directory: ``report.md``, ``summary.json`` and figures (PNG, PDF and SVG).
 
 Usage::
 
+    torchrl-subgoal report RESULTS_DIR [--out DIR]
     python -m torchrl_subgoal.experiments.report RESULTS_DIR [--out DIR]
-    torchrl-subgoal-report RESULTS_DIR [--out DIR]
 
 What it computes (per method; see :mod:`~torchrl_subgoal.experiments.stats`):
 
@@ -13,11 +13,14 @@ What it computes (per method; see :mod:`~torchrl_subgoal.experiments.stats`):
 * asymptotic performance: the mean over the configured final window;
 * a one-way ANOVA across methods and pairwise Welch t-tests with Holm-Bonferroni
   correction, for each of these measures (as the paper does);
-* beyond the paper: the interquartile mean (IQM) with a stratified-bootstrap
-  confidence interval (strata = subgoal patterns) and the probability of improvement
-  between every pair of methods (Agarwal et al. 2021);
-* learning curves (mean ± standard error) and the subgoal patterns on the domain's map;
-* the paper's numbers beside ours where :mod:`~torchrl_subgoal.experiments.paper` has them.
+* beyond the paper, computed by rliable (Agarwal et al. 2021): the interquartile mean
+  (IQM) with a stratified-bootstrap confidence interval (strata = subgoal patterns), the
+  probability of improvement between every pair of methods, and performance profiles of
+  the asymptotic performance;
+* learning curves (mean and 95% stratified-bootstrap band; x in frames for the learner
+  recipes, else the paper's episodes or epochs) and the subgoal patterns on the domain's map;
+* the paper's numbers beside ours where :mod:`~torchrl_subgoal.experiments.paper` has them
+  (no paper column where it has none).
 """
 
 from __future__ import annotations
@@ -39,7 +42,12 @@ import numpy as np
 from torchrl_subgoal.experiments import stats
 from torchrl_subgoal.experiments.cli import OneLineParser
 from torchrl_subgoal.experiments.paper import PaperResults, paper_results
-from torchrl_subgoal.experiments.plots import plot_learning_curves, plot_pattern_maps
+from torchrl_subgoal.experiments.plots import (
+    FORMATS,
+    plot_learning_curves,
+    plot_pattern_maps,
+    plot_performance_profile,
+)
 from torchrl_subgoal.experiments.results import (
     METRICS,
     IncompleteResultsError,
@@ -52,9 +60,12 @@ from torchrl_subgoal.experiments.store import LOCK_FILE, ResultsStore, load_resu
 SUMMARY_FILE = "summary.json"
 REPORT_FILE = "report.md"
 CURVES_FILE = "learning_curves.png"
+PROFILE_FILE = "performance_profile.png"
 PATTERNS_FILE = "patterns.png"
 #: Largest ``--n-boot``: the bootstrap holds ``n_boot x learners`` indices in memory.
 MAX_BOOT = 100_000
+#: Most bootstrap samples of the figures' bands (each costs a pass over the curves' points).
+BAND_BOOT = 500
 
 
 @dataclass(frozen=True)
@@ -276,8 +287,9 @@ def summarize(
             "n_boot": n_boot,
             "confidence": confidence,
             "seed": seed,
-            "strata": "subgoal pattern of each learner",
+            "strata": "subgoal pattern of each learner (one stratum unless every pattern has as many, >= 2)",
             "interval": "percentile",
+            "library": "rliable",
         },
         "tests": {"anova": "one-way (scipy f_oneway)", "pairwise": "Welch t-test, Holm-Bonferroni"},
     }
@@ -383,7 +395,8 @@ def render_markdown(
         frames = summary.get("frames_per_unit") or 0
         if frames:
             out.append(f"One {unit} is {frames} frames; *mean frames* = mean {unit}s x {frames}.")
-        if paper is not None and paper.time_to_threshold:
+        with_paper = paper is not None and bool(paper.time_to_threshold)
+        if paper is not None and with_paper:
             shown = f"moving average of {paper.window}" if paper.window > 1 else "no moving average"
             out.append(f"Paper: Okudo & Yamada (2021), {shown}, mean (s.d.).")
         out.append("")
@@ -402,7 +415,7 @@ def render_markdown(
                         *([f"{cell['mean'] * frames:.0f}" if cell["mean"] is not None else "—"] if frames else []),
                         f"{cell['not_reached']}/{cell['n']}",
                         _ci(cell),
-                        f"{_num(ref.mean)} ({_num(ref.sd)})" if ref else "—",
+                        *([f"{_num(ref.mean)} ({_num(ref.sd)})" if ref else "—"] if with_paper else []),
                     ]
                 )
         header = [
@@ -412,7 +425,7 @@ def render_markdown(
             *(["mean frames"] if frames else []),
             "not reached",
             "IQM [CI]",
-            "paper mean (s.d.)",
+            *(["paper mean (s.d.)"] if with_paper else []),
         ]
         out.append(_table(header, rows))
     asym = summary["asymptotic"]
@@ -423,16 +436,17 @@ def render_markdown(
         a, b = paper.asymptotic_window
         out.append(f"Paper: Okudo & Yamada (2021), mean over {a} to {b}.")
     out.append("")
+    paper_asymptotic = paper.asymptotic if paper is not None else {}
     rows = [
         [
             name,
             f"{_num(cell['mean'])} ({_num(cell['sd'])})",
             _ci(cell),
-            _num(paper.asymptotic[name]) if paper and name in paper.asymptotic else "—",
+            *([_num(paper_asymptotic[name]) if name in paper_asymptotic else "—"] if paper_asymptotic else []),
         ]
         for name, cell in asym["methods"].items()
     ]
-    out.append(_table(["method", "mean (s.d.)", "IQM [CI]", "paper mean"], rows))
+    out.append(_table(["method", "mean (s.d.)", "IQM [CI]", *(["paper mean"] if paper_asymptotic else [])], rows))
     measures.append(("asymptotic", asym))
     out += ["", *_tests_markdown(measures)]
     if figures:
@@ -442,11 +456,14 @@ def render_markdown(
     out += ["", "## Notes", ""]
     out += [
         f"- IQM: mean of the middle 50% of learners; CI: {boot['confidence']:.0%} percentile interval "
-        f"of a bootstrap stratified by subgoal pattern, patterns of one learner pooled "
-        f"({boot['n_boot']} samples, seed {boot['seed']}), "
-        "after Agarwal et al. (2021), *Deep RL at the Edge of the Statistical Precipice*.",
+        "of a bootstrap stratified by subgoal pattern (one stratum where the patterns' learners are single "
+        f"or uneven; {boot['n_boot']} samples, seed {boot['seed']}), computed by rliable after Agarwal et al. "
+        "(2021), *Deep RL at the Edge of the Statistical Precipice*.",
         "- Probability of improvement: P(X better than Y) over random learner pairs, ties ½ "
-        f"(Agarwal et al. 2021). For times to threshold, fewer {unit}s is better.",
+        f"(rliable; Agarwal et al. 2021). For times to threshold, fewer {unit}s is better.",
+        "- Curves: the mean across learners and its 95% stratified-bootstrap band (rliable). Performance "
+        "profile: the fraction of learners whose asymptotic performance is better than τ (rliable's score "
+        "distributions), with its band.",
         "- Tests: one-way ANOVA, pairwise Welch t-tests with Holm-Bonferroni correction "
         "(Okudo & Yamada 2021 use ANOVA with Holm-corrected pairwise tests).",
     ]
@@ -467,7 +484,7 @@ def write_report(
     seed: int = 0,
     allow_incomplete: bool = False,
 ) -> ReportOutput:
-    """Write ``report.md``, ``summary.json`` and the PNGs for a results directory.
+    """Write ``report.md``, ``summary.json`` and the figures (PNG, PDF, SVG) for a results directory.
 
     Args:
         results_dir: a directory written by a sweep.
@@ -494,8 +511,11 @@ def write_report(
     _check_output_dir(out)
     summary = summarize(results, spec, n_boot=n_boot, seed=seed)
     paper = paper_results(results.domain)
-    notes, figures, files = [], {}, []
+    notes: list[str] = []
+    figures: dict[str, str] = {}
+    files: list[Path] = []
     log_scale = spec.log_scale if spec.log_scale is not None else spec.metric == "steps"
+    strata = {name: res.patterns for name, res in results.methods.items()}
     curves = plot_learning_curves(
         {name: res.table.metric(spec.metric) for name, res in results.methods.items()},
         out / CURVES_FILE,
@@ -504,6 +524,25 @@ def write_report(
         thresholds=spec.thresholds,
         log_scale=log_scale,
         unit=spec.unit,
+        frames_per_unit=spec.frames_per_unit,
+        strata=strata,
+        n_boot=min(n_boot, BAND_BOOT),
+        seed=seed,
+    )
+    start, stop = summary["asymptotic"]["window"]
+    finals = {
+        name: stats.asymptotic_performance(res.table.metric(spec.metric), (start, stop))
+        for name, res in results.methods.items()
+    }
+    profile = plot_performance_profile(
+        finals,
+        out / PROFILE_FILE,
+        label=f"mean {spec.metric} per {spec.unit}, {spec.unit}s {start + 1} to {stop}",
+        lower_is_better=spec.lower_is_better,
+        strata=strata,
+        log_scale=log_scale,
+        n_boot=min(n_boot, BAND_BOOT),
+        seed=seed,
     )
     maps = plot_pattern_maps(  # a sweep named after its recipe (a2c_four_rooms) names its map's domain
         str(results.config.get("domain", results.domain)),
@@ -511,10 +550,10 @@ def write_report(
         out / PATTERNS_FILE,
         options=spec.map,
     )
-    for caption, figure in (("learning curves", curves), ("subgoal patterns", maps)):
+    for caption, figure in (("learning curves", curves), ("performance profile", profile), ("subgoal patterns", maps)):
         if figure.path is not None:
             figures[caption] = figure.path.name
-            files.append(figure.path)
+            files += figure.paths
         if figure.note:
             notes.append(f"{caption}: {figure.note}")
     markdown = render_markdown(summary, paper, figures, notes)
@@ -524,7 +563,11 @@ def write_report(
     return ReportOutput(markdown, summary, tuple(files))
 
 
-REPORT_FILES = (REPORT_FILE, SUMMARY_FILE, CURVES_FILE, PATTERNS_FILE)
+REPORT_FILES = (
+    REPORT_FILE,
+    SUMMARY_FILE,
+    *(Path(figure).with_suffix(f).name for figure in (CURVES_FILE, PROFILE_FILE, PATTERNS_FILE) for f in FORMATS),
+)
 
 
 def _is_report_dir(out: Path) -> bool:
@@ -555,7 +598,7 @@ def _check_output_dir(out: Path) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console entry point: ``torchrl-subgoal-report RESULTS_DIR [--out DIR]``.
+    """Console entry point: ``torchrl-subgoal report RESULTS_DIR [--out DIR]`` (also ``torchrl-subgoal-report``).
 
     Examples:
         >>> import tempfile
@@ -563,7 +606,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         2
     """
     parser = OneLineParser(
-        prog="torchrl-subgoal-report",
+        prog="torchrl-subgoal report",
         description="Write report.md, summary.json and plots for a sweep's results directory.",
     )
     parser.add_argument("results_dir", type=Path)

@@ -7,23 +7,28 @@ The paper (Okudo & Yamada 2021) reports, per method: time to threshold (episodes
 until the metric, smoothed by a moving average for PinBall, first crosses a
 threshold), asymptotic performance (mean over the final episodes), a one-way
 ANOVA across methods, pairwise follow-up tests with Holm-Bonferroni correction, and
-learning curves with standard-error bands.
+learning curves with standard-error bands (ours: stratified-bootstrap bands).
 
 Beyond the paper, following Agarwal et al. (2021), "Deep Reinforcement Learning at
-the Edge of the Statistical Precipice" (NeurIPS): the interquartile mean (IQM)
-with stratified-bootstrap confidence intervals, and the probability of improvement.
+the Edge of the Statistical Precipice" (NeurIPS), computed by their library, rliable:
+the interquartile mean (IQM) with stratified-bootstrap confidence intervals, the
+probability of improvement and performance profiles. This module arranges the
+learners for it (:func:`runs_by_task`) and seeds its bootstrap.
 """
 
 from __future__ import annotations
 
 import gc
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from itertools import combinations
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from rliable import library, metrics
 from scipy import stats as sps
 from statsmodels.stats.multitest import multipletests
 
@@ -132,21 +137,6 @@ def asymptotic_performance(curves: ArrayLike, window: Sequence[int]) -> FloatArr
     return x[..., start:stop].mean(axis=-1)
 
 
-def mean_and_sem(curves: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """Mean across learners (axis 0) and its standard error (0 with a single learner).
-
-    Examples:
-        >>> mean, sem = mean_and_sem([[1.0, 2.0], [3.0, 2.0]])
-        >>> mean.tolist(), sem.tolist()
-        ([2.0, 2.0], [1.0, 0.0])
-    """
-    x = np.asarray(curves, dtype=np.float64)
-    mean = x.mean(axis=0)
-    if x.shape[0] < 2:
-        return mean, np.zeros_like(mean)
-    return mean, x.std(axis=0, ddof=1) / np.sqrt(x.shape[0])
-
-
 @dataclass(frozen=True)
 class TestResult:
     """A test statistic and its p-value (NaN when the test is undefined, e.g. constant data).
@@ -238,94 +228,232 @@ def pairwise_tests(
     ]
 
 
-def iqm(scores: ArrayLike, axis: int = -1) -> FloatArray:
-    """Interquartile mean: the mean of the middle 50% of scores.
+def runs_by_task(scores: ArrayLike, strata: ArrayLike | None = None) -> FloatArray:
+    """Scores of runs (``[n, ...]``: one per run, or a curve per run) as rliable's ``[runs, tasks, ...]``: a
+    column per stratum (the runs' subgoal patterns) when every stratum holds the same number (at least 2)
+    of runs, else one column.
 
-    ``floor(n / 4)`` scores are dropped from each end, as
-    ``scipy.stats.trim_mean(scores, 0.25)`` does (sorting is faster on bootstrap batches).
+    rliable's stratified bootstrap resamples the runs of each task (column) on their own, as Agarwal et
+    al. (2021) resample runs within each task. A stratum of one run could not vary when resampled within
+    itself (one learner per pattern would give an interval of zero width), and rliable needs as many runs
+    in every column: in those cases the runs form one stratum.
 
     Examples:
-        >>> float(iqm([1, 2, 3, 4, 5, 6, 7, 100]))
+        >>> runs_by_task([1.0, 2.0, 3.0, 4.0], ["a", "b", "a", "b"]).tolist()
+        [[1.0, 2.0], [3.0, 4.0]]
+        >>> runs_by_task([1.0, 2.0, 3.0], ["a", "b", "c"]).tolist()  # one run per pattern: one stratum
+        [[1.0], [2.0], [3.0]]
+        >>> runs_by_task(np.zeros((4, 7)), ["a", "b", "a", "b"]).shape  # curves: [runs, tasks, points]
+        (2, 2, 7)
+    """
+    x = np.asarray(scores, dtype=np.float64)
+    if x.ndim == 0:
+        x = x.reshape(1)
+    if strata is None:
+        return x[:, None]
+    labels = np.asarray(strata).ravel()
+    if labels.size != x.shape[0]:
+        raise ValueError(f"{labels.size} strata labels for {x.shape[0]} runs")
+    names, counts = np.unique(labels, return_counts=True)
+    if counts.min() < 2 or counts.min() != counts.max():
+        return x[:, None]
+    return np.stack([x[labels == name] for name in names], axis=1)
+
+
+def iqm(scores: ArrayLike) -> float:
+    """Interquartile mean: the mean of the middle 50% of scores (rliable's ``aggregate_iqm``: ``floor(n / 4)``
+    scores dropped from each end).
+
+    Examples:
+        >>> iqm([1, 2, 3, 4, 5, 6, 7, 100])
         4.5
     """
-    x = np.sort(np.asarray(scores, dtype=np.float64), axis=axis)
-    n = x.shape[axis]
-    if n == 0:
+    x = np.asarray(scores, dtype=np.float64)
+    if x.size == 0:
         raise ValueError("iqm of no scores")
-    cut = n // 4
-    return np.asarray(np.take(x, np.arange(cut, n - cut), axis=axis).mean(axis=axis))
+    return float(metrics.aggregate_iqm(x))
+
+
+def _iqm_of_replicate(matrix: FloatArray) -> FloatArray:
+    """rliable's ``aggregate_iqm`` (scipy's ``trim_mean`` at 25%, over every entry) as one sort and a mean:
+    the same trimmed set, so the same number (to the last bits of the sum), for the bootstrap's thousands
+    of replicates, where ``trim_mean``'s own overhead would dominate.
+
+    Examples:
+        >>> m = np.random.default_rng(0).normal(size=(9, 3))
+        >>> bool(np.isclose(_iqm_of_replicate(m)[0], metrics.aggregate_iqm(m)))
+        True
+    """
+    x = np.sort(matrix, axis=None)
+    cut = int(0.25 * x.size)
+    return np.array([x[cut : x.size - cut].mean()])
+
+
+@contextmanager
+def _seeded(seed: int) -> Iterator[None]:
+    """numpy's global random state seeded for the block, then restored: rliable's stratified bootstrap draws
+    its resampling indices from it (``np.random.choice``)."""
+    state = np.random.get_state()
+    np.random.seed(seed % 2**32)
+    try:
+        yield
+    finally:
+        np.random.set_state(state)
+
+
+def bootstrap_ci(
+    matrix: FloatArray,
+    statistic: Callable[[FloatArray], Any],
+    *,
+    n_boot: int = 2000,
+    confidence: float = 0.95,
+    seed: int = 0,
+) -> FloatArray:
+    """Percentile confidence interval of ``statistic`` by rliable's stratified bootstrap (runs resampled
+    within each task), reproducible given ``seed``: ``[2, ...]``, the lower then the upper bounds.
+
+    Args:
+        matrix: ``[runs, tasks, ...]`` scores (:func:`runs_by_task`; a trailing axis of curve points).
+        statistic: ``statistic(matrix) -> array``, e.g. rliable's ``aggregate_iqm``.
+        n_boot: bootstrap samples.
+        confidence: coverage of the interval.
+        seed: seed of the resampling.
+
+    Examples:
+        >>> low, high = bootstrap_ci(runs_by_task(np.arange(100.0)), lambda m: np.array([iqm(m)]), seed=1)
+        >>> bool(low[0] < iqm(np.arange(100.0)) < high[0])
+        True
+    """
+    with _seeded(seed), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # constant resamples: scipy warns, the interval is a point
+        _, intervals = library.get_interval_estimates(
+            {"x": matrix}, statistic, reps=n_boot, confidence_interval_size=confidence
+        )
+    return np.asarray(intervals["x"], dtype=np.float64)
 
 
 def stratified_bootstrap_ci(
     scores: ArrayLike,
     strata: ArrayLike | None = None,
     *,
-    statistic: Callable[..., FloatArray] = iqm,
     n_boot: int = 2000,
     confidence: float = 0.95,
     seed: int = 0,
 ) -> tuple[float, float]:
-    """Percentile confidence interval of ``statistic`` by a stratified bootstrap.
-
-    Each bootstrap sample draws, within every stratum independently and with
-    replacement, as many scores as the stratum holds, so the strata keep their
-    sizes (as Agarwal et al. 2021 resample runs within each task). A stratum of
-    one run cannot vary when resampled within itself, so strata of one run are
-    pooled into one stratum (one learner per subgoal pattern would otherwise
-    give an interval of zero width).
+    """Percentile confidence interval of the IQM of ``scores``, by rliable's stratified bootstrap over the
+    strata of :func:`runs_by_task` (the learners' subgoal patterns).
 
     Args:
         scores: one score per run, shape ``[n]``.
         strata: a label per run (e.g. its subgoal pattern); None = a single stratum.
-        statistic: called as ``statistic(samples, axis=-1)`` on ``[n_boot, n]``.
         n_boot: bootstrap samples.
         confidence: coverage of the interval.
         seed: seed of the resampling; the interval is reproducible given it.
 
     Examples:
         >>> low, high = stratified_bootstrap_ci(np.arange(100.0), seed=1)
-        >>> bool(low < float(iqm(np.arange(100.0))) < high)
+        >>> bool(low < iqm(np.arange(100.0)) < high)
         True
     """
     x = np.asarray(scores, dtype=np.float64).ravel()
     if x.size == 0:
         return float("nan"), float("nan")
-    labels = np.zeros(x.size, dtype=np.int64) if strata is None else np.asarray(strata).ravel()
-    if labels.size != x.size:
-        raise ValueError(f"{labels.size} strata labels for {x.size} scores")
-    rng = np.random.default_rng(seed)
-    _, codes, counts = np.unique(labels, return_inverse=True, return_counts=True)
-    codes = np.where(counts[codes] == 1, -1, codes)  # strata of one run: pooled into stratum -1
-    parts = []
-    for label in np.unique(codes):
-        members = np.flatnonzero(codes == label)
-        parts.append(members[rng.integers(0, members.size, size=(n_boot, members.size))])
-    samples = x[np.concatenate(parts, axis=1)]
-    values = np.asarray(statistic(samples, axis=-1), dtype=np.float64)
-    tail = 100 * (1 - confidence) / 2
-    low, high = np.percentile(values, [tail, 100 - tail])
-    return float(low), float(high)
+    interval = bootstrap_ci(
+        runs_by_task(x, strata),
+        _iqm_of_replicate,
+        n_boot=n_boot,
+        confidence=confidence,
+        seed=seed,
+    )
+    return float(interval[0, 0]), float(interval[1, 0])
 
 
 def probability_of_improvement(x: ArrayLike, y: ArrayLike, *, lower_is_better: bool = False) -> float:
-    """P(X improves on Y) for a random run of each, counting ties as one half.
-
-    From the definition of Agarwal et al. (2021) for one task:
-    ``(1 / (n m)) * sum_i sum_j S(x_i, y_j)`` with ``S = 1`` if ``x_i`` is better than
-    ``y_j``, ``1/2`` if equal, ``0`` otherwise. Computed from mid-ranks of the pooled
-    sample (the Mann-Whitney U statistic), in ``O((n + m) log(n + m))``.
+    """P(X improves on Y) for a random run of each, ties counting one half: rliable's
+    ``probability_of_improvement`` on one task (the Mann-Whitney U statistic over ``n m`` pairs).
 
     Examples:
         >>> probability_of_improvement([3, 4], [1, 2])
         1.0
         >>> probability_of_improvement([1, 2], [1, 2])
         0.5
+        >>> probability_of_improvement([1, 2], [3, 4], lower_is_better=True)
+        1.0
     """
     a = np.asarray(x, dtype=np.float64).ravel()
     b = np.asarray(y, dtype=np.float64).ravel()
     if a.size == 0 or b.size == 0:
         return float("nan")
-    ranks = sps.rankdata(np.concatenate([a, b]))
-    greater = ranks[: a.size].sum() - a.size * (a.size + 1) / 2  # pairs x > y, ties halved
-    p_greater = greater / (a.size * b.size)
-    return float(1 - p_greater if lower_is_better else p_greater)
+    sign = -1.0 if lower_is_better else 1.0
+    return float(metrics.probability_of_improvement(sign * a[:, None], sign * b[:, None]))
+
+
+def performance_profile(
+    scores: Mapping[str, ArrayLike],
+    strata: Mapping[str, ArrayLike],
+    taus: ArrayLike,
+    *,
+    lower_is_better: bool = False,
+    n_boot: int = 500,
+    confidence: float = 0.95,
+    seed: int = 0,
+) -> dict[str, tuple[FloatArray, FloatArray]]:
+    """rliable's performance profiles (score distributions): for each method, the fraction of runs whose
+    score is better than each ``tau`` (above it, or below it when lower is better), with its stratified
+    bootstrap interval (``[2, len(taus)]``).
+
+    Examples:
+        >>> profile, band = performance_profile({"A": [1.0, 2.0, 3.0, 4.0]}, {"A": None}, [0.5, 2.5])["A"]
+        >>> profile.tolist(), band.shape
+        ([1.0, 0.5], (2, 2))
+    """
+    tau = np.asarray(taus, dtype=np.float64)
+
+    def fraction(matrix: FloatArray) -> FloatArray:
+        values = matrix.reshape(-1, 1)
+        return np.mean(values < tau if lower_is_better else values > tau, axis=0)
+
+    out = {}
+    for k, (name, x) in enumerate(scores.items()):
+        matrix = runs_by_task(x, strata.get(name))
+        band = bootstrap_ci(matrix, fraction, n_boot=n_boot, confidence=confidence, seed=seed + k)
+        out[name] = (fraction(matrix), band)
+    return out
+
+
+def curve_band(
+    curves: ArrayLike,
+    strata: ArrayLike | None = None,
+    *,
+    points: int = 100,
+    n_boot: int = 500,
+    confidence: float = 0.95,
+    seed: int = 0,
+) -> tuple[npt.NDArray[np.int64], FloatArray, FloatArray]:
+    """The mean learning curve across learners and its stratified-bootstrap band (rliable, runs resampled
+    within each subgoal pattern at each point), at ``points`` evenly spaced columns at most.
+
+    Args:
+        curves: ``[n_learners, n_columns]``.
+        strata: each learner's stratum (its subgoal pattern), as in :func:`runs_by_task`.
+        points: the most columns the band is computed at (the bootstrap costs ``n_boot`` x points).
+        n_boot: bootstrap samples.
+        confidence: coverage of the band.
+        seed: seed of the resampling.
+
+    Returns:
+        The columns (0-based), the mean there, and the band ``[2, columns]`` (lower, upper).
+
+    Examples:
+        >>> columns, mean, band = curve_band(np.arange(12.0).reshape(4, 3), points=2, n_boot=100)
+        >>> columns.tolist(), mean.tolist(), band.shape
+        ([0, 2], [4.5, 6.5], (2, 2))
+    """
+    x = np.asarray(curves, dtype=np.float64)
+    columns = np.unique(np.linspace(0, x.shape[1] - 1, min(points, x.shape[1])).round().astype(np.int64))
+    matrix = runs_by_task(x[:, columns], strata)
+    mean = matrix.mean(axis=(0, 1))
+    if x.shape[0] < 2:
+        return columns, mean, np.stack([mean, mean])
+    band = bootstrap_ci(matrix, lambda m: m.mean(axis=(0, 1)), n_boot=n_boot, confidence=confidence, seed=seed)
+    return columns, mean, band

@@ -4,7 +4,8 @@ Layout of a results directory::
 
     results_dir/
       config.json                      what was run: domain, methods, config, seed,
-                                       chunk layout, package versions
+                                       chunk layout, package versions; the command,
+                                       its settings and the code's version (provenance)
       .lock                            held (``flock``) by the process running the sweep
       chunks/<method>/<index>.parquet  one finished chunk, long format, one row per
                                        (learner, episode)
@@ -29,6 +30,7 @@ import json
 import os
 import platform
 import re
+import subprocess
 import uuid
 from collections.abc import Iterator, Mapping, Sequence
 from importlib import metadata
@@ -63,6 +65,7 @@ IDENTITY_FIELDS = ("domain", "methods", "config", "seed", "chunk_size", "n_episo
 __all__ = [
     "ResultsStore",
     "check_method_name",
+    "code_version",
     "collect_versions",
     "diff_fields",
     "load_frame",
@@ -105,6 +108,33 @@ def collect_versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             versions[package] = "not installed"
     return versions
+
+
+def code_version() -> dict[str, str]:
+    """This package's version, and the git commit of its source when it runs from a git checkout
+    (``+dirty`` when tracked files differ from it), for ``config.json``'s provenance.
+
+    Examples:
+        >>> sorted(code_version())[-1]
+        'version'
+    """
+    out = {"version": metadata.version("torchrl_subgoal")}
+    source = Path(__file__).resolve().parents[2]
+    try:
+        commit = subprocess.run(
+            ["git", "-C", str(source), "rev-parse", "--verify", "HEAD"], capture_output=True, text=True, timeout=10
+        )
+        if commit.returncode == 0 and (source / "torchrl_subgoal").is_dir() and (source / "pyproject.toml").is_file():
+            status = subprocess.run(
+                ["git", "-C", str(source), "status", "--porcelain", "--untracked-files=no"],
+                capture_output=True,
+                text=True,
+                timeout=10,
+            )
+            out["commit"] = commit.stdout.strip() + ("+dirty" if status.stdout.strip() else "")
+    except (OSError, subprocess.SubprocessError):
+        pass  # no git here: the version alone
+    return out
 
 
 def to_json_data(value: Any, what: str = "config") -> Any:

@@ -27,7 +27,7 @@ import multiprocessing as mp
 import os
 import pickle
 import queue as queue_module
-import socket
+import sys
 import threading
 import time
 import warnings
@@ -336,16 +336,6 @@ def _execute_chunk(run_chunk: RunChunk, chunk: Chunk, config: Mapping[str, Any])
     return table
 
 
-def _execute_chunk_ray(
-    run_chunk: RunChunk, chunk: Chunk, config: Mapping[str, Any], progress_queue: Any
-) -> EpisodeTable:
-    _limit_threads()
-    progress = _ThrottledProgress(chunk.name, progress_queue.put_nowait)
-    table = run_chunk(chunk, config, progress)
-    progress.flush()
-    return table
-
-
 def _failure(chunk: Chunk, exc: BaseException, note: str = "") -> ChunkFailedError:
     """The error for a chunk whose ``run_chunk`` raised; :meth:`Sweep.run` adds what to do next."""
     reason = " ".join(str(exc).split()).rstrip(".") or "(no message)"  # one line, however the cause wrote it
@@ -448,111 +438,23 @@ def _wait_for_exit(process: Any, grace: float = 2.0) -> None:
         time.sleep(0.01)
 
 
-def check_ray_address(timeout: float = 10.0) -> None:
-    """Refuse at once a ``RAY_ADDRESS`` (``host:port``) where nothing answers: Ray itself retries for minutes.
-
-    Raises:
-        BackendUnavailableError: naming the address, the reason and what to do.
-
-    Examples:
-        >>> from unittest import mock
-        >>> with mock.patch.dict(os.environ, {"RAY_ADDRESS": "127.0.0.1:1"}):  # nothing listens on port 1
-        ...     check_ray_address()
-        Traceback (most recent call last):
-        ...
-        torchrl_subgoal.experiments.sweep.BackendUnavailableError: RAY_ADDRESS=127.0.0.1:1: no Ray cluster answers ...
-    """
-    address = os.environ.get("RAY_ADDRESS", "")
-    if not address or address in ("local", "auto") or "://" in address:
-        return
-    host, _, port = address.rpartition(":")
-    try:
-        socket.create_connection((host.strip("[]") or "127.0.0.1", int(port)), timeout=timeout).close()
-    except (OSError, ValueError) as exc:
-        reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
-        raise BackendUnavailableError(
-            f"RAY_ADDRESS={address}: no Ray cluster answers there ({reason}); start it (ray start --head) or "
-            "set RAY_ADDRESS to its head's HOST:PORT (unset, the sweep uses a cluster running on this machine or "
-            "starts one)"
-        ) from None
-
-
-def _connect_ray(workers: int) -> tuple[Any, bool]:
-    """Import Ray and connect; returns (ray module, whether we started the instance)."""
-    try:
-        import ray
-    except ImportError as exc:
-        raise ImportError("backend='ray' needs Ray: pip install 'torchrl_subgoal[ray]'") from exc
-    if ray.is_initialized():
-        return ray, False
-    if os.environ.get("RAY_ADDRESS") == "local":  # a fresh instance, whatever else runs here
-        ray.init(address="local", num_cpus=max(workers, 1), include_dashboard=False)
-        return ray, True
-    try:
-        # RAY_ADDRESS when set, else a cluster already running on this machine.
-        ray.init(address="auto")
-    except ConnectionError:
-        if os.environ.get("RAY_ADDRESS"):
-            raise
-        ray.init(address="local", num_cpus=max(workers, 1), include_dashboard=False)
-        return ray, True
-    return ray, False
-
-
-def _run_ray(
-    chunks: Sequence[Chunk],
-    run_chunk: RunChunk,
-    config: Mapping[str, Any],
-    bar: _ProgressBar,
-    workers: int,
-) -> Finished:
-    ray, started = _connect_ray(workers)
-    pending: list[Any] = []
-    progress_queue = None
-    try:
-        from ray.util.queue import Queue
-
-        progress_queue = Queue(actor_options={"num_cpus": 0})  # never waits for a free CPU
-        task = ray.remote(num_cpus=1, max_retries=RAY_RETRIES)(_execute_chunk_ray)
-        config_ref = ray.put(dict(config))
-        refs = {task.remote(run_chunk, chunk, config_ref, progress_queue): chunk for chunk in chunks}
-        pending = list(refs)
-        error: ChunkFailedError | None = None
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1, timeout=0.2)
-            size = progress_queue.qsize()
-            messages = progress_queue.get_nowait_batch(size) if size else []
-            for name, k in messages:
-                bar.add(name, k)
-            for ref in done:
-                try:
-                    table = ray.get(ref)
-                except ray.exceptions.TaskCancelledError:
-                    continue
-                except ray.exceptions.RayError as exc:
-                    if error is None:
-                        # a task's own exception, without Ray's wrapping traceback text; else its worker
-                        # or node died each time Ray ran it
-                        crashed = not isinstance(exc, ray.exceptions.RayTaskError)
-                        note = f" (Ray ran it {RAY_RETRIES + 1} times)" if crashed else ""
-                        error = _failure(refs[ref], getattr(exc, "cause", None) or exc, note)
-                        error.__cause__ = exc
-                        for other in pending:
-                            ray.cancel(other)
-                    continue
-                yield refs[ref], table
-        if error is not None:
-            raise error
-    finally:
-        for other in pending:
-            ray.cancel(other, force=True)
-        if progress_queue is not None:
-            progress_queue.shutdown()
-        if started:
-            ray.shutdown()
-
-
 # -- the sweep -------------------------------------------------------------------------------
+
+
+def _warm_up(warm: Callable[[], object]) -> None:
+    """Run ``warm`` (see :class:`Sweep`), saying what it does and how long it took."""
+    start = time.perf_counter()
+    print(
+        "compiling the engine's numba kernels (some 20 s on a first run after an install; "
+        "later runs load them from numba's cache) ...",
+        file=sys.stderr,
+        flush=True,
+    )
+    try:
+        warm()
+    except Exception:
+        return  # the chunks run anyway and say what is wrong
+    print(f"engine ready in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
 
 
 class Sweep:
@@ -573,6 +475,15 @@ class Sweep:
             and the progress bar gets a total from the start.
         overwrite: discard results of a different experiment in ``results_dir``
             instead of raising :class:`ConfigMismatchError`.
+        runtime: JSON-serialisable settings that change how chunks run but not their results
+            (a learner recipe's ``"logger"``): ``run_chunk`` gets them with ``config``; recorded in
+            ``config.json``, but a resumed sweep may change them.
+        provenance: what made the results (a recipe's command, its settings, the code's version),
+            recorded in ``config.json`` when the sweep starts; not compared when it resumes.
+        warm_up: called once before the first pending chunk runs, with a line on stderr before and after:
+            what compiles the chunks' numba kernels in this process, so that worker processes load them
+            from numba's cache instead of each compiling them at 0% of the progress bar. If it raises, the
+            chunks run anyway (and report their own failure).
 
     Re-running the same sweep resumes: finished chunks are kept, temporary files of an
     interrupted write are removed, corrupt chunks are reported
@@ -601,6 +512,9 @@ class Sweep:
         *,
         n_episodes: int | None = None,
         overwrite: bool = False,
+        runtime: Mapping[str, Any] | None = None,
+        provenance: Mapping[str, Any] | None = None,
+        warm_up: Callable[[], object] | None = None,
     ) -> None:
         names = [m.name for m in methods]
         if not methods or len(set(names)) != len(names):
@@ -612,6 +526,9 @@ class Sweep:
         self.methods = list(methods)
         self.run_chunk = run_chunk
         self.config: dict[str, Any] = to_json_data(dict(config))
+        self.runtime: dict[str, Any] = to_json_data(dict(runtime or {}), "runtime")
+        self.provenance: dict[str, Any] = to_json_data(dict(provenance or {}), "provenance")
+        self.warm_up = warm_up
         self.seed = int(seed)
         self.chunk_size = int(chunk_size)
         self.n_episodes = n_episodes
@@ -630,6 +547,8 @@ class Sweep:
             "n_episodes": self.n_episodes,
             "chunks": [c.to_json() for c in self.chunks],
             "versions": collect_versions(),
+            **({"runtime": self.runtime} if self.runtime else {}),
+            **({"provenance": self.provenance} if self.provenance else {}),
         }
 
     def _check_directory(self) -> dict[str, Any] | None:
@@ -683,7 +602,10 @@ class Sweep:
                     stacklevel=3,
                 )
             return
-        if stored is not None and stored == requested:
+        told = ("runtime", "provenance")  # how this attempt runs, who asked: not the experiment
+        if stored is not None and {k: v for k, v in stored.items() if k not in told} == {
+            k: v for k, v in requested.items() if k not in told
+        }:
             return  # nothing finished yet, the same experiment: keep its config.json
         self.store.clear()
         self.store.write_manifest(requested)
@@ -759,21 +681,28 @@ class Sweep:
                     "run_chunk must be picklable: define it at module level in an importable module"
                 ) from exc
         if backend == "ray":
+            from torchrl_subgoal.experiments._ray import check_ray_address
+
             check_ray_address()  # before anything is written
         self._check_directory()  # before the lock file is created in a directory that is not ours
         with self.store.lock():
             self._open_store()
             self.store.clean_temp_files()
             todo = self.pending()
+            if todo and self.warm_up is not None:
+                _warm_up(self.warm_up)
             if todo:
                 bar = _ProgressBar(todo, self.n_episodes, progress)
+                config = {**self.config, **self.runtime}
                 finished: Finished
                 if backend == "ray":
-                    finished = _run_ray(todo, self.run_chunk, self.config, bar, workers)
+                    from torchrl_subgoal.experiments._ray import run_ray
+
+                    finished = run_ray(todo, self.run_chunk, config, bar, workers)
                 elif workers == 0:
-                    finished = _run_inline(todo, self.run_chunk, self.config, bar)
+                    finished = _run_inline(todo, self.run_chunk, config, bar)
                 else:
-                    finished = _run_local(todo, self.run_chunk, self.config, bar, workers)
+                    finished = _run_local(todo, self.run_chunk, config, bar, workers)
                 try:
                     for chunk, table in finished:
                         table = self._check_table(chunk, table)

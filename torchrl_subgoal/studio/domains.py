@@ -205,7 +205,7 @@ class StudioDomain:
         map_check: ``map_check(predicate, map_name, config)``, an extra check on the chosen map.
         limits: bounds of the "Try it" settings ``episodes``, ``learners``, ``max_steps`` (none: no "Try it").
         recipe: the recipe that trains with a saved subgoal file, with any options it needs before
-            ``--subgoals FILE`` (``"recipes/train.py --algo ppo --domain NAME"``).
+            ``--subgoals FILE`` (``"torchrl-subgoal train --algo ppo --domain NAME"``).
         to_page: a loaded predicate as the studio edits it; its file form by default.
         from_page: a subgoal the studio sent (without its name) as the file's predicate, and where it is
             (for messages); the identity by default.

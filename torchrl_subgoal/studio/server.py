@@ -422,7 +422,7 @@ def _source(data: Any) -> str:
 
 def _recipe(domain: Domain, path: Path, map_name: str = "") -> str:
     """The command that trains with the file (on the map it was drawn on)."""
-    command = f"python {domain.recipe} --subgoals {path}"
+    command = f"{domain.recipe} --subgoals {path}"
     return f"{command} --map {domain.maps[map_name]}" if map_name else command
 
 

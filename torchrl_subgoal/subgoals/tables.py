@@ -10,10 +10,13 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 
-from torchrl_subgoal._kernels.regions import advance_regions, advance_with_conditions
+from torchrl_subgoal._kernels import NUMBA
 from torchrl_subgoal.subgoals.errors import SubgoalFileError, _where
 from torchrl_subgoal.subgoals.predicates import Condition, Predicate
 from torchrl_subgoal.subgoals.series import SubgoalSeries
+
+if NUMBA:  # the compiled region search; without numba, the torch one (advance_eager)
+    from torchrl_subgoal._kernels.regions import advance_regions, advance_with_conditions
 
 
 def _misfit(pred: Predicate, size: int, one_hot: bool) -> str | None:
@@ -248,11 +251,11 @@ class SubgoalTables:
     ) -> torch.Tensor:
         """Next abstract state after observing ``observation`` (and ``tensordict``) in abstract state ``z``.
 
-        On the CPU this is one compiled region search (the conditions called first, once each);
-        elsewhere :meth:`advance_eager`.
+        On the CPU with numba installed this is one compiled region search (the conditions called first,
+        once each); elsewhere :meth:`advance_eager`.
         """
         self._check_z(z)
-        if z.device.type != "cpu":
+        if z.device.type != "cpu" or not NUMBA:
             return self.advance_eager(z, observation, tensordict)
         out = np.empty((self._n, 1), dtype=np.int64)
         self.advance_into(z.numpy().reshape(self._n, 1), observation, tensordict, out)
@@ -463,7 +466,7 @@ class StateAggregation:
         search compiled on the CPU."""
         if observation is None:
             raise ValueError("a state aggregation needs the observation it reads")
-        if self.regions is not None and z.device.type == "cpu":
+        if self.regions is not None and z.device.type == "cpu" and NUMBA:
             n = z.numel()
             if n and not 0 <= int(z.min()) <= int(z.max()) < self.num_states:  # the kernel indexes by z unchecked
                 raise ValueError(

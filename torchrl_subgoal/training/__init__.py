@@ -33,6 +33,7 @@ Every block trains ``len(seeds)`` learners as one program (one learner is a batc
 
 from __future__ import annotations
 
+from importlib.util import find_spec
 from pathlib import Path
 from typing import Literal
 
@@ -141,14 +142,25 @@ __all__ = [
 
 
 def experiment_logger(
-    log_dir: str | Path, name: str, backend: Literal["csv", "tensorboard", "none"] = "csv", *, fresh: bool = False
+    log_dir: str | Path,
+    name: str,
+    backend: Literal["csv", "tensorboard", "wandb", "none"] = "csv",
+    *,
+    fresh: bool = False,
 ) -> Logger | None:
-    """A TorchRL logger writing under ``log_dir/name``: CSV (default), TensorBoard, or none.
+    """A TorchRL logger writing under ``log_dir/name``: CSV (default), TensorBoard, Weights & Biases, or none.
+
+    The learners log ``episode_length``, ``episode_return`` and ``success`` per collected batch, at the
+    frames collected so far (the ``logger`` argument of ``train_a2c`` and the others); the recipes'
+    ``--logger`` picks the backend, one log per learner under ``RESULTS/logs``.
 
     Args:
         log_dir: the directory of every learner's log.
-        name: this learner's (its subdirectory).
-        backend: ``"csv"``, ``"tensorboard"`` or ``"none"``.
+        name: this learner's (its subdirectory; the W&B run's name).
+        backend: ``"csv"`` (TorchRL's ``CSVLogger``: ``scalars/*.csv``), ``"tensorboard"``
+            (``TensorboardLogger``: event files; the ``tensorboard`` extra), ``"wandb"`` (``WandbLogger``, in
+            ``log_dir``; the ``wandb`` extra; ``WANDB_MODE=offline`` logs without an account, ``wandb sync``
+            uploads later) or ``"none"``.
         fresh: start the learner's log afresh: remove what an earlier attempt of it logged (its
             ``scalars/*.csv``, its TensorBoard event files), so a learner run again from its start
             (a resumed sweep reruns the learners it had not finished) logs one series, not the
@@ -172,9 +184,20 @@ def experiment_logger(
     if backend == "none":
         return None
     if backend == "tensorboard":
-        try:
-            from torchrl.record.loggers import TensorboardLogger
-        except ImportError as exc:
-            raise ValueError(f"logger 'tensorboard' needs the tensorboard package ({exc})") from None
+        if find_spec("tensorboard") is None:
+            raise ValueError("logger 'tensorboard' needs the tensorboard package: pip install tensorboard")
+        from torchrl.record.loggers import TensorboardLogger
+
         return TensorboardLogger(exp_name=name, log_dir=str(log_dir))
+    if backend == "wandb":
+        if find_spec("wandb") is None:
+            raise ValueError("logger 'wandb' needs the wandb package: pip install wandb")
+        from torchrl.record.loggers import WandbLogger
+
+        # one run per learner, grouped by the results directory; a learner after another in one process
+        # finishes the one before
+        group = Path(log_dir).resolve().parent.name
+        return WandbLogger(
+            exp_name=name, save_dir=str(log_dir), project="torchrl_subgoal", group=group, reinit="finish_previous"
+        )
     return CSVLogger(exp_name=name, log_dir=str(log_dir))

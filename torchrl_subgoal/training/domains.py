@@ -25,7 +25,7 @@ __all__ = ["A2CDomain", "LearnerDomain"]
 
 @dataclass(frozen=True)
 class LearnerDomain:
-    """What the learner recipes (``recipes/train.py``, ``recipes/a2c.py``) need of a domain.
+    """What the learner recipes (``torchrl-subgoal train``, ``recipes/a2c.py``) need of a domain.
 
     Attributes:
         name: the domain's name (subgoal files' ``domain`` field).

@@ -2,7 +2,7 @@
 
 ``LEARNERS["ppo"].train(make_env, config, seeds=..., shaping=...)`` is
 :func:`~torchrl_subgoal.training.train_ppo`; a sweep over learners (the
-``recipes/train.py`` recipe) reads its algorithm here and checks, before
+``torchrl-subgoal train`` recipe) reads its algorithm here and checks, before
 anything runs, that the env's actions suit it (:func:`check_actions`).
 """
 
@@ -68,7 +68,7 @@ class Learner:
         return self.name.upper()
 
 
-#: Every building block, by the name ``recipes/train.py --algo`` takes.
+#: Every building block, by the name ``torchrl-subgoal train --algo`` takes.
 LEARNERS: dict[str, Learner] = {
     learner.name: learner
     for learner in (

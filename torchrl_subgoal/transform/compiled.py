@@ -11,18 +11,21 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
-from torchrl_subgoal._kernels.shaping import (
-    LOOKUP_SHAPING,
-    NO_SHAPING,
-    REGION_SHAPING,
-    START_VALUE,
-    advance_and_shape,
-    finite_inputs,
-    shape_step,
-)
+from torchrl_subgoal._kernels import NUMBA
 from torchrl_subgoal.subgoals import RegionTables, SubgoalTables
 from torchrl_subgoal.transform.setup import NO_TABLE, BatchSetup, PotentialKernelState, Settings
 from torchrl_subgoal.transform.transitions import transition
+
+if NUMBA:  # without numba the transform never takes this path (setup.compiles)
+    from torchrl_subgoal._kernels.shaping import (
+        LOOKUP_SHAPING,
+        NO_SHAPING,
+        REGION_SHAPING,
+        START_VALUE,
+        advance_and_shape,
+        finite_inputs,
+        shape_step,
+    )
 
 __all__ = ["AbstractStates", "ShapingKernelState", "StepInputs", "check_finite", "compiled_step"]
 

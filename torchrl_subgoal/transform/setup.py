@@ -13,6 +13,7 @@ from tensordict.nn import TensorDictModuleBase
 from tensordict.utils import NestedKey
 from torchrl.data import OneHot, TensorSpec
 
+from torchrl_subgoal._kernels import NUMBA
 from torchrl_subgoal.loss import SubgoalValueLoss, ValueUpdate
 from torchrl_subgoal.potentials import NaivePotential, TabularPotential
 from torchrl_subgoal.subgoals import (
@@ -355,7 +356,13 @@ def compiles(backend: str, potential: TensorDictModuleBase, update: ValueUpdate 
         >>> compiles("auto", TabularPotential(3, monotone=True), None)
         True
     """
-    why = "backend='torch'" if backend == "torch" else compiled_potential(potential, update.loss if update else None)
+    why = (
+        "backend='torch'"
+        if backend == "torch"
+        else "numba is not installed (pip install numba)"
+        if not NUMBA
+        else compiled_potential(potential, update.loss if update else None)
+    )
     if why is not None and backend == "compiled":
         raise TypeError(f"SubgoalPotentialTransform(backend='compiled'): {why}; use backend='torch' or 'auto'")
     return why is None

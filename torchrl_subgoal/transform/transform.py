@@ -12,6 +12,7 @@ from tensordict.utils import NestedKey
 from torchrl.data import Composite, TensorSpec
 from torchrl.envs.transforms import Transform
 
+from torchrl_subgoal._kernels import NUMBA
 from torchrl_subgoal.loss import ValueUpdate
 from torchrl_subgoal.subgoals import StateAggregation, SubgoalSeries, SubgoalTables
 from torchrl_subgoal.transform import compiled, keys, setup, stored
@@ -76,7 +77,7 @@ class SubgoalPotentialTransform(Transform):
             refused).
         backend: ``"compiled"``: numba kernels (a tabular or naive potential on the CPU; anything else is a
             ``TypeError`` saying why); ``"torch"``: torch operations only (any potential, any device); ``"auto"``
-            (default): compiled when possible. Both agree.
+            (default): compiled when possible (numba installed: the ``fast`` extra). Both agree.
 
     Examples:
         >>> from torchrl.envs import TransformedEnv
@@ -204,7 +205,7 @@ class SubgoalPotentialTransform(Transform):
         abstraction = self.subgoals.compile(learner, batch_shape, n_learners, layout, self.observation_key)
         ancestors = setup.monotone_ancestors(self.potential, self.subgoals, learner, n_learners)
         batch = BatchSetup(
-            batch_shape, abstraction, learner, compiled_search=self.backend != "torch", ancestors=ancestors
+            batch_shape, abstraction, learner, compiled_search=self.backend != "torch" and NUMBA, ancestors=ancestors
         )
         if setup.compiles(self.backend, self.potential, self.value_update):
             batch.use_kernels(self.potential, self._settings, self.value_update, online)
