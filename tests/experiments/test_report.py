@@ -262,3 +262,20 @@ def test_the_reports_robust_statistics_are_rliables(four_rooms_dir: Path) -> Non
     for pair in summary["asymptotic"]["probability_of_improvement"]:  # fewer steps is better: negated
         x, y = -finals[pair["first"]][:, None], -finals[pair["second"]][:, None]
         assert pair["p"] == pytest.approx(float(metrics.probability_of_improvement(x, y)))
+
+
+def test_learning_curves_of_frames_are_drawn_against_environment_steps(tmp_path, monkeypatch) -> None:
+    """x in frames when each column is a batch of frames; the paper's unit otherwise."""
+    import numpy as np
+
+    from torchrl_subgoal.experiments import plots
+
+    drawn = []
+    monkeypatch.setattr(plots, "save_figure", lambda fig, path: drawn.append(fig.axes[0]))
+    curves = {"A2C": np.ones((3, 5)), "HRS": np.zeros((3, 5))}
+    plots.plot_learning_curves(curves, tmp_path / "a.png", unit="update", frames_per_unit=256, n_boot=20)
+    plots.plot_learning_curves(curves, tmp_path / "b.png", unit="episode", n_boot=20)
+    frames, episodes = drawn
+    assert frames.get_xlabel() == "frames (environment steps)" and episodes.get_xlabel() == "episode"
+    assert frames.lines[0].get_xdata().tolist() == [256, 512, 768, 1024, 1280]
+    assert episodes.lines[0].get_xdata().tolist() == [1, 2, 3, 4, 5]
