@@ -115,6 +115,27 @@ def test_monotone_potential_reaches_the_shaped_learners_table(
     assert made[0] is None and made[1].monotone == monotone
 
 
+def test_the_progress_prior_is_in_the_envs_reward_units(tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """--progress-scale is the goal's worth in the env's units; the learner's reward_scale applies to it as to the
+    reward (DQN on four-rooms with a step cost learns from rewards x 0.01)."""
+    from torchrl_subgoal.experiments import learners
+    from torchrl_subgoal.experiments.store import Chunk
+
+    class Made(Exception):
+        pass
+
+    def recording(*args, **kwargs):
+        raise Made(kwargs["progress_scale"])
+
+    monkeypatch.setattr(learners, "shaping_parts", recording)
+    cfg = recipe_config("dqn", "four_rooms_step", methods="DQN,HRS", progress_scale=2.0, results=str(tmp_path))
+    plan = learner_plan(cfg, "dqn")
+    hrs = next(spec for spec in plan.specs if spec.name == "HRS")
+    with pytest.raises(Made) as made:
+        learners.run_learner_chunk(Chunk("HRS", 0, ((hrs.patterns[0], 0),), seed=1), plan.config, lambda done: None)
+    assert made.value.args[0] == pytest.approx(2.0 * 0.01)
+
+
 def test_the_learner_sees_z_by_its_own_default_unless_told() -> None:
     """DQN reads z whenever shaped (its default), A2C's and PPO's critics do; --sees-subgoal True, False, None
     or critic overrides."""

@@ -158,7 +158,8 @@ class LearnerRecipeConfig(RecipeConfig):
     progress_scale: float = setting(
         1.0,
         "the learned tables (HRS, RRS) start at the subgoals' progress prior of this scale, the goal's worth in "
-        "the learner's reward units (after --reward-scale); 0 starts them at 0; SRS shapes with the prior",
+        "the env's reward units (the learner's --reward-scale applies to it as to the reward); 0 starts them at 0; "
+        "SRS shapes with the prior",
     )
     frozen_potential: str = setting(
         "",
@@ -512,7 +513,8 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
             zero_terminal_potential=config["zero_terminal_potential"],
             start_potential=config["start_potential"],
             monotone_potential=config.get("monotone_potential", False),
-            progress_scale=config.get("progress_scale", 0.0),
+            # in the env's reward units: the transform shapes the reward after the learner's reward_scale
+            progress_scale=config.get("progress_scale", 0.0) * settings.reward_scale,
         )
         frozen = config.get("frozen_potential", {}).get(pattern) if method.shaping == "subgoals" else None
         if parts is not None and frozen is not None:
