@@ -177,7 +177,8 @@ def main(argv: list[str] | None = None) -> int:
         "--sees-subgoal",
         choices=("default", "yes", "no"),
         default="default",
-        help="the shaped learners' networks also read z (default: the learner's, DQN yes, the others no)",
+        help="the shaped learners' networks also read z (default: the learner's: DQN's Q-network, A2C's and PPO's "
+        "critic)",
     )
     parser.add_argument(
         "--value-lr", type=float, default=0.0, help="the potential's step size (0: the learner's default)"
