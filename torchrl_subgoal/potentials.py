@@ -234,8 +234,10 @@ class TabularPotential(Potential):
         Args:
             subgoals: one series (one table, or the same prior in every table of ``batch_shape``), or one
                 series per table.
-            scale: what reaching the goal is worth, in the learner's reward units; each subgoal's share
-                is ``scale / (n + 1)``.
+            scale: what reaching the goal is worth, in the units of the reward the transform shapes
+                (after any reward scaling of the learner); each subgoal's share is ``scale / (n + 1)``.
+                Keep it at the size of the task's rewards: with ``Φ = 0`` at the goal, the goal's step
+                takes back what the subgoals paid.
             batch_shape: the tables' batch shape (default: one per series given as a sequence, else shared).
             **kwargs: the other arguments of :class:`TabularPotential` (``envs_per_table``, keys...).
 
