@@ -16,7 +16,7 @@ import pytest
 import torch
 from torchrl.envs import TransformedEnv
 
-from torchrl_subgoal import domains, load_patterns
+from torchrl_subgoal import domains, load_patterns, registry
 from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.experiments import Chunk, EpisodeTable, MethodSpec, Sweep
@@ -44,7 +44,7 @@ CORE = (
 @pytest.fixture
 def corridor(monkeypatch: pytest.MonkeyPatch) -> ModuleType:
     """The docs' corridor domain, registered for this test only."""
-    monkeypatch.setattr(domains, "_REGISTRY", dict(domains._REGISTRY))
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
     spec = importlib.util.spec_from_file_location("adding_a_domain", TUTORIAL)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)

@@ -8,11 +8,13 @@ from pathlib import Path
 import pytest
 
 from torchrl_subgoal import SubgoalFileError, SubgoalSeries, load_patterns
+from torchrl_subgoal.envs import four_rooms
 from torchrl_subgoal.subgoals import (
     MAX_FILE_BYTES,
     MAX_SUBGOALS,
     Cell,
     parse_text,
+    pattern_from_data,
     patterns_from_data,
 )
 
@@ -104,7 +106,7 @@ def test_a_large_partial_order_is_read_in_reasonable_time() -> None:
     n = 300
     names = [f"s{i}" for i in range(n)]
     order = [[names[a], names[b]] for a in range(n) for b in range(a + 1, min(n, a + 20))]
-    series = SubgoalSeries.from_dict(
+    series = pattern_from_data(
         {"subgoals": {nm: {"cell": [i, 0]} for i, nm in enumerate(names)}, "order": order}, name="dag"
     )
     assert [series.successors(z) for z in (0, 1, n)] == [(0,), (1,), ()]
@@ -118,11 +120,11 @@ def test_duplicate_names_given_in_code_are_refused_too() -> None:
 def test_parsed_data_can_be_checked_without_a_file() -> None:
     """What a web upload does: parse the bytes it received, then build the patterns."""
     text = b'{"patterns": {"p": {"subgoals": [{"cell": [3, 6]}]}}}'
-    patterns = patterns_from_data(parse_text(text, "upload.json"), "upload.json", domain="four_rooms")
+    patterns = patterns_from_data(parse_text(text, "upload.json"), "upload.json", check=four_rooms.check_subgoal)
     assert patterns["p"].predicates == (Cell(3, 6),)
     with pytest.raises(SubgoalFileError, match=r"^upload\.json: pattern 'p': subgoals\[0\]\.cell: \(0, 0\) is a wall"):
         patterns_from_data(
-            parse_text(b"patterns: {p: [{cell: [0, 0]}]}", "upload.json"), "upload.json", domain="four_rooms"
+            parse_text(b"patterns: {p: [{cell: [0, 0]}]}", "upload.json"), "upload.json", check=four_rooms.check_subgoal
         )
 
 
@@ -132,4 +134,4 @@ def test_cycles_are_still_named() -> None:
         "order": [["c", "a"], ["a", "b"], ["b", "a"]],
     }
     with pytest.raises(SubgoalFileError, match="order: the order has a cycle through subgoal 'a'"):
-        SubgoalSeries.from_dict(body, name="p", source="f.yaml")
+        pattern_from_data(body, name="p", source="f.yaml")

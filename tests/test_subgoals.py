@@ -22,7 +22,7 @@ from torchrl_subgoal import (
     load_patterns,
     save_patterns,
 )
-from torchrl_subgoal.subgoals import Predicate, SubgoalTables, file_description
+from torchrl_subgoal.subgoals import Predicate, SubgoalTables, file_description, load_pattern
 
 
 def write(tmp_path: Path, data: object, name: str = "subgoals.yaml") -> Path:
@@ -136,7 +136,7 @@ def test_json_and_box_slice(tmp_path: Path) -> None:
         '{"patterns": {"fetch": {"subgoals": [{"box": {"centre": [0, 0, 0], "margin": 0.01, "slice": [6, 9]}}]}}}',
         "s.json",
     )
-    box = SubgoalSeries.from_file(path).predicates[0]
+    box = load_pattern(path).predicates[0]
     assert isinstance(box, Box) and box.box_dims == (6, 7, 8) and box.margin == (0.01,) * 3
 
 
@@ -204,9 +204,9 @@ def test_file_errors_name_file_pattern_and_field(tmp_path: Path, data: object, m
 def test_unknown_pattern_names_the_available_ones(tmp_path: Path) -> None:
     path = write(tmp_path, {"patterns": {"a": [{"cell": [1, 1]}], "b": [{"cell": [2, 2]}]}})
     with pytest.raises(SubgoalFileError, match=r"no pattern 'c'; available: \['a', 'b'\]"):
-        SubgoalSeries.from_file(path, "c")
+        load_pattern(path, "c")
     with pytest.raises(SubgoalFileError, match="holds 2 patterns"):
-        SubgoalSeries.from_file(path)
+        load_pattern(path)
 
 
 def test_missing_file(tmp_path: Path) -> None:
@@ -372,7 +372,7 @@ def test_condition_by_import_path_in_a_file(tmp_path: Path) -> None:
         "      - {call: 'tests.dict_env.at_door'}\n"
         "      - {cell: [3, 4]}\n"
     )
-    series = SubgoalSeries.from_file(path)
+    series = load_pattern(path)
     first, second = series.predicates[0], series.predicates[1]
     assert isinstance(first, Condition) and first.fn is _carrying
     assert isinstance(second, Condition) and second.path == "tests.dict_env:at_door"
@@ -383,7 +383,7 @@ def test_condition_by_import_path_in_a_file(tmp_path: Path) -> None:
 def test_condition_factory_with_args(tmp_path: Path) -> None:
     path = tmp_path / "factory.yaml"
     path.write_text("patterns:\n  p:\n    subgoals:\n      - {call: 'operator:itemgetter', args: {}}\n")
-    series = SubgoalSeries.from_file(path)
+    series = load_pattern(path)
     assert isinstance(series.predicates[0], Condition)
 
 

@@ -6,9 +6,10 @@ Aggregation" (IJCNN 2021): a person names a few ordered subgoals, and
 shaping reward for any TorchRL environment.
 """
 
-from torchrl_subgoal import domains  # noqa: F401  (the registry: subgoal files that name a domain are checked)
+from torchrl_subgoal import domains  # noqa: F401  (the registry's names; no plugin is imported)
 from torchrl_subgoal.loss import SubgoalValueLoss, ValueUpdate
 from torchrl_subgoal.potentials import NaivePotential, NeuralPotential, Potential, TabularPotential
+from torchrl_subgoal.registry import load_pattern, load_patterns
 from torchrl_subgoal.subgoals import (
     Box,
     Cell,
@@ -18,7 +19,6 @@ from torchrl_subgoal.subgoals import (
     StateAggregation,
     SubgoalFileError,
     SubgoalSeries,
-    load_patterns,
     save_patterns,
 )
 from torchrl_subgoal.transform import SubgoalKeys, SubgoalPotentialTransform
@@ -43,6 +43,7 @@ __all__ = [
     "TabularPotential",
     "ValueUpdate",
     "__version__",
+    "load_pattern",
     "load_patterns",
     "save_patterns",
 ]

@@ -41,7 +41,11 @@ def test_the_step_cost_variant_is_a_domain_of_its_own() -> None:
     assert step.defaults["dqn"] == dataclasses.replace(goal.defaults["dqn"], reward_scale=0.01)
     assert len(load_patterns(step.participants, domain="four_rooms_step")) == 10
     with pytest.raises(SubgoalFileError, match="is a wall"):
-        patterns_from_data({"patterns": {"p": {"subgoals": [{"cell": [0, 6]}]}}}, "mine.yaml", domain="four_rooms_step")
+        patterns_from_data(
+            {"patterns": {"p": {"subgoals": [{"cell": [0, 6]}]}}},
+            "mine.yaml",
+            check=domains.subgoal_check("four_rooms_step"),
+        )
 
 
 def test_the_recipe_runs_on_the_step_cost_variant(tmp_path) -> None:

@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 from tests.experiments import toy_domain
-from torchrl_subgoal import domains
+from torchrl_subgoal import registry
 from torchrl_subgoal.domains import Domain, register
 from torchrl_subgoal.experiments import Sweep, load_results, stats
 from torchrl_subgoal.experiments.plots import ReportMap
@@ -103,7 +103,7 @@ def test_domains_without_a_map_or_paper_get_notes(tmp_path: Path) -> None:
 def test_map_hooks_are_looked_up_by_domain_and_failures_only_cost_the_map(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(domains, "_REGISTRY", dict(domains._REGISTRY))  # the test's domains go with it
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))  # the test's domains go with it
     drawn: list[dict[str, Any]] = []
 
     def hook(ax: Any, patterns: Any, options: Any) -> None:
@@ -148,7 +148,7 @@ def test_a_sweep_named_after_its_recipe_draws_the_map_of_its_config_domain(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """recipes/a2c.py names its sweep a2c_four_rooms and stores ``"domain": "four_rooms"``."""
-    monkeypatch.setattr(domains, "_REGISTRY", dict(domains._REGISTRY))
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
     drawn: list[str] = []
     register(Domain("hooked2", parts=(ReportMap(lambda ax, patterns, options: drawn.extend(patterns)),)))
     config = toy_domain.toy_config(12) | {"domain": "hooked2"}

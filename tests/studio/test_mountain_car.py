@@ -9,7 +9,8 @@ from typing import Any
 from flask.testing import FlaskClient
 
 from torchrl_subgoal.envs import mountain_car
-from torchrl_subgoal.subgoals import Box, load_patterns
+from torchrl_subgoal import load_patterns
+from torchrl_subgoal.subgoals import Box
 
 
 def box(components: list[str], centre: list[float], margin: Any) -> dict[str, Any]:

@@ -10,7 +10,8 @@ import pytest
 from flask.testing import FlaskClient
 
 from torchrl_subgoal.envs import fetch
-from torchrl_subgoal.subgoals import Box, load_patterns
+from torchrl_subgoal import load_patterns
+from torchrl_subgoal.subgoals import Box
 
 
 def box(components: list[str], centre: list[float], margin: Any = 0.01, **extra: Any) -> dict[str, Any]:

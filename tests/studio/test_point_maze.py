@@ -10,7 +10,8 @@ import pytest
 from flask.testing import FlaskClient
 
 from torchrl_subgoal.envs import point_maze
-from torchrl_subgoal.subgoals import Circle, load_patterns
+from torchrl_subgoal import load_patterns
+from torchrl_subgoal.subgoals import Circle
 
 
 def drawing(maze: str, *patterns: tuple[str, list[tuple[float, float, float]]]) -> dict[str, Any]:

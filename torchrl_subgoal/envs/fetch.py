@@ -512,7 +512,7 @@ def human_patterns(path: str = PARTICIPANTS_FILE) -> dict[str, SubgoalSeries]:
         >>> len(patterns) >= 1, [len(series) for series in patterns.values()][0]
         (True, 2)
     """
-    return load_patterns(path)
+    return load_patterns(path, check=check_subgoal)
 
 
 def random_patterns(human: SubgoalSeries, num_patterns: int, seed: int) -> list[SubgoalSeries]:

@@ -37,7 +37,7 @@ from typing import Any
 from torchrl.envs import EnvBase
 
 from torchrl_subgoal.envs.gym_batch import gym_batch, require_gymnasium
-from torchrl_subgoal.subgoals import SubgoalSeries
+from torchrl_subgoal.subgoals import SubgoalSeries, load_pattern
 
 __all__ = ["ENV_ID", "MAX_EPISODE_STEPS", "SUBGOAL_FILE", "make_mountain_car", "mountain_car_subgoals"]
 
@@ -81,4 +81,4 @@ def mountain_car_subgoals() -> SubgoalSeries:
         >>> len(series), [p.to_dict()["box"]["dims"] for p in series.predicates]
         (2, [[0], [0, 1]])
     """
-    return SubgoalSeries.from_file(SUBGOAL_FILE, "swing_then_speed")
+    return load_pattern(SUBGOAL_FILE, "swing_then_speed")

@@ -267,9 +267,9 @@ def plot_pattern_maps(
     names = list(patterns)[:max_panels]
     left_out = len(patterns) - len(names)
     try:
-        from torchrl_subgoal.subgoals import SubgoalSeries
+        from torchrl_subgoal.subgoals import pattern_from_data
 
-        series = {n: SubgoalSeries.from_dict(patterns[n], name=n) for n in names}
+        series = {n: pattern_from_data(patterns[n], name=n) for n in names}
         cols = min(5, len(names))
         rows = math.ceil(len(names) / cols)
         fig = Figure(figsize=(2.6 * cols, 2.6 * rows))

@@ -40,7 +40,7 @@ from torchrl_subgoal.experiments.sweep import (
 )
 from torchrl_subgoal.methods import Method, random_patterns
 from torchrl_subgoal.potentials import NaivePotential
-from torchrl_subgoal.subgoals import Predicate, SubgoalFileError, SubgoalSeries
+from torchrl_subgoal.subgoals import Predicate, SubgoalFileError, SubgoalSeries, pattern_from_data
 from torchrl_subgoal.transform import SubgoalPotentialTransform
 
 __all__ = [
@@ -350,9 +350,7 @@ def chunk_patterns(chunk: Chunk, config: Mapping[str, Any]) -> tuple[list[Subgoa
     """
     names = sorted({pattern for pattern, _ in chunk.learners})
     sources = config.get("pattern_sources") or {}
-    series = [
-        SubgoalSeries.from_dict(config["patterns"][n], name=n, source=sources.get(n)) for n in names if n != "none"
-    ]
+    series = [pattern_from_data(config["patterns"][n], name=n, source=sources.get(n)) for n in names if n != "none"]
     return series, torch.tensor([names.index(p) for p, _ in chunk.learners])
 
 

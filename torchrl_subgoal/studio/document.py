@@ -10,7 +10,7 @@ plus an optional ``name``) and ``order`` (``null`` for the chain, else
 
 :func:`read_drawing` turns it into the subgoal file it would save and checks
 that file with :func:`torchrl_subgoal.load_patterns`, the very code
-``SubgoalSeries.from_file`` and the recipes run, so whatever the studio saves
+``torchrl_subgoal.load_pattern`` and the recipes run, so whatever the studio saves
 the recipes read. Every problem is a :class:`RequestError` whose message names
 the file, the pattern and the field.
 """
@@ -33,6 +33,7 @@ from typing import Any
 
 import yaml
 
+from torchrl_subgoal.registry import load_patterns
 from torchrl_subgoal.studio.domains import Domain, FormError
 from torchrl_subgoal.subgoals import (
     FORMAT,
@@ -40,7 +41,6 @@ from torchrl_subgoal.subgoals import (
     Predicate,
     SubgoalFileError,
     SubgoalSeries,
-    load_patterns,
     save_patterns,
 )
 

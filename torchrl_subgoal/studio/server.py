@@ -50,6 +50,7 @@ from flask import Flask, Response, jsonify, render_template, request, send_file
 from werkzeug.exceptions import HTTPException
 from werkzeug.serving import BaseWSGIServer, get_sockaddr, make_server, select_address_family
 
+from torchrl_subgoal.registry import load_patterns
 from torchrl_subgoal.studio.document import (
     MAX_REQUEST_BYTES,
     SUFFIXES,
@@ -70,7 +71,6 @@ from torchrl_subgoal.subgoals import (
     MAX_FILE_BYTES,
     SubgoalFileError,
     file_description,
-    load_patterns,
     parse_text,
 )
 

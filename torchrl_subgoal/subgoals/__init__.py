@@ -23,8 +23,10 @@ subgoal is wrapped in one, and a subgoal file names one by import path
 (``{call: "package.module:function"}``).
 
 The file format (YAML, or JSON which is valid YAML) is documented in
-``docs/subgoal_files.md``; :meth:`SubgoalSeries.from_file` loads it and every
-error names the file, the pattern and the field.
+``docs/subgoal_files.md``; :mod:`torchrl_subgoal.subgoals.files` reads, checks and
+saves it (:func:`load_pattern`, :func:`load_patterns`, :func:`save_patterns`), and
+every error names the file, the pattern and the field. A series itself is data:
+it knows nothing of files.
 """
 
 from torchrl_subgoal.subgoals.errors import SubgoalFileError
@@ -33,13 +35,16 @@ from torchrl_subgoal.subgoals.files import (
     MAX_FILE_BYTES,
     DomainCheck,
     file_description,
+    load_pattern,
     load_patterns,
+    parse_predicate,
     parse_text,
+    pattern_from_data,
     patterns_from_data,
+    pick_pattern,
+    read_file,
     save_patterns,
-    use_domain_checks,
 )
-from torchrl_subgoal.subgoals.forms import parse_predicate
 from torchrl_subgoal.subgoals.predicates import (
     Box,
     Cell,
@@ -70,10 +75,13 @@ __all__ = [
     "SubgoalSeries",
     "SubgoalTables",
     "file_description",
+    "load_pattern",
     "load_patterns",
     "parse_predicate",
     "parse_text",
+    "pattern_from_data",
     "patterns_from_data",
+    "pick_pattern",
+    "read_file",
     "save_patterns",
-    "use_domain_checks",
 ]

@@ -1,8 +1,10 @@
-"""Subgoal files: parsing YAML/JSON in linear time, loading and saving patterns, domain checks."""
+"""Subgoal files: parsing YAML/JSON in linear time, reading patterns and predicates with errors that name
+the file, the pattern and the field, checking subgoals against a map, and saving."""
 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -10,9 +12,8 @@ from typing import Any
 import yaml
 
 from torchrl_subgoal.subgoals.errors import SubgoalFileError, _where
-from torchrl_subgoal.subgoals.forms import _check_keys, _description, _unique
-from torchrl_subgoal.subgoals.predicates import Predicate
-from torchrl_subgoal.subgoals.series import SubgoalSeries
+from torchrl_subgoal.subgoals.predicates import Box, Cell, Circle, Condition, Predicate, State
+from torchrl_subgoal.subgoals.series import MAX_SUBGOALS, SubgoalSeries
 
 FORMAT = "torchrl_subgoal/v1"
 #: Largest subgoal file :func:`load_patterns` reads (1 MiB, a thousand times a study's file).
@@ -145,83 +146,298 @@ def _read_file(path: Path) -> bytes:
         raise SubgoalFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
 
 
-#: Why a predicate is not a valid subgoal on a domain's map (``None``: it is one).
-DomainCheck = Callable[[Predicate], "str | None"]
-#: How a file's ``domain`` name finds its check; the domain registry sets it (:func:`use_domain_checks`).
-_domain_checks: list[Callable[[str], DomainCheck | None]] = []
+# ------------------------------------------------------------ patterns and predicates
 
 
-def use_domain_checks(lookup: Callable[[str], DomainCheck | None]) -> None:
-    """Set how a subgoal file's ``domain`` field finds the check its subgoals must pass.
+def _unique(mapping: Any, where: str, what: str) -> None:
+    """Refuse a parsed mapping that held a key twice (YAML and JSON both keep the last one)."""
+    duplicates = getattr(mapping, "duplicates", None)
+    if duplicates:
+        key, line = duplicates[0]
+        at = f" (line {line})" if line else ""
+        raise SubgoalFileError(f"{where}: duplicate {what} {key!r}{at}; each must appear once")
 
-    :mod:`torchrl_subgoal.domains` calls this when it is imported (importing
-    ``torchrl_subgoal`` imports it), so that a file naming a registered domain
-    is checked against that domain's map. ``lookup(name)`` returns the check,
-    ``None`` for a domain without one, or raises ``ValueError`` (whose message
-    is reported as the file's ``domain`` error) for an unknown name.
 
-    Args:
-        lookup: the domain name -> check function.
+def _number(value: Any, where: str, *, integer: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise SubgoalFileError(f"{where}: expected a number, got {value!r}")
+    if integer and not isinstance(value, int):
+        raise SubgoalFileError(f"{where}: expected an integer, got {value!r}")
+    if math.isnan(value) or math.isinf(value):
+        raise SubgoalFileError(f"{where}: expected a finite number, got {value!r}")
+    return value
+
+
+def _numbers(value: Any, where: str, *, integer: bool = False) -> list[Any]:
+    if not isinstance(value, list | tuple) or not value:
+        raise SubgoalFileError(f"{where}: expected a non-empty list of numbers, got {value!r}")
+    return [_number(v, f"{where}[{i}]", integer=integer) for i, v in enumerate(value)]
+
+
+def _dims(value: Any, where: str, n: int) -> tuple[int, ...]:
+    dims = tuple(int(d) for d in _numbers(value, where, integer=True))
+    if len(dims) != n:
+        raise SubgoalFileError(f"{where}: has {len(dims)} entries but the centre has {n}")
+    if min(dims) < 0 or len(set(dims)) != len(dims):
+        raise SubgoalFileError(f"{where}: entries must be distinct non-negative indices, got {list(dims)}")
+    return dims
+
+
+def _description(body: Mapping[str, Any], where: str) -> str | None:
+    """A pattern's or file's optional ``description``: text, kept when the file is saved again."""
+    value = body.get("description")
+    if value is not None and not isinstance(value, str):
+        raise SubgoalFileError(f"{where}: expected text, got {value!r}")
+    return value
+
+
+def _check_keys(body: Mapping[str, Any], allowed: set[str], where: str) -> None:
+    unknown = set(body) - allowed
+    if unknown:
+        raise SubgoalFileError(f"{where}: unknown field(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+
+
+def parse_predicate(spec: Any, where: str) -> Predicate:
+    """Build a predicate from its file form; ``where`` prefixes error messages.
 
     Examples:
-        >>> from torchrl_subgoal.subgoals import State
-        >>> use_domain_checks(lambda name: lambda p: None if p.kind == "state" else "states only")
-        >>> patterns_from_data({"domain": "line", "patterns": {"p": {"subgoals": [{"cell": [1, 2]}]}}}, "f.yaml")
+        >>> parse_predicate({"cell": [4, 9]}, "alice.yaml: subgoals[0]").to_dict()
+        {'cell': [4, 9]}
+        >>> parse_predicate({"cell": [4]}, "alice.yaml: subgoals[0]")
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.subgoals.errors.SubgoalFileError: f.yaml: pattern 'p': subgoals[0].cell: states only
-        >>> from torchrl_subgoal import domains
-        >>> use_domain_checks(domains.subgoal_check)  # the registry's lookup again
+        torchrl_subgoal.subgoals.errors.SubgoalFileError: alice.yaml: subgoals[0].cell: expected [row, col], got [4]
     """
-    _domain_checks[:] = [lookup]
+    if not isinstance(spec, Mapping):
+        raise SubgoalFileError(f"{where}: expected a mapping such as {{cell: [4, 9]}}, got {spec!r}")
+    _unique(spec, where, "field")
+    kinds = [k for k in ("state", "cell", "circle", "box", "call") if k in spec]
+    if len(kinds) != 1:
+        raise SubgoalFileError(
+            f"{where}: give exactly one predicate among state, cell, circle, box, call; got fields {sorted(spec)}"
+        )
+    kind = kinds[0]
+    if kind == "call":
+        _check_keys(spec, {"call", "args"}, where)
+        return Condition.from_path(spec["call"], spec.get("args"), where=f"{where}.call")
+    if kind == "state":
+        _check_keys(spec, {"state"}, where)
+        return State(int(_number(spec["state"], f"{where}.state", integer=True)))
+    if kind == "cell":
+        _check_keys(spec, {"cell", "dims"}, where)
+        rc = _numbers(spec["cell"], f"{where}.cell", integer=True)
+        if len(rc) != 2:
+            raise SubgoalFileError(f"{where}.cell: expected [row, col], got {spec['cell']!r}")
+        dims = _dims(spec.get("dims", [0, 1]), f"{where}.dims", 2)
+        return Cell(int(rc[0]), int(rc[1]), (dims[0], dims[1]))
+    body = spec[kind]
+    if len(spec) != 1:
+        raise SubgoalFileError(f"{where}: unknown field(s) {sorted(set(spec) - {kind})}")
+    if not isinstance(body, Mapping):
+        raise SubgoalFileError(f"{where}.{kind}: expected a mapping, got {body!r}")
+    _unique(body, f"{where}.{kind}", "field")
+    body = dict(body)
+    if "center" in body and "centre" not in body:
+        body["centre"] = body.pop("center")
+    if "centre" not in body:
+        raise SubgoalFileError(f"{where}.{kind}.centre: missing")
+    centre = tuple(float(c) for c in _numbers(body["centre"], f"{where}.{kind}.centre"))
+    if kind == "circle":
+        _check_keys(body, {"centre", "radius", "dims"}, f"{where}.circle")
+        if "radius" not in body:
+            raise SubgoalFileError(f"{where}.circle.radius: missing")
+        radius = float(_number(body["radius"], f"{where}.circle.radius"))
+        if radius <= 0:
+            raise SubgoalFileError(f"{where}.circle.radius: must be positive, got {radius}")
+        cdims = _dims(body["dims"], f"{where}.circle.dims", len(centre)) if "dims" in body else None
+        return Circle(centre, radius, cdims)
+    _check_keys(body, {"centre", "margin", "dims", "slice"}, f"{where}.box")
+    if "dims" in body and "slice" in body:
+        raise SubgoalFileError(f"{where}.box: give 'dims' or 'slice', not both")
+    if "slice" in body:
+        bounds = _numbers(body["slice"], f"{where}.box.slice", integer=True)
+        if len(bounds) != 2 or bounds[0] < 0 or bounds[1] - bounds[0] != len(centre):
+            raise SubgoalFileError(
+                f"{where}.box.slice: expected [start, stop) covering {len(centre)} entries, got {bounds}"
+            )
+        bdims = tuple(range(int(bounds[0]), int(bounds[1])))
+    else:
+        bdims = _dims(body.get("dims", list(range(len(centre)))), f"{where}.box.dims", len(centre))
+    if "margin" not in body:
+        raise SubgoalFileError(f"{where}.box.margin: missing")
+    raw = body["margin"]
+    margins = (
+        [float(_number(raw, f"{where}.box.margin"))] * len(centre)
+        if not isinstance(raw, list | tuple)
+        else [float(m) for m in _numbers(raw, f"{where}.box.margin")]
+    )
+    if len(margins) != len(centre):
+        raise SubgoalFileError(f"{where}.box.margin: has {len(margins)} entries but the centre has {len(centre)}")
+    if min(margins) < 0:
+        raise SubgoalFileError(f"{where}.box.margin: must be non-negative, got {margins}")
+    return Box(centre, tuple(margins), bdims)
 
 
-def _domain_check(domain: str) -> DomainCheck | None:
-    """The check of the domain named ``domain``, through the lookup :func:`use_domain_checks` set."""
-    if not _domain_checks:
-        raise SubgoalFileError(f"unknown domain {domain!r}: no domain registry is in use (import torchrl_subgoal)")
-    try:
-        return _domain_checks[0](domain)
-    except ValueError as exc:
-        raise SubgoalFileError(str(exc)) from None
+def pattern_from_data(body: Any, *, name: str = "pattern", source: str | None = None) -> SubgoalSeries:
+    """Parse one pattern (the value under ``patterns: {name: ...}``).
+
+    Examples:
+        >>> pattern_from_data({"subgoals": {"a": {"state": 3}, "b": {"state": 5}}, "order": []}).successors(0)
+        (0, 1)
+    """
+    where = _where(source, name, "")
+    if isinstance(body, list):
+        body = {"subgoals": body}
+    if not isinstance(body, Mapping):
+        raise SubgoalFileError(f"{where}: expected a mapping with 'subgoals', got {body!r}")
+    _unique(body, where, "field")
+    _check_keys(body, {"subgoals", "order", "description"}, where)
+    if "subgoals" not in body:
+        raise SubgoalFileError(f"{where}: missing field 'subgoals'")
+    description = _description(body, _where(source, name, "description"))
+    subgoals = body["subgoals"]
+    if isinstance(subgoals, list | Mapping) and len(subgoals) > MAX_SUBGOALS:
+        raise SubgoalFileError(
+            f"{_where(source, name, 'subgoals')}: {len(subgoals)} subgoals; a pattern may have at most {MAX_SUBGOALS}"
+        )
+    if isinstance(subgoals, list):
+        if "order" in body:
+            raise SubgoalFileError(
+                f"{_where(source, name, 'order')}: a list of subgoals is already a total order; "
+                "name the subgoals (a mapping) to give a partial order"
+            )
+        preds = [parse_predicate(s, _where(source, name, f"subgoals[{i}]")) for i, s in enumerate(subgoals)]
+        return SubgoalSeries(preds, name=name, source=source, description=description)
+    if not isinstance(subgoals, Mapping):
+        raise SubgoalFileError(f"{_where(source, name, 'subgoals')}: expected a list or a mapping")
+    _unique(subgoals, _where(source, name, "subgoals"), "subgoal name")
+    names = [str(k) for k in subgoals]
+    preds = [parse_predicate(subgoals[k], _where(source, name, f"subgoals.{k}")) for k in subgoals]
+    if "order" not in body:
+        raise SubgoalFileError(
+            f"{_where(source, name, 'order')}: missing; named subgoals need an 'order' "
+            "(a list of [before, after] pairs, [] for no constraint)"
+        )
+    index = {nm: i for i, nm in enumerate(names)}
+    order = []
+    raw_order = body["order"]
+    if not isinstance(raw_order, list):
+        raise SubgoalFileError(f"{_where(source, name, 'order')}: expected a list of [before, after] pairs")
+    for i, pair in enumerate(raw_order):
+        w = _where(source, name, f"order[{i}]")
+        if not isinstance(pair, list | tuple) or len(pair) != 2:
+            raise SubgoalFileError(f"{w}: expected [before, after], got {pair!r}")
+        for p in pair:
+            if str(p) not in index:
+                raise SubgoalFileError(f"{w}: unknown subgoal {p!r}; known: {names}")
+        order.append((index[str(pair[0])], index[str(pair[1])]))
+    return SubgoalSeries(preds, order=order, names=names, name=name, source=source, description=description)
 
 
-def load_patterns(path: str | Path, *, domain: str | None = None) -> dict[str, SubgoalSeries]:
-    """Load every named pattern of a subgoal file.
+#: Why a predicate is not a valid subgoal on a domain's map (``None``: it is one).
+DomainCheck = Callable[[Predicate], "str | None"]
+
+
+def read_file(path: str | Path) -> Any:
+    """The parsed content of the subgoal file ``path`` (see :func:`parse_text`), not yet checked.
+
+    Raises:
+        SubgoalFileError: the file cannot be read, or as :func:`parse_text`.
+
+    Examples:
+        >>> import tempfile, pathlib
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "mine.yaml"
+        >>> _ = path.write_text("domain: four_rooms\\npatterns: {p: [{cell: [3, 6]}]}")
+        >>> read_file(path)["domain"]
+        'four_rooms'
+    """
+    path = Path(path)
+    return parse_text(_read_file(path), str(path))
+
+
+def load_patterns(path: str | Path, *, check: DomainCheck | None = None) -> dict[str, SubgoalSeries]:
+    """Load every named pattern of a subgoal file, each subgoal checked with ``check``.
 
     The file holds ``patterns: {name: {subgoals: [...], order: [...]}}`` and
-    optionally ``domain: four_rooms`` (or ``pinball``, ``pick_and_place``, or any
-    domain registered with :func:`torchrl_subgoal.domains.register`), which
-    checks every subgoal against that domain's map (a cell in a wall or off the
-    grid, a circle off the table, a box entry outside the observation).
+    optionally ``domain: four_rooms``. This function checks the subgoals only
+    with the ``check`` it is given (a domain's ``check_subgoal``: a cell in a
+    wall or off the grid, a circle off the table, a box entry outside the
+    observation); :func:`torchrl_subgoal.load_patterns` looks the check up in
+    the domain registry by the file's ``domain``.
 
     Loading takes time linear in the file's size. Files larger than
     :data:`MAX_FILE_BYTES` (1 MiB) are refused, as are patterns of more than
     :data:`MAX_SUBGOALS` subgoals, a pattern, subgoal or field named twice, YAML
     aliases, and files that are not UTF-8 text.
 
+    Args:
+        path: a YAML or JSON subgoal file (see ``docs/subgoal_files.md``).
+        check: why a predicate is not a valid subgoal (``None``: it is one), run on every subgoal.
+
     Raises:
         SubgoalFileError: naming the file, the pattern and the field.
 
     Examples:
         >>> import os, tempfile
-        >>> from torchrl_subgoal import Cell
+        >>> from torchrl_subgoal.subgoals import Cell
         >>> path = os.path.join(tempfile.mkdtemp(), "mine.yaml")
-        >>> save_patterns(path, {"hallways": SubgoalSeries([Cell(3, 6), Cell(7, 9)])}, domain="four_rooms")
+        >>> save_patterns(path, {"hallways": SubgoalSeries([Cell(3, 6), Cell(7, 9)])})
         >>> load_patterns(path)["hallways"].predicates
         (Cell(row=3, col=6, cell_dims=(0, 1)), Cell(row=7, col=9, cell_dims=(0, 1)))
+        >>> load_patterns(path, check=lambda p: "not on this map" if p.row > 5 else None)
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.subgoals.errors.SubgoalFileError: ...: pattern 'hallways': subgoals[1].cell: not on this map
     """
-    path = Path(path)
-    return patterns_from_data(parse_text(_read_file(path), str(path)), str(path), domain=domain)
+    return patterns_from_data(read_file(path), str(path), check=check)
 
 
-def patterns_from_data(data: Any, source: str = "<subgoals>", *, domain: str | None = None) -> dict[str, SubgoalSeries]:
+def load_pattern(path: str | Path, pattern: str | None = None, *, check: DomainCheck | None = None) -> SubgoalSeries:
+    """Load one named pattern of a subgoal file (see :func:`load_patterns`).
+
+    Args:
+        path: a YAML or JSON subgoal file.
+        pattern: the pattern's name; may be omitted when the file has one.
+        check: as for :func:`load_patterns`.
+
+    Raises:
+        SubgoalFileError: as :func:`load_patterns`, or no such pattern (the message lists those there are).
+
+    Examples:
+        >>> import os, tempfile
+        >>> from torchrl_subgoal.subgoals import State
+        >>> path = os.path.join(tempfile.mkdtemp(), "mine.yaml")
+        >>> save_patterns(path, {"a": SubgoalSeries([State(3)]), "b": SubgoalSeries([State(4)])})
+        >>> load_pattern(path, "b").predicates
+        (State(state=4),)
+    """
+    return pick_pattern(load_patterns(path, check=check), pattern, str(path))
+
+
+def pick_pattern(patterns: Mapping[str, SubgoalSeries], pattern: str | None, source: str) -> SubgoalSeries:
+    """The pattern named ``pattern`` among a file's ``patterns`` (``None``: the file's only one).
+
+    Raises:
+        SubgoalFileError: no such pattern, or ``None`` for a file of several; the message lists them.
+    """
+    if pattern is None:
+        if len(patterns) != 1:
+            raise SubgoalFileError(f"{source}: holds {len(patterns)} patterns {sorted(patterns)}; pass pattern=<name>")
+        return next(iter(patterns.values()))
+    if pattern not in patterns:
+        raise SubgoalFileError(f"{source}: no pattern {pattern!r}; available: {sorted(patterns)}")
+    return patterns[pattern]
+
+
+def patterns_from_data(
+    data: Any, source: str = "<subgoals>", *, check: DomainCheck | None = None
+) -> dict[str, SubgoalSeries]:
     """:func:`load_patterns` for a file's already parsed content (see :func:`parse_text`).
 
     Args:
         data: the parsed YAML/JSON document.
         source: the file's name, for error messages.
-        domain: as for :func:`load_patterns`.
+        check: as for :func:`load_patterns`.
 
     Examples:
         >>> text = '{"domain": "four_rooms", "patterns": {"p": {"subgoals": [{"cell": [3, 6]}]}}}'
@@ -239,16 +455,11 @@ def patterns_from_data(data: Any, source: str = "<subgoals>", *, domain: str | N
     if not isinstance(raw, Mapping) or not raw:
         raise SubgoalFileError(f"{source}: patterns: expected a non-empty mapping of name -> pattern")
     _unique(raw, f"{source}: patterns", "pattern name")
-    domain = domain if domain is not None else data.get("domain")
-    try:
-        check = _domain_check(str(domain)) if domain is not None else None
-    except SubgoalFileError as exc:
-        raise SubgoalFileError(f"{source}: domain: {exc}") from None
     patterns: dict[str, SubgoalSeries] = {}
     for name, body in raw.items():
         if str(name) in patterns:  # e.g. 1 and "1"
             raise SubgoalFileError(f"{source}: patterns: duplicate pattern name {str(name)!r}")
-        series = SubgoalSeries.from_dict(body, name=str(name), source=source)
+        series = pattern_from_data(body, name=str(name), source=source)
         if check is not None:
             labels = series.names or tuple(f"subgoals[{i}]" for i in range(len(series)))
             for label, pred in zip(labels, series.predicates, strict=True):
@@ -307,7 +518,6 @@ def file_description(path: str | Path) -> str | None:
         >>> file_description(path)
         'drawn by hand'
     """
-    path = Path(path)
-    data = parse_text(_read_file(path), str(path))
+    data = read_file(path)
     patterns_from_data(data, str(path))
     return _description(data, f"{path}: description")

@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, NoReturn
 
 import torch
 from tensordict import TensorDictBase
 
 from torchrl_subgoal.subgoals.errors import SubgoalFileError, _where
-from torchrl_subgoal.subgoals.forms import _check_keys, _description, _unique, parse_predicate
 from torchrl_subgoal.subgoals.predicates import Condition, Predicate
 
 #: Most subgoals one pattern of a file may have.
@@ -248,83 +246,6 @@ class SubgoalSeries:
         edges = self.order if self.order is not None else tuple((i, i + 1) for i in range(len(self) - 1))
         out["order"] = [[names[a], names[b]] for a, b in edges]
         return out
-
-    @classmethod
-    def from_dict(cls, body: Any, *, name: str = "pattern", source: str | None = None) -> SubgoalSeries:
-        """Parse one pattern (the value under ``patterns: {name: ...}``)."""
-        where = _where(source, name, "")
-        if isinstance(body, list):
-            body = {"subgoals": body}
-        if not isinstance(body, Mapping):
-            raise SubgoalFileError(f"{where}: expected a mapping with 'subgoals', got {body!r}")
-        _unique(body, where, "field")
-        _check_keys(body, {"subgoals", "order", "description"}, where)
-        if "subgoals" not in body:
-            raise SubgoalFileError(f"{where}: missing field 'subgoals'")
-        description = _description(body, _where(source, name, "description"))
-        subgoals = body["subgoals"]
-        if isinstance(subgoals, list | Mapping) and len(subgoals) > MAX_SUBGOALS:
-            raise SubgoalFileError(
-                f"{_where(source, name, 'subgoals')}: {len(subgoals)} subgoals; a pattern may have at "
-                f"most {MAX_SUBGOALS}"
-            )
-        if isinstance(subgoals, list):
-            if "order" in body:
-                raise SubgoalFileError(
-                    f"{_where(source, name, 'order')}: a list of subgoals is already a total order; "
-                    "name the subgoals (a mapping) to give a partial order"
-                )
-            preds = [parse_predicate(s, _where(source, name, f"subgoals[{i}]")) for i, s in enumerate(subgoals)]
-            return cls(preds, name=name, source=source, description=description)
-        if not isinstance(subgoals, Mapping):
-            raise SubgoalFileError(f"{_where(source, name, 'subgoals')}: expected a list or a mapping")
-        _unique(subgoals, _where(source, name, "subgoals"), "subgoal name")
-        names = [str(k) for k in subgoals]
-        preds = [parse_predicate(subgoals[k], _where(source, name, f"subgoals.{k}")) for k in subgoals]
-        if "order" not in body:
-            raise SubgoalFileError(
-                f"{_where(source, name, 'order')}: missing; named subgoals need an 'order' "
-                "(a list of [before, after] pairs, [] for no constraint)"
-            )
-        index = {nm: i for i, nm in enumerate(names)}
-        order = []
-        raw_order = body["order"]
-        if not isinstance(raw_order, list):
-            raise SubgoalFileError(f"{_where(source, name, 'order')}: expected a list of [before, after] pairs")
-        for i, pair in enumerate(raw_order):
-            w = _where(source, name, f"order[{i}]")
-            if not isinstance(pair, list | tuple) or len(pair) != 2:
-                raise SubgoalFileError(f"{w}: expected [before, after], got {pair!r}")
-            for p in pair:
-                if str(p) not in index:
-                    raise SubgoalFileError(f"{w}: unknown subgoal {p!r}; known: {names}")
-            order.append((index[str(pair[0])], index[str(pair[1])]))
-        return cls(preds, order=order, names=names, name=name, source=source, description=description)
-
-    @classmethod
-    def from_file(cls, path: str | Path, pattern: str | None = None, *, domain: str | None = None) -> SubgoalSeries:
-        """Load one named pattern from a subgoal file.
-
-        Args:
-            path: a YAML or JSON subgoal file (see ``docs/subgoal_files.md``).
-            pattern: the pattern's name; may be omitted when the file has one.
-            domain: check subgoals against this domain's map (defaults to the
-                file's ``domain`` field); see :func:`load_patterns`.
-        """
-        from torchrl_subgoal.subgoals.files import (
-            load_patterns,  # files builds series: imported when called
-        )
-
-        patterns = load_patterns(path, domain=domain)
-        if pattern is None:
-            if len(patterns) != 1:
-                raise SubgoalFileError(
-                    f"{path}: holds {len(patterns)} patterns {sorted(patterns)}; pass pattern=<name>"
-                )
-            return next(iter(patterns.values()))
-        if pattern not in patterns:
-            raise SubgoalFileError(f"{path}: no pattern {pattern!r}; available: {sorted(patterns)}")
-        return patterns[pattern]
 
     @classmethod
     def random(
