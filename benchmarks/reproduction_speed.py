@@ -126,7 +126,7 @@ def measure(domain: str, args: list[str]) -> dict[str, float]:
     timeline: list[tuple[float, int]] = []  # (seconds since start, learner-episodes done)
     start = time.perf_counter()
 
-    class RecordingBar(sweep._ProgressBar):
+    class RecordingBar(sweep.ProgressBar):
         def add(self, name: str, k: int) -> None:
             super().add(name, k)
             timeline.append((time.perf_counter() - start, int(self.bar.n)))
@@ -135,7 +135,7 @@ def measure(domain: str, args: list[str]) -> dict[str, float]:
             super().done(chunk, n_episodes)
             timeline.append((time.perf_counter() - start, int(self.bar.n)))
 
-    sweep._ProgressBar = RecordingBar  # type: ignore[misc]
+    sweep.ProgressBar = RecordingBar  # type: ignore[misc]
     recipe = _recipe(domain)
     with tempfile.TemporaryDirectory() as tmp:
         results = os.path.join(tmp, "results")

@@ -25,7 +25,7 @@ import pytest
 
 from tests.experiments.test_sweep import chunk_files, make_sweep
 from torchrl_subgoal.experiments import load_frame
-from torchrl_subgoal.experiments.sweep import RAY_RETRIES
+from torchrl_subgoal.experiments.backend import RAY_RETRIES
 
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("ray")]  # one Ray at a time under pytest-xdist
 

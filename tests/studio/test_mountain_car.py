@@ -8,8 +8,8 @@ from typing import Any
 
 from flask.testing import FlaskClient
 
-from torchrl_subgoal.envs import mountain_car
 from torchrl_subgoal import load_patterns
+from torchrl_subgoal.envs import mountain_car
 from torchrl_subgoal.subgoals import Box
 
 

@@ -9,8 +9,8 @@ from typing import Any
 import pytest
 from flask.testing import FlaskClient
 
-from torchrl_subgoal.envs import fetch
 from torchrl_subgoal import load_patterns
+from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.subgoals import Box
 
 

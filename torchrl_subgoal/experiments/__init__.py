@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from torchrl_subgoal.experiments.backend import BackendUnavailableError, ChunkFailedError, RunChunk
 from torchrl_subgoal.experiments.results import (
     Chunk,
     ConfigMismatchError,
@@ -32,11 +33,8 @@ from torchrl_subgoal.experiments.results import (
 )
 from torchrl_subgoal.experiments.store import load_frame, load_results
 from torchrl_subgoal.experiments.sweep import (
-    BackendUnavailableError,
-    ChunkFailedError,
     CorruptChunkWarning,
     MethodSpec,
-    RunChunk,
     Sweep,
     learner_seeds,
     plan_chunks,

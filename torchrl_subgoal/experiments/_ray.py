@@ -4,7 +4,7 @@ On an existing cluster (``RAY_ADDRESS`` or a running local cluster), else on a l
 instance started for the sweep. Tasks *return* their table to the driver, which writes it:
 the cluster needs no shared filesystem, and the store keeps a single writer. A chunk whose
 worker process or node dies runs again, up to
-:data:`~torchrl_subgoal.experiments.sweep.RAY_RETRIES` times.
+:data:`~torchrl_subgoal.experiments.backend.RAY_RETRIES` times.
 """
 
 from __future__ import annotations
@@ -14,25 +14,25 @@ import socket
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from torchrl_subgoal.experiments.results import Chunk, EpisodeTable
-from torchrl_subgoal.experiments.sweep import (
+from torchrl_subgoal.experiments.backend import (
     RAY_RETRIES,
     BackendUnavailableError,
     ChunkFailedError,
     Finished,
+    ProgressBar,
     RunChunk,
-    _failure,
-    _limit_threads,
-    _ProgressBar,
-    _ThrottledProgress,
+    ThrottledProgress,
+    failure,
+    limit_threads,
 )
+from torchrl_subgoal.experiments.results import Chunk, EpisodeTable
 
 
 def _execute_chunk_ray(
     run_chunk: RunChunk, chunk: Chunk, config: Mapping[str, Any], progress_queue: Any
 ) -> EpisodeTable:
-    _limit_threads()
-    progress = _ThrottledProgress(chunk.name, progress_queue.put_nowait)
+    limit_threads()
+    progress = ThrottledProgress(chunk.name, progress_queue.put_nowait)
     table = run_chunk(chunk, config, progress)
     progress.flush()
     return table
@@ -50,7 +50,7 @@ def check_ray_address(timeout: float = 10.0) -> None:
         ...     check_ray_address()
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.experiments.sweep.BackendUnavailableError: RAY_ADDRESS=127.0.0.1:1: no Ray cluster answers ...
+        torchrl_subgoal.experiments.backend.BackendUnavailableError: RAY_ADDRESS=127.0.0.1:1: no Ray cluster answers ...
     """
     address = os.environ.get("RAY_ADDRESS", "")
     if not address or address in ("local", "auto") or "://" in address:
@@ -93,7 +93,7 @@ def run_ray(
     chunks: Sequence[Chunk],
     run_chunk: RunChunk,
     config: Mapping[str, Any],
-    bar: _ProgressBar,
+    bar: ProgressBar,
     workers: int,
 ) -> Finished:
     """Run ``chunks`` as Ray tasks on ``workers`` CPUs of a local instance (or the cluster's); yields
@@ -128,7 +128,7 @@ def run_ray(
                         # or node died each time Ray ran it
                         crashed = not isinstance(exc, ray.exceptions.RayTaskError)
                         note = f" (Ray ran it {RAY_RETRIES + 1} times)" if crashed else ""
-                        error = _failure(refs[ref], getattr(exc, "cause", None) or exc, note)
+                        error = failure(refs[ref], getattr(exc, "cause", None) or exc, note)
                         error.__cause__ = exc
                         for other in pending:
                             ray.cancel(other)

@@ -33,7 +33,7 @@ import numpy as np
 import torch
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal import TabularPotential, domains, load_patterns
+from torchrl_subgoal import registry
 from torchrl_subgoal.experiments.budget import Budget
 from torchrl_subgoal.experiments.cli import ConfigError, check, flag_of, setting
 from torchrl_subgoal.experiments.recipe import (
@@ -52,6 +52,8 @@ from torchrl_subgoal.experiments.recipe import (
 )
 from torchrl_subgoal.experiments.results import Chunk, EpisodeTable
 from torchrl_subgoal.methods import Method, all_methods, shaping_parts
+from torchrl_subgoal.potentials import TabularPotential
+from torchrl_subgoal.registry import load_patterns
 from torchrl_subgoal.training import (
     LEARNERS,
     LearnerDomain,
@@ -93,13 +95,13 @@ def learner_domain(name: str) -> LearnerDomain:
         ...
         torchrl_subgoal.experiments.cli.ConfigError: --domain: unknown domain 'cartpole'; choose from four_rooms, ...
     """
-    if domains.find(name) is None:
+    if registry.find(name) is None:
         raise ConfigError(
-            f"--domain: unknown domain {name!r}; choose from {', '.join(domains.having(LearnerDomain))} "
+            f"--domain: unknown domain {name!r}; choose from {', '.join(registry.having(LearnerDomain))} "
             "(or register your own: docs/adding_a_domain.md)"
         )
     try:
-        return domains.part(name, LearnerDomain)
+        return registry.part(name, LearnerDomain)
     except ValueError as exc:
         raise ConfigError(f"--domain: {exc}") from None
 
@@ -375,7 +377,7 @@ def learner_budget(settings: Any, probe: EnvBase) -> Budget:
 
     Examples:
         >>> from torchrl_subgoal.training import DQNConfig
-        >>> four_rooms = domains.part("four_rooms", LearnerDomain)
+        >>> four_rooms = registry.part("four_rooms", LearnerDomain)
         >>> budget = learner_budget(DQNConfig(total_frames=10_000), four_rooms.make_env(1))
         >>> budget.steps, budget.length, budget.chunk_flag, budget.unit
         (10000, ('total_frames', 10000), 'seed_batch', 'update')
@@ -402,7 +404,7 @@ def check_seed_batch(algo: str, domain: LearnerDomain, settings: Any, methods: S
 
     Examples:
         >>> from torchrl_subgoal.training import DQNConfig
-        >>> check_seed_batch("dqn", domains.part("four_rooms", LearnerDomain), DQNConfig(collector_workers=1), [])
+        >>> check_seed_batch("dqn", registry.part("four_rooms", LearnerDomain), DQNConfig(collector_workers=1), [])
         Traceback (most recent call last):
         ...
         torchrl_subgoal.experiments.cli.ConfigError: --seed-batch: needs --collector-workers 0 (one collector for ...
@@ -486,7 +488,7 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
     """
     torch.set_num_threads(1)
     quiet_torchrl()
-    domain = domains.part(config["domain"], LearnerDomain)
+    domain = registry.part(config["domain"], LearnerDomain)
     learner = LEARNERS[config["algo"]]
     method = learner_methods(config["algo"])[chunk.method]
     patterns, pattern_index = chunk_patterns(chunk, config)

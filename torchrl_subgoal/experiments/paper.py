@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from torchrl_subgoal import domains
+from torchrl_subgoal import registry
 
 CITATION = (
     'Okudo, T. & Yamada, S. (2021). "Reward Shaping with Dynamic Trajectory Aggregation". '
@@ -90,5 +90,5 @@ def paper_results(domain: str) -> PaperResults | None:
         >>> paper_results("toy") is None
         True
     """
-    registered = domains.find(domain)
+    registered = registry.find(domain)
     return registered.part(PaperResults) if registered is not None else None

@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 from matplotlib.figure import Figure
 
-from torchrl_subgoal import domains
+from torchrl_subgoal import registry
 from torchrl_subgoal.experiments.stats import curve_band, moving_average, performance_profile
 
 T = TypeVar("T")
@@ -42,8 +42,8 @@ class ReportMap:
         draw: ``draw(ax, patterns, options)``, the map and the patterns on a matplotlib ``Axes``.
 
     Examples:
-        >>> from torchrl_subgoal import domains
-        >>> isinstance(domains.get("four_rooms").part(ReportMap), ReportMap)
+        >>> from torchrl_subgoal import registry
+        >>> isinstance(registry.get("four_rooms").part(ReportMap), ReportMap)
         True
     """
 
@@ -256,7 +256,7 @@ def plot_pattern_maps(
         ('maps.png', True)
     """
     try:
-        registered = domains.find(domain)
+        registered = registry.find(domain)
     except Exception as exc:  # a broken domain module costs the map, not the report
         return FigureFile(None, f"map for domain {domain!r} skipped: {type(exc).__name__}: {exc}")
     drawing = registered.part(ReportMap) if registered is not None else None

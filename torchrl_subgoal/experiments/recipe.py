@@ -26,18 +26,12 @@ from typing import Any, ClassVar, Literal, TypeVar
 import torch
 from torchrl.envs import EnvBase, TransformedEnv
 
+from torchrl_subgoal.experiments.backend import BackendUnavailableError, ChunkFailedError, RunChunk
 from torchrl_subgoal.experiments.budget import Budget, check_budget, check_learnings
 from torchrl_subgoal.experiments.cli import ConfigError, check, parse_config, setting, settings_data
 from torchrl_subgoal.experiments.results import Chunk, ResultsError, UnknownMethodError
 from torchrl_subgoal.experiments.store import code_version
-from torchrl_subgoal.experiments.sweep import (
-    BackendUnavailableError,
-    ChunkFailedError,
-    MethodSpec,
-    RunChunk,
-    Sweep,
-    select_methods,
-)
+from torchrl_subgoal.experiments.sweep import MethodSpec, Sweep, select_methods
 from torchrl_subgoal.methods import Method, random_patterns
 from torchrl_subgoal.potentials import NaivePotential
 from torchrl_subgoal.subgoals import Predicate, SubgoalFileError, SubgoalSeries, pattern_from_data

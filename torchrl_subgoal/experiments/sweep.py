@@ -31,14 +31,22 @@ import sys
 import threading
 import time
 import warnings
-from collections.abc import Callable, Generator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
-from typing import Any, Literal, Protocol
+from typing import Any, Literal
 
 import numpy as np
-from tqdm.auto import tqdm
 
+from torchrl_subgoal.experiments.backend import (
+    ChunkFailedError,
+    Finished,
+    ProgressBar,
+    RunChunk,
+    ThrottledProgress,
+    failure,
+    limit_threads,
+)
 from torchrl_subgoal.experiments.results import (
     Chunk,
     ConfigMismatchError,
@@ -60,51 +68,7 @@ from torchrl_subgoal.experiments.store import (
     to_json_data,
 )
 
-Progress = Callable[[int], None]
 Backend = Literal["local", "ray"]
-#: How often Ray runs a chunk again whose worker process or node died (a ``run_chunk`` that raises is not
-#: run again: it would raise again).
-RAY_RETRIES = 3
-
-
-class RunChunk(Protocol):
-    """The user-supplied, picklable (module-level) function that runs one chunk.
-
-    It trains every learner of ``chunk`` (seeding all randomness from ``chunk.seed``)
-    and returns their per-episode records, one row per learner in ``chunk.learners``
-    order. ``progress(k)`` reports ``k`` more learner-episodes finished.
-
-    Examples:
-        >>> def run_chunk(chunk, config, progress):  # a RunChunk: every learner takes 7 steps per episode
-        ...     episodes = config["episodes"]
-        ...     progress(chunk.n_learners * episodes)
-        ...     shape = (chunk.n_learners, episodes)
-        ...     return EpisodeTable(np.full(shape, 7), np.zeros(shape), np.ones(shape, bool))
-        >>> done = []
-        >>> table = run_chunk(Chunk("HRS", 0, (("alice", 0), ("alice", 1)), seed=1), {"episodes": 3}, done.append)
-        >>> table.n_learners, table.n_episodes, done
-        (2, 3, [6])
-    """
-
-    def __call__(self, chunk: Chunk, config: Mapping[str, Any], progress: Progress, /) -> EpisodeTable: ...
-
-
-class ChunkFailedError(RuntimeError):
-    """``run_chunk`` raised (or its worker died); finished chunks are kept for a re-run.
-
-    Examples:
-        >>> issubclass(ChunkFailedError, RuntimeError), str(ChunkFailedError("HRS/00000: worker died"))
-        (True, 'HRS/00000: worker died')
-    """
-
-
-class BackendUnavailableError(RuntimeError):
-    """The Ray cluster ``RAY_ADDRESS`` names does not answer; raised before anything is written.
-
-    Examples:
-        >>> issubclass(BackendUnavailableError, RuntimeError)
-        True
-    """
 
 
 class CorruptChunkWarning(UserWarning):
@@ -247,73 +211,9 @@ def plan_chunks(methods: Sequence[MethodSpec], seed: int, chunk_size: int) -> li
     return chunks
 
 
-# -- progress -------------------------------------------------------------------------------
-
-
-class _ThrottledProgress:
-    """The ``progress`` callable handed to ``run_chunk``: batches counts before sending."""
-
-    def __init__(self, chunk_name: str, sink: Callable[[tuple[str, int]], None] | None) -> None:
-        self.chunk_name = chunk_name
-        self.sink = sink
-        self.pending = 0
-        self.last = time.monotonic()
-
-    def __call__(self, k: int) -> None:
-        self.pending += int(k)
-        if time.monotonic() - self.last > 0.25:
-            self.flush()
-
-    def flush(self) -> None:
-        if self.sink is not None and self.pending:
-            self.sink((self.chunk_name, self.pending))
-        self.pending = 0
-        self.last = time.monotonic()
-
-
-class _ProgressBar:
-    """A tqdm bar over learner-episodes, fed by chunk progress messages."""
-
-    def __init__(self, chunks: Sequence[Chunk], n_episodes: int | None, enabled: bool) -> None:
-        self.n_episodes = n_episodes
-        self.learners = {c.name: c.n_learners for c in chunks}
-        self.reported: dict[str, int] = dict.fromkeys(self.learners, 0)
-        total = sum(self.learners.values()) * n_episodes if n_episodes else None
-        self.bar = tqdm(total=total, unit="ep", desc="learner-episodes", disable=not enabled)
-
-    def _cap(self, name: str) -> int | None:
-        return self.learners[name] * self.n_episodes if self.n_episodes else None
-
-    def add(self, name: str, k: int) -> None:
-        if name not in self.reported:  # a late message for a chunk already counted
-            return
-        cap = self._cap(name)
-        if cap is not None:
-            k = max(0, min(k, cap - self.reported[name]))
-        self.reported[name] += k
-        self.bar.update(k)
-
-    def done(self, chunk: Chunk, n_episodes: int) -> None:
-        if self.n_episodes is None:
-            self.n_episodes = n_episodes
-            self.bar.total = sum(self.learners.values()) * n_episodes
-        self.add(chunk.name, chunk.n_learners * n_episodes)
-        self.reported.pop(chunk.name, None)
-        self.bar.refresh()
-
-    def close(self) -> None:
-        self.bar.close()
-
-
 # -- workers ---------------------------------------------------------------------------------
 
 _WORKER_SINK: Callable[[tuple[str, int]], None] | None = None
-
-
-def _limit_threads() -> None:
-    import torch
-
-    torch.set_num_threads(1)
 
 
 def _exit_when_orphaned(parent_pid: int) -> None:
@@ -326,39 +226,31 @@ def _init_local_worker(progress_queue: Any, parent_pid: int) -> None:
     global _WORKER_SINK
     _WORKER_SINK = progress_queue.put
     threading.Thread(target=_exit_when_orphaned, args=(parent_pid,), daemon=True).start()
-    _limit_threads()
+    limit_threads()
 
 
 def _execute_chunk(run_chunk: RunChunk, chunk: Chunk, config: Mapping[str, Any]) -> EpisodeTable:
-    progress = _ThrottledProgress(chunk.name, _WORKER_SINK)
+    progress = ThrottledProgress(chunk.name, _WORKER_SINK)
     table = run_chunk(chunk, config, progress)
     progress.flush()
     return table
 
 
-def _failure(chunk: Chunk, exc: BaseException, note: str = "") -> ChunkFailedError:
-    """The error for a chunk whose ``run_chunk`` raised; :meth:`Sweep.run` adds what to do next."""
-    reason = " ".join(str(exc).split()).rstrip(".") or "(no message)"  # one line, however the cause wrote it
-    return ChunkFailedError(f"chunk {chunk.name} failed: {type(exc).__name__}: {reason}{note}.")
-
-
 # -- backends: each yields (chunk, table) as chunks finish ----------------------------------
 
-Finished = Generator[tuple[Chunk, EpisodeTable], None, None]
 
-
-def _run_inline(chunks: Sequence[Chunk], run_chunk: RunChunk, config: Mapping[str, Any], bar: _ProgressBar) -> Finished:
+def _run_inline(chunks: Sequence[Chunk], run_chunk: RunChunk, config: Mapping[str, Any], bar: ProgressBar) -> Finished:
     for chunk in chunks:
-        progress = _ThrottledProgress(chunk.name, lambda msg: bar.add(*msg))
+        progress = ThrottledProgress(chunk.name, lambda msg: bar.add(*msg))
         try:
             table = run_chunk(chunk, config, progress)
         except Exception as exc:
-            raise _failure(chunk, exc) from exc
+            raise failure(chunk, exc) from exc
         progress.flush()
         yield chunk, table
 
 
-def _drain_local(progress_queue: Any, bar: _ProgressBar) -> None:
+def _drain_local(progress_queue: Any, bar: ProgressBar) -> None:
     while True:
         try:
             name, k = progress_queue.get_nowait()
@@ -371,7 +263,7 @@ def _run_local(
     chunks: Sequence[Chunk],
     run_chunk: RunChunk,
     config: Mapping[str, Any],
-    bar: _ProgressBar,
+    bar: ProgressBar,
     workers: int,
 ) -> Finished:
     context = mp.get_context("spawn")
@@ -399,7 +291,7 @@ def _run_local(
                     continue
                 except Exception as exc:
                     if error is None:  # keep the running chunks, start no new ones
-                        error = _failure(futures[future], exc)
+                        error = failure(futures[future], exc)
                         error.__cause__ = exc
                         for other in pending:
                             other.cancel()
@@ -692,7 +584,7 @@ class Sweep:
             if todo and self.warm_up is not None:
                 _warm_up(self.warm_up)
             if todo:
-                bar = _ProgressBar(todo, self.n_episodes, progress)
+                bar = ProgressBar(todo, self.n_episodes, progress)
                 config = {**self.config, **self.runtime}
                 finished: Finished
                 if backend == "ray":

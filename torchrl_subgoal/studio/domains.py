@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from torchrl_subgoal import domains
+from torchrl_subgoal import registry
 from torchrl_subgoal.subgoals import Box
 
 if TYPE_CHECKING:
@@ -277,7 +277,7 @@ def studio_domain(name: str) -> StudioDomain | None:
         >>> studio_domain("four_rooms").title
         'Four rooms'
     """
-    registered = domains.find(name)
+    registered = registry.find(name)
     studio = registered.part(StudioDomain) if registered is not None else None
     if registered is None or studio is None:
         return None
@@ -303,7 +303,7 @@ def default_domains(pinball_maps: Mapping[str, str | Path] | None = None) -> dic
         >>> studio_domains["four_rooms"].geometry("")["rows"][0]
         'wwwwwwwwwwwww'
     """
-    views = [view for name in domains.names() if (view := studio_domain(name)) is not None]
+    views = [view for name in registry.names() if (view := studio_domain(name)) is not None]
     drawn = {view.name: view for view in sorted(views, key=lambda view: view.position)}
     extra = {name: str(path) for name, path in (pinball_maps or {}).items()}
     if extra:

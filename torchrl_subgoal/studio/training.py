@@ -22,7 +22,7 @@ from typing import Any
 import torch
 from torchrl.envs import TransformedEnv
 
-from torchrl_subgoal import domains
+from torchrl_subgoal import registry
 from torchrl_subgoal.agents import run_episodes
 from torchrl_subgoal.methods import SRS, paper_methods, shaping_transform
 from torchrl_subgoal.potentials import TabularPotential
@@ -155,8 +155,8 @@ def try_pattern(
         raise ValueError(f"method: expected one of {list(METHODS)}, got {method!r}")
     found = studio_domain(domain)
     if found is None or found.learner is None:
-        problem = "unknown domain" if domains.find(domain) is None else "no learner (StudioDomain.learner) for domain"
-        with_learner = [name for name in domains.names() if (view := studio_domain(name)) and view.learner]
+        problem = "unknown domain" if registry.find(domain) is None else "no learner (StudioDomain.learner) for domain"
+        with_learner = [name for name in registry.names() if (view := studio_domain(name)) and view.learner]
         raise ValueError(f"{problem} {domain!r}; known: {with_learner}")
     learner = found.learner
     start = time.perf_counter()
