@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from torchrl_subgoal import Cell, NaivePotential, SubgoalSeries, TabularPotential
-from torchrl_subgoal.envs.four_rooms import check_subgoal, free_cells, room_aggregation
+from torchrl_subgoal.domains.four_rooms import check_subgoal
+from torchrl_subgoal.envs.four_rooms import free_cells, room_aggregation
 from torchrl_subgoal.methods import paper_methods, random_patterns, shaping_transform
 
 

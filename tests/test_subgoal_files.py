@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from torchrl_subgoal import SubgoalFileError, SubgoalSeries, load_patterns
-from torchrl_subgoal.envs import four_rooms
+from torchrl_subgoal.domains import four_rooms
 from torchrl_subgoal.subgoals import (
     MAX_FILE_BYTES,
     MAX_SUBGOALS,

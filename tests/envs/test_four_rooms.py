@@ -7,12 +7,12 @@ import torch
 from torchrl.envs.utils import check_env_specs
 
 from torchrl_subgoal import Cell, State
+from torchrl_subgoal.domains.four_rooms import check_subgoal
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import (
     GOAL,
     HALLWAYS,
     START,
-    check_subgoal,
     free_cells,
     goal_distances,
     room_aggregation,

@@ -11,12 +11,12 @@ import torch
 from torchrl.envs import ParallelEnv, SerialEnv
 from torchrl.envs.utils import check_env_specs
 
+from torchrl_subgoal.domains.pinball import check_subgoal
 from torchrl_subgoal.envs.pinball import (
     ACTION_NAMES,
     PinBallConfig,
     PinBallEnv,
     PinBallPhysics,
-    check_subgoal,
     draw_map,
 )
 from torchrl_subgoal.envs.pinball_physics import DRAG

@@ -32,7 +32,7 @@ from torchrl.data import Binary, Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from torchrl_subgoal.envs.gym_batch import import_robotics
-from torchrl_subgoal.subgoals import Box, Predicate, StateAggregation, SubgoalSeries, load_patterns
+from torchrl_subgoal.subgoals import Box, StateAggregation, SubgoalSeries, load_patterns
 
 __all__ = [
     "COMPONENTS",
@@ -44,7 +44,6 @@ __all__ = [
     "FetchEnvs",
     "FetchUnavailableError",
     "LeanStep",
-    "check_subgoal",
     "component_dims",
     "components_of",
     "human_patterns",
@@ -130,27 +129,6 @@ def components_of(dims: tuple[int, ...] | list[int]) -> tuple[str, ...] | None:
         names.append(match)
         i += COMPONENTS[match].stop - COMPONENTS[match].start
     return tuple(names)
-
-
-def check_subgoal(predicate: Predicate) -> str | None:
-    """Why ``predicate`` is not a valid pick-and-place subgoal, or ``None``.
-
-    A pick-and-place subgoal is a box over entries of the 25-d observation.
-    Used by subgoal files that declare ``domain: pick_and_place``.
-
-    Examples:
-        >>> check_subgoal(Box((0.0,), (0.01,), (30,)))
-        'box entries [30] lie outside the 25-d observation (entries 0 to 24)'
-    """
-    if not isinstance(predicate, Box):
-        return f"pick-and-place subgoals are boxes over observation entries, not {predicate.kind}"
-    outside = [d for d in predicate.box_dims if d >= OBSERVATION_SIZE]
-    if outside:
-        return (
-            f"box entries {outside} lie outside the {OBSERVATION_SIZE}-d observation "
-            f"(entries 0 to {OBSERVATION_SIZE - 1})"
-        )
-    return None
 
 
 def _version_tuple(version: str) -> tuple[int, int]:
@@ -512,7 +490,7 @@ def human_patterns(path: str = PARTICIPANTS_FILE) -> dict[str, SubgoalSeries]:
         >>> len(patterns) >= 1, [len(series) for series in patterns.values()][0]
         (True, 2)
     """
-    return load_patterns(path, check=check_subgoal)
+    return load_patterns(path)
 
 
 def random_patterns(human: SubgoalSeries, num_patterns: int, seed: int) -> list[SubgoalSeries]:

@@ -14,11 +14,11 @@ from torchrl.envs import EnvBase
 
 from torchrl_subgoal._kernels import steps
 from torchrl_subgoal._kernels.grid import grid_reset, grid_reset_one, grid_step, grid_step_one
-from torchrl_subgoal.subgoals import Cell, Predicate, State, StateAggregation, SubgoalSeries
+from torchrl_subgoal.subgoals import Cell, StateAggregation, SubgoalSeries
 
 # fmt: off
 __all__ = [
-    "ACTIONS", "LAYOUT", "FourRoomsEnv", "check_subgoal", "draw_map", "free_cells", "goal_distances",
+    "ACTIONS", "LAYOUT", "FourRoomsEnv", "draw_map", "free_cells", "goal_distances",
     "room_aggregation",
 ]
 # fmt: on
@@ -113,31 +113,6 @@ def room_aggregation() -> StateAggregation:
         4
     """
     return StateAggregation(torch.tensor([_room(c) for c in _CELLS]), num_states=4)
-
-
-def check_subgoal(predicate: Predicate) -> str | None:
-    """Why ``predicate`` is not a valid four-rooms subgoal, or ``None``.
-
-    Examples:
-        >>> check_subgoal(Cell(0, 0))
-        '(0, 0) is a wall'
-        >>> print(check_subgoal(Cell(4, 9)))
-        None
-        >>> check_subgoal(State(200))
-        'state 200 is not one of the 104 free states'
-    """
-    if isinstance(predicate, Cell):
-        r, c = predicate.row, predicate.col
-        if not (0 <= r < SIZE[0] and 0 <= c < SIZE[1]):
-            return f"({r}, {c}) is off the {SIZE[0]}x{SIZE[1]} grid"
-        if _ROWS[r][c] == "w":
-            return f"({r}, {c}) is a wall"
-        return None
-    if isinstance(predicate, State):
-        if not 0 <= predicate.state < len(_CELLS):
-            return f"state {predicate.state} is not one of the {len(_CELLS)} free states"
-        return None
-    return f"four-rooms subgoals are cells or states, not {predicate.kind}"
 
 
 class GridKernelState(NamedTuple):

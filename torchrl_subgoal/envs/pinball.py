@@ -65,14 +65,12 @@ from torchrl_subgoal.envs.pinball_physics import (
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-    from torchrl_subgoal.subgoals import Predicate
 
 __all__ = [
     "ACTION_NAMES",
     "PinBallConfig",
     "PinBallEnv",
     "PinBallPhysics",
-    "check_subgoal",
     "draw_map",
     "point_in_polygon",
 ]
@@ -345,34 +343,6 @@ def _circles_free(points: torch.Tensor, radius: float, config: PinBallConfig) ->
         inside = (straddles & (px < crossing_x)).sum(1) % 2 == 1
         free &= ~(near | inside)
     return free
-
-
-def check_subgoal(predicate: Predicate) -> str | None:
-    """Why ``predicate`` is not a valid PinBall subgoal, or ``None``.
-
-    A PinBall subgoal is a circle over the ball position (observation entries
-    0 and 1) with a positive radius and its centre on the table (the unit
-    square). Used by subgoal files that declare ``domain: pinball``.
-
-    Examples:
-        >>> from torchrl_subgoal import Cell, Circle
-        >>> check_subgoal(Circle((0.5, 0.2), 0.04)) is None
-        True
-        >>> check_subgoal(Cell(3, 6))
-        'pinball subgoals are circles over (x, y), not cell'
-    """
-    from torchrl_subgoal.subgoals import Circle
-
-    if not isinstance(predicate, Circle):
-        return f"pinball subgoals are circles over (x, y), not {predicate.kind}"
-    if tuple(predicate.dims()) != (0, 1):
-        return f"a pinball subgoal circle covers (x, y), dims [0, 1], not {list(predicate.dims())}"
-    if not predicate.radius > 0:
-        return f"radius must be positive, got {predicate.radius}"
-    x, y = predicate.centre
-    if not (0.0 <= x <= 1.0 and 0.0 <= y <= 1.0):
-        return f"centre ({x}, {y}) is off the table (the unit square)"
-    return None
 
 
 # --------------------------------------------------------------------------

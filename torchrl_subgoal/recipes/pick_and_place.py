@@ -80,6 +80,7 @@ from torchrl_subgoal.experiments.recipe import (
     recipe_main,
 )
 from torchrl_subgoal.methods import paper_methods, shaping_parts
+from torchrl_subgoal.registry import load_patterns
 from torchrl_subgoal.training import (
     DDPGHooks,
     DDPGTrainConfig,
@@ -406,7 +407,7 @@ def run_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callable[[int],
 def build_patterns(cfg: Config) -> dict[str, dict[str, Any]]:
     """The human pattern(s) and one random pattern per learning (RRS; none when RRS does not run and the
     first pattern's components are not ones random boxes are drawn over)."""
-    human = fetch.human_patterns(cfg.subgoals)
+    human = load_patterns(cfg.subgoals, domain="pick_and_place")
     first = next(iter(human))
     try:
         rand = fetch.random_patterns(human[first], cfg.learnings, seed=cfg.seed)

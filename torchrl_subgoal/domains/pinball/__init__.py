@@ -26,7 +26,33 @@ from torchrl_subgoal.studio.domains import Limit, StudioDomain
 from torchrl_subgoal.subgoals import Box, Circle, Predicate, StateAggregation
 from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig, SuccessSignal
 
-__all__ = ["A2C", "DOMAIN", "PAPER", "STUDIO", "pinball_env"]
+__all__ = ["A2C", "DOMAIN", "PAPER", "STUDIO", "check_subgoal", "pinball_env"]
+
+
+def check_subgoal(predicate: Predicate) -> str | None:
+    """Why ``predicate`` is not a valid PinBall subgoal, or ``None``.
+
+    A PinBall subgoal is a circle over the ball position (observation entries
+    0 and 1) with a positive radius and its centre on the table (the unit
+    square). Used by subgoal files that declare ``domain: pinball``.
+
+    Examples:
+        >>> from torchrl_subgoal import Cell
+        >>> check_subgoal(Circle((0.5, 0.2), 0.04)) is None
+        True
+        >>> check_subgoal(Cell(3, 6))
+        'pinball subgoals are circles over (x, y), not cell'
+    """
+    if not isinstance(predicate, Circle):
+        return f"pinball subgoals are circles over (x, y), not {predicate.kind}"
+    if tuple(predicate.dims()) != (0, 1):
+        return f"a pinball subgoal circle covers (x, y), dims [0, 1], not {list(predicate.dims())}"
+    if not predicate.radius > 0:
+        return f"radius must be positive, got {predicate.radius}"
+    x, y = predicate.centre
+    if not (0.0 <= x <= 1.0 and 0.0 <= y <= 1.0):
+        return f"centre ({x}, {y}) is off the table (the unit square)"
+    return None
 
 
 def pinball_env(num_envs: int) -> EnvBase:
@@ -183,7 +209,7 @@ DOMAIN = domains.register(
         "pinball",
         "PinBall",
         make_env=pinball_env,
-        check_subgoal=pinball.check_subgoal,
+        check_subgoal=check_subgoal,
         parts=(A2C, PAPER, ReportMap(_draw_map), STUDIO),
     )
 )

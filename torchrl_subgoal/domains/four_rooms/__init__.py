@@ -25,7 +25,46 @@ from torchrl_subgoal.studio.domains import Limit, StudioDomain
 from torchrl_subgoal.subgoals import Cell, Predicate, State
 from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig, SuccessSignal
 
-__all__ = ["A2C", "A2C_STEP", "DOMAIN", "PAPER", "STEP_DOMAIN", "STUDIO", "four_rooms_env", "four_rooms_step_env"]
+__all__ = [
+    "A2C",
+    "A2C_STEP",
+    "DOMAIN",
+    "PAPER",
+    "STEP_DOMAIN",
+    "STUDIO",
+    "check_subgoal",
+    "four_rooms_env",
+    "four_rooms_step_env",
+]
+
+
+_ROWS = four_rooms.LAYOUT.splitlines()
+_CELLS = four_rooms.free_cells()
+
+
+def check_subgoal(predicate: Predicate) -> str | None:
+    """Why ``predicate`` is not a valid four-rooms subgoal, or ``None``.
+
+    Examples:
+        >>> check_subgoal(Cell(0, 0))
+        '(0, 0) is a wall'
+        >>> print(check_subgoal(Cell(4, 9)))
+        None
+        >>> check_subgoal(State(200))
+        'state 200 is not one of the 104 free states'
+    """
+    if isinstance(predicate, Cell):
+        r, c = predicate.row, predicate.col
+        if not (0 <= r < len(_ROWS) and 0 <= c < len(_ROWS[0])):
+            return f"({r}, {c}) is off the {len(_ROWS)}x{len(_ROWS[0])} grid"
+        if _ROWS[r][c] == "w":
+            return f"({r}, {c}) is a wall"
+        return None
+    if isinstance(predicate, State):
+        if not 0 <= predicate.state < len(_CELLS):
+            return f"state {predicate.state} is not one of the {len(_CELLS)} free states"
+        return None
+    return f"four-rooms subgoals are cells or states, not {predicate.kind}"
 
 
 def four_rooms_env(num_envs: int) -> EnvBase:
@@ -190,7 +229,7 @@ DOMAIN = domains.register(
         "four_rooms",
         "Four rooms",
         make_env=four_rooms_env,
-        check_subgoal=four_rooms.check_subgoal,
+        check_subgoal=check_subgoal,
         parts=(A2C, PAPER, ReportMap(_draw_map), STUDIO),
     )
 )
@@ -200,7 +239,7 @@ STEP_DOMAIN = domains.register(
         "four_rooms_step",
         "Four rooms, step cost",
         make_env=four_rooms_step_env,
-        check_subgoal=four_rooms.check_subgoal,
+        check_subgoal=check_subgoal,
         parts=(A2C_STEP, ReportMap(_draw_map)),
     )
 )

@@ -16,8 +16,30 @@ from torchrl_subgoal import domains
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.experiments.paper import PaperResults
 from torchrl_subgoal.studio.domains import BoxForm, StudioDomain
+from torchrl_subgoal.subgoals import Box, Predicate
 
-__all__ = ["DOMAIN", "FORM", "PAPER", "STUDIO", "fetch_env"]
+__all__ = ["DOMAIN", "FORM", "PAPER", "STUDIO", "check_subgoal", "fetch_env"]
+
+
+def check_subgoal(predicate: Predicate) -> str | None:
+    """Why ``predicate`` is not a valid pick-and-place subgoal, or ``None``.
+
+    A pick-and-place subgoal is a box over entries of the 25-d observation.
+    Used by subgoal files that declare ``domain: pick_and_place``.
+
+    Examples:
+        >>> check_subgoal(Box((0.0,), (0.01,), (30,)))
+        'box entries [30] lie outside the 25-d observation (entries 0 to 24)'
+    """
+    if not isinstance(predicate, Box):
+        return f"pick-and-place subgoals are boxes over observation entries, not {predicate.kind}"
+    outside = [d for d in predicate.box_dims if d >= fetch.OBSERVATION_SIZE]
+    if outside:
+        return (
+            f"box entries {outside} lie outside the {fetch.OBSERVATION_SIZE}-d observation "
+            f"(entries 0 to {fetch.OBSERVATION_SIZE - 1})"
+        )
+    return None
 
 
 def fetch_env(num_envs: int) -> EnvBase:
@@ -70,7 +92,7 @@ DOMAIN = domains.register(
         "Pick and place",
         aliases=("fetch",),
         make_env=fetch_env,
-        check_subgoal=fetch.check_subgoal,
+        check_subgoal=check_subgoal,
         parts=(PAPER, STUDIO),
     )
 )
