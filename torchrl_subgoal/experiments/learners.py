@@ -136,8 +136,7 @@ class LearnerRecipeConfig(RecipeConfig):
 
     domain: str = setting(
         "four_rooms",
-        "a domain with a learner set-up (four_rooms, four_rooms_step, pinball, point_maze_umaze, point_maze_medium, "
-        "mountain_car)",
+        "a registered domain with a learner set-up (a LearnerDomain part); an unknown name lists them",
     )
     methods: str = setting(
         "",
