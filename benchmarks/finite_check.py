@@ -32,7 +32,11 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     n = args.envs
-    patterns = list(load_patterns(str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")).values())
+    patterns = list(
+        load_patterns(
+            str(files("torchrl_subgoal") / "domains" / "four_rooms" / "four_rooms_participants.yaml")
+        ).values()
+    )
     shaping = SubgoalPotentialTransform(
         [patterns[i % len(patterns)] for i in range(n)],
         TabularPotential(3, (n,)),

@@ -41,7 +41,9 @@ from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.potentials import INDEX
 from torchrl_subgoal.transform import RETURN, STEPS
 
-PATTERNS = list(load_patterns(str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")).values())
+PATTERNS = list(
+    load_patterns(str(files("torchrl_subgoal") / "domains" / "four_rooms" / "four_rooms_participants.yaml")).values()
+)
 
 
 def shaping(n: int, write: bool) -> SubgoalPotentialTransform:

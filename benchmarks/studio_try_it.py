@@ -40,7 +40,7 @@ def main() -> None:
     studio = default_domains()
     for name, (file, pattern) in PATTERNS.items():  # the domains whose Try it runs (not pick-and-place)
         domain = studio[name]
-        series = load_patterns(str(files("torchrl_subgoal") / "data" / file))[pattern]
+        series = load_patterns(str(files("torchrl_subgoal") / "domains" / name / file))[pattern]
         map_ = next(iter(domain.maps), None)
         try_pattern(name, series, TrySettings(1, 1, max_steps=100), map=map_)  # compile
         limits = domain.limits

@@ -28,7 +28,7 @@ from torchrl_subgoal.experiments.cli import check, setting
 from torchrl_subgoal.experiments.recipe import config_main
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 
-PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")
+PARTICIPANTS = str(files("torchrl_subgoal") / "domains" / "four_rooms" / "four_rooms_participants.yaml")
 CONVENTIONS = {  # name: (zero_terminal_potential, start_potential)
     "old default (Φ_T = 0, Φ = V)": (True, "value"),
     "authors (Φ_T = V(z_T), Φ = V)": (False, "value"),

@@ -65,7 +65,7 @@ METHODS = {
 }
 #: the paper's target (HRS-mean); HRS's comes from the flags (default: the library's)
 MEAN_TARGET = {"expectile": 0.5, "bootstrap_truncated": True}
-PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")
+PARTICIPANTS = str(files("torchrl_subgoal") / "domains" / "four_rooms" / "four_rooms_participants.yaml")
 #: per task: the env's subgoal-read key, the report's thresholds and moving-average window
 TASKS: dict[str, dict[str, Any]] = {
     "four_rooms": {"subgoal_key": "cell", "thresholds": [100, 50], "window": 1},

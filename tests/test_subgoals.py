@@ -124,7 +124,9 @@ def test_save_keeps_file_and_pattern_descriptions(tmp_path: Path) -> None:
 def test_shipped_participants_file() -> None:
     from importlib.resources import files
 
-    patterns = load_patterns(Path(str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")))
+    patterns = load_patterns(
+        Path(str(files("torchrl_subgoal") / "domains" / "four_rooms" / "four_rooms_participants.yaml"))
+    )
     assert len(patterns) == 10
     assert patterns["participant_7"].predicates == (Cell(3, 6), Cell(7, 9))
     assert all(len(p) == 2 and p.is_chain for p in patterns.values())

@@ -272,7 +272,7 @@ def load_pattern(path: str | Path, pattern: str | None = None, *, domain: str | 
 
     Examples:
         >>> from importlib.resources import files
-        >>> path = files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml"
+        >>> path = files("torchrl_subgoal") / "domains" / "four_rooms" / "four_rooms_participants.yaml"
         >>> load_pattern(path, "participant_1").predicates[0]
         Cell(row=4, col=9, cell_dims=(0, 1))
     """

@@ -23,7 +23,9 @@ from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import room_aggregation
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 
-PATTERNS = list(load_patterns(str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")).values())
+PATTERNS = list(
+    load_patterns(str(files("torchrl_subgoal") / "domains" / "four_rooms" / "four_rooms_participants.yaml")).values()
+)
 #: the conventions below are guarded under the paper's mean target and its potential (zero at the start, learned
 #: freely), as docs/shaping_defaults.md measures them
 PAPER_TARGET: dict[str, Any] = {

@@ -55,7 +55,13 @@ def test_a2c_recipe_pinball_runs(tmp_path: Path) -> None:
         "--workers",
         "0",
         "--subgoals",
-        str(Path(__file__).resolve().parents[2] / "torchrl_subgoal" / "data" / "pinball_participants.yaml"),
+        str(
+            Path(__file__).resolve().parents[2]
+            / "torchrl_subgoal"
+            / "domains"
+            / "pinball"
+            / "pinball_participants.yaml"
+        ),
         "--results",
         str(tmp_path),
     ]

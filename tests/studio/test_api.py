@@ -127,7 +127,7 @@ def test_opening_the_shipped_participants_files(client: FlaskClient, app: Flask)
 
     folder = app.extensions["studio"].folder
     for name, domain in (("four_rooms_participants.yaml", "four_rooms"), ("pinball_participants.yaml", "pinball")):
-        (folder / name).write_text((files("torchrl_subgoal") / "data" / name).read_text())
+        (folder / name).write_text((files("torchrl_subgoal") / "domains" / domain / name).read_text())
         opened = client.get(f"/api/files/{name}").json
         assert opened["domain"] == domain and len(opened["patterns"]) == 10
 

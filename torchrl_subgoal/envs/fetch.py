@@ -72,7 +72,7 @@ BASE_ENV_ID = "FetchPickAndPlace-v4"
 MAX_EPISODE_STEPS = 50
 SUBGOAL_MARGIN = 0.01
 INSTALL_HINT = "pip install 'torchrl_subgoal[fetch]'  (or `make install` in a checkout)"
-PARTICIPANTS_FILE = str(files("torchrl_subgoal") / "data" / "pick_and_place_participants.yaml")
+PARTICIPANTS_FILE = str(files("torchrl_subgoal") / "domains" / "pick_and_place" / "pick_and_place_participants.yaml")
 _MUJOCO_RANGE = ((3, 3), (3, 12))  # >= 3.3, < 3.12
 
 

@@ -44,7 +44,7 @@ __all__ = ["ENV_ID", "MAX_EPISODE_STEPS", "SUBGOAL_FILE", "make_mountain_car", "
 ENV_ID = "MountainCar-v0"
 #: gymnasium's time limit.
 MAX_EPISODE_STEPS = 200
-SUBGOAL_FILE = str(files("torchrl_subgoal") / "data" / "mountain_car_subgoals.yaml")
+SUBGOAL_FILE = str(files("torchrl_subgoal") / "domains" / "mountain_car" / "mountain_car_subgoals.yaml")
 
 
 def _make_single() -> Any:

@@ -95,7 +95,9 @@ BALL_RADIUS = 0.1
 #: Radius of the waypoint circles: a ball (radius 0.1) turning through a corner cell comes within
 #: ``√2 · 0.5 − 0.1 ≈ 0.61`` of the cell's centre (its centre stays 0.1 from the wall's corner).
 WAYPOINT_RADIUS = 0.65
-SUBGOAL_FILES = {maze: str(files("torchrl_subgoal") / "data" / f"point_maze_{maze}.yaml") for maze in MAZES}
+SUBGOAL_FILES = {
+    maze: str(files("torchrl_subgoal") / "domains" / "point_maze" / f"point_maze_{maze}.yaml") for maze in MAZES
+}
 
 
 @dataclass(frozen=True)

@@ -61,7 +61,7 @@ from torchrl_subgoal.methods import all_methods, paper_methods, shaping_transfor
 from torchrl_subgoal.subgoals import Cell
 
 METHODS = all_methods(baseline="SARSA")
-PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml")
+PARTICIPANTS = str(files("torchrl_subgoal") / "domains" / "four_rooms" / "four_rooms_participants.yaml")
 OBSERVATION_KEY = "cell"  # what the subgoal predicates read: (row, col)
 
 

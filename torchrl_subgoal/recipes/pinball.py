@@ -60,7 +60,7 @@ from torchrl_subgoal.methods import all_methods, paper_methods, shaping_transfor
 
 METHODS = all_methods(baseline="AC")
 OBSERVATION_KEY = "observation"  # what the subgoal predicates read: (x, y, ẋ, ẏ)
-PARTICIPANTS = str(files("torchrl_subgoal") / "data" / "pinball_participants.yaml")
+PARTICIPANTS = str(files("torchrl_subgoal") / "domains" / "pinball" / "pinball_participants.yaml")
 SUBGOAL_RADIUS = 0.04  # the target's radius, as in the paper
 
 

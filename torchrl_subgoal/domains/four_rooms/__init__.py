@@ -141,7 +141,7 @@ A2C = LearnerDomain(
     "observation",
     "cell",
     "observation",
-    str(files("torchrl_subgoal") / "data" / "four_rooms_participants.yaml"),
+    str(files(__name__) / "four_rooms_participants.yaml"),
     eta=1.0,
     thresholds=(100.0, 50.0),
     defaults={

@@ -137,7 +137,7 @@ A2C = LearnerDomain(
     "observation",
     "observation",
     "observation",
-    str(files("torchrl_subgoal") / "data" / "pinball_participants.yaml"),
+    str(files(__name__) / "pinball_participants.yaml"),
     eta=1.0,
     thresholds=(3000.0, 2000.0, 1000.0, 500.0),
     success=SuccessSignal(min_return=10_000.0),  # the target's reward (no step cost)
