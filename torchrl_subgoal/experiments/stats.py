@@ -32,6 +32,24 @@ from rliable import library, metrics
 from scipy import stats as sps
 from statsmodels.stats.multitest import multipletests
 
+__all__ = [
+    "PairwiseResult",
+    "TestResult",
+    "ThresholdTimes",
+    "anova",
+    "asymptotic_performance",
+    "bootstrap_ci",
+    "curve_band",
+    "iqm",
+    "moving_average",
+    "pairwise_tests",
+    "performance_profile",
+    "probability_of_improvement",
+    "runs_by_task",
+    "stratified_bootstrap_ci",
+    "time_to_threshold",
+]
+
 FloatArray = npt.NDArray[np.float64]
 ArrayLike = npt.ArrayLike
 
