@@ -75,7 +75,17 @@ class BackendUnavailableError(RuntimeError):
 
 
 class ThrottledProgress:
-    """The ``progress`` callable handed to ``run_chunk``: batches counts before sending."""
+    """The ``progress`` callable handed to ``run_chunk``: batches counts before sending.
+
+    Examples:
+        >>> sent = []
+        >>> progress = ThrottledProgress("HRS/00000", sent.append)
+        >>> progress(3), progress(4), sent
+        (None, None, [])
+        >>> progress.flush()
+        >>> sent
+        [('HRS/00000', 7)]
+    """
 
     def __init__(self, chunk_name: str, sink: Callable[[tuple[str, int]], None] | None) -> None:
         self.chunk_name = chunk_name
@@ -96,7 +106,17 @@ class ThrottledProgress:
 
 
 class ProgressBar:
-    """A tqdm bar over learner-episodes, fed by chunk progress messages."""
+    """A tqdm bar over learner-episodes, fed by chunk progress messages.
+
+    Examples:
+        >>> chunk = Chunk("HRS", 0, (("alice", 0),), seed=1)
+        >>> bar = ProgressBar([chunk], n_episodes=3, enabled=False)
+        >>> bar.add("HRS/00000", 2)
+        >>> bar.add("HRS/00000", 5)  # a learner runs 3 episodes: counted up to that
+        >>> bar.reported
+        {'HRS/00000': 3}
+        >>> bar.close()
+    """
 
     def __init__(self, chunks: Sequence[Chunk], n_episodes: int | None, enabled: bool) -> None:
         self.n_episodes = n_episodes
@@ -130,13 +150,28 @@ class ProgressBar:
 
 
 def limit_threads() -> None:
+    """One torch thread in a worker process: the workers, not the threads, use the cores.
+
+    Examples:
+        >>> import torch
+        >>> before = torch.get_num_threads()
+        >>> limit_threads()
+        >>> torch.get_num_threads()
+        1
+        >>> torch.set_num_threads(before)
+    """
     import torch
 
     torch.set_num_threads(1)
 
 
 def failure(chunk: Chunk, exc: BaseException, note: str = "") -> ChunkFailedError:
-    """The error for a chunk whose ``run_chunk`` raised; :meth:`Sweep.run` adds what to do next."""
+    """The error for a chunk whose ``run_chunk`` raised; :meth:`Sweep.run` adds what to do next.
+
+    Examples:
+        >>> failure(Chunk("HRS", 0, (("alice", 0),), seed=1), ValueError("bad\\nfile."))
+        ChunkFailedError('chunk HRS/00000 failed: ValueError: bad file.')
+    """
     reason = " ".join(str(exc).split()).rstrip(".") or "(no message)"  # one line, however the cause wrote it
     return ChunkFailedError(f"chunk {chunk.name} failed: {type(exc).__name__}: {reason}{note}.")
 

@@ -419,6 +419,16 @@ def pick_pattern(patterns: Mapping[str, SubgoalSeries], pattern: str | None, sou
 
     Raises:
         SubgoalFileError: no such pattern, or ``None`` for a file of several; the message lists them.
+
+    Examples:
+        >>> from torchrl_subgoal.subgoals import State
+        >>> patterns = {"a": SubgoalSeries([State(1)]), "b": SubgoalSeries([State(2)])}
+        >>> pick_pattern(patterns, "b", "f.yaml").predicates
+        (State(state=2),)
+        >>> pick_pattern(patterns, None, "f.yaml")
+        Traceback (most recent call last):
+        ...
+        torchrl_subgoal.subgoals.errors.SubgoalFileError: f.yaml: holds 2 patterns ['a', 'b']; pass pattern=<name>
     """
     if pattern is None:
         if len(patterns) != 1:
