@@ -36,8 +36,8 @@ from torchrl.data import Composite, TensorSpec, Unbounded
 from torchrl.envs import Compose, EnvBase, Transform, TransformedEnv
 
 from torchrl_subgoal import SubgoalPotentialTransform, TabularPotential, load_patterns
-from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
+from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.potentials import INDEX
 from torchrl_subgoal.transform import RETURN, STEPS
 

@@ -17,11 +17,11 @@ from torchrl.envs import ParallelEnv, TransformedEnv
 
 from tests.recipes.test_recipes import recipe
 from torchrl_subgoal import NeuralPotential, SubgoalPotentialTransform, SubgoalValueLoss
-from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.experiments import load_frame
 from torchrl_subgoal.experiments.cli import parse_config
 from torchrl_subgoal.training import EnvFactory, batched, close_collector, shaped_env
+from torchrl_subgoal.training.ddpg_parts import DDPGAgent, DDPGConfig
 
 GAMMA = 0.98
 
