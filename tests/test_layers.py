@@ -41,8 +41,8 @@ LAYERS: dict[str, int] = {
     "torchrl_subgoal.training.ddpg_parts": 6,
     "torchrl_subgoal.training.stack": 6,
     "torchrl_subgoal.training.subgoal_input": 6,
-    "torchrl_subgoal.fused.kernels.sarsa": 6,
-    "torchrl_subgoal.fused.kernels.actor_critic": 6,
+    "torchrl_subgoal.fused._kernels.sarsa": 6,
+    "torchrl_subgoal.fused._kernels.actor_critic": 6,
     "torchrl_subgoal.fused": 7,
     "torchrl_subgoal.training": 7,
     "torchrl_subgoal.methods": 7,
@@ -63,7 +63,7 @@ NOT_IN_THE_CORE = (
     "torchrl_subgoal.envs",
 )
 #: the packages of compiled kernels, whose functions take their arrays one by one
-KERNELS = ("torchrl_subgoal._kernels", "torchrl_subgoal.fused.kernels")
+KERNELS = ("torchrl_subgoal._kernels", "torchrl_subgoal.fused._kernels")
 CORE = ("torchrl_subgoal.subgoals", "torchrl_subgoal.transform", "torchrl_subgoal.potentials", "torchrl_subgoal.loss")
 
 

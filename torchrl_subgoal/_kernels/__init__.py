@@ -14,7 +14,7 @@ potentials); the tests check the two agree.
 * :mod:`.grid`: the four-rooms env.
 
 The paper's two learners' kernels, filing finished episodes and the fused engine's loop live with the
-learners, in :mod:`torchrl_subgoal.fused.kernels`.
+learners, in :mod:`torchrl_subgoal.fused._kernels`.
 
 Arrays are numpy views of torch tensors (no copies); batch dimensions are
 flattened, per-learner scalars have a trailing singleton. Import the module you

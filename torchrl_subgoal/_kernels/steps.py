@@ -1,6 +1,6 @@
 """The fused engine's per-record steps: generic functions that an env's or a learner's record implements.
 
-:func:`~torchrl_subgoal.fused.kernels.engine.fused_run` steps any env with any learner. It names neither: it
+:func:`~torchrl_subgoal.fused._kernels.engine.fused_run` steps any env with any learner. It names neither: it
 calls the generic functions below, and an env's or a learner's record type (the NamedTuple its
 ``kernel_state()`` returns) joins the engine by implementing them, next to its own kernels, with
 ``@implements(generic, RecordType)`` (also importable from :mod:`torchrl_subgoal.fused.engine`, with
@@ -16,7 +16,7 @@ should not pass its whole record to further inlined helpers per step when the re
 numba counts a reference per array each time (see the note above
 :func:`~torchrl_subgoal._kernels.shaping.shaping_start`). Numba's on-disk cache of ``fused_run`` is keyed
 on its own file only: after editing an implementation elsewhere, delete
-``fused/kernels/__pycache__/engine.fused_run-*.nb[ic]``.
+``fused/_kernels/__pycache__/engine.fused_run-*.nb[ic]``.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@
   every step, record episodes (:class:`EpisodeRecords`, :mod:`~torchrl_subgoal.fused.records`);
   with ``engine="fused"``, the same env, shaping transform and learner in one compiled loop
   (:mod:`~torchrl_subgoal.fused.engine`);
-* :mod:`torchrl_subgoal.fused.kernels`: the numba kernels these call (the learners' steps, the
+* :mod:`torchrl_subgoal.fused._kernels`: the numba kernels these call (the learners' steps, the
   engine's loop, filing episodes); the ones they share with the envs and the shaping transform
   are in :mod:`torchrl_subgoal._kernels`.
 

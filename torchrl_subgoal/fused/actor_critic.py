@@ -14,7 +14,7 @@ from tensordict.utils import NestedKey
 
 from torchrl_subgoal._kernels.random import AGENT_STREAM, learner_keys, new_streams
 from torchrl_subgoal._kernels.steps import implements, learner_scratch, learner_step
-from torchrl_subgoal.fused.kernels.actor_critic import (
+from torchrl_subgoal.fused._kernels.actor_critic import (
     _feature_scratch,
     ac_act,
     ac_learner_step,
@@ -321,7 +321,7 @@ class FourierActorCritic(KernelLearner):
         next_root.set("action", torch.from_numpy(action))
 
 
-# The fused engine's learner step (torchrl_subgoal.fused.kernels.engine.fused_run): features of the observation array.
+# The fused engine's learner step (torchrl_subgoal.fused._kernels.engine.fused_run): features of the observation array.
 
 
 @implements(learner_scratch, ActorCriticKernelState)

@@ -12,7 +12,7 @@ draws from its own stream), so its records are identical to the TorchRL
 loop's (``tests/fused/test_engine.py``) while a learner-step costs tens of
 nanoseconds (four-rooms) or a few microseconds (PinBall).
 
-One loop, :func:`torchrl_subgoal.fused.kernels.engine.fused_run`, runs every env and
+One loop, :func:`torchrl_subgoal.fused._kernels.engine.fused_run`, runs every env and
 learner: it calls an env's and a learner's compiled steps (``env_step``,
 ``env_reset``, ``learner_step``, …), which each record type (what the env's
 and the learner's ``kernel_state()`` return) implements next to its own
@@ -60,7 +60,7 @@ from torchrl_subgoal._kernels.steps import (
     learner_step,
     missing_steps,
 )
-from torchrl_subgoal.fused.kernels.engine import fused_run, fused_run_uncached
+from torchrl_subgoal.fused._kernels.engine import fused_run, fused_run_uncached
 from torchrl_subgoal.fused.records import EpisodeArrays, EpisodeRecords
 from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.transform import ShapingKernelState, SubgoalPotentialTransform

@@ -11,7 +11,7 @@ from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal.fused.kernels.records import record_episodes
+from torchrl_subgoal.fused._kernels.records import record_episodes
 from torchrl_subgoal.fused.records import EpisodeRecords
 
 __all__ = ["EpisodeRecords", "OnlineAgent", "run_episodes"]

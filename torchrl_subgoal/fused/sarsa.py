@@ -13,7 +13,7 @@ from tensordict.utils import NestedKey
 
 from torchrl_subgoal._kernels.random import AGENT_STREAM, learner_keys, new_streams
 from torchrl_subgoal._kernels.steps import implements, learner_scratch, learner_step
-from torchrl_subgoal.fused.kernels.sarsa import sarsa_learner_step, sarsa_step, softmax_sample
+from torchrl_subgoal.fused._kernels.sarsa import sarsa_learner_step, sarsa_step, softmax_sample
 from torchrl_subgoal.fused.module import KernelLearner
 
 __all__ = ["SARSA_PRESETS", "SarsaConfig", "SarsaKernelState", "SoftmaxSarsa"]
@@ -232,7 +232,7 @@ def _flat(t: torch.Tensor) -> np.ndarray:
     return t.numpy().reshape(-1)
 
 
-# The fused engine's learner step (torchrl_subgoal.fused.kernels.engine.fused_run): a row per state and abstract state.
+# The fused engine's learner step (torchrl_subgoal.fused._kernels.engine.fused_run): a row per state and abstract state.
 
 
 @implements(learner_scratch, SarsaKernelState)

@@ -31,7 +31,7 @@ from torchrl.data import Categorical, OneHot
 from torchrl.envs import EnvBase, ExplorationType
 from torchrl.envs.utils import exploration_type
 
-from torchrl_subgoal.fused.kernels.records import record_episodes
+from torchrl_subgoal.fused._kernels.records import record_episodes
 from torchrl_subgoal.fused.records import EpisodeRecords
 from torchrl_subgoal.training.config import Settings
 from torchrl_subgoal.training.recording import SuccessSignal

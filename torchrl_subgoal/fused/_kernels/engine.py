@@ -22,7 +22,7 @@ from torchrl_subgoal._kernels.steps import (
     learner_scratch,
     learner_step,
 )
-from torchrl_subgoal.fused.kernels.records import _active_learners, _record_learner
+from torchrl_subgoal.fused._kernels.records import _active_learners, _record_learner
 
 
 @numba.njit(cache=True, nogil=True)
