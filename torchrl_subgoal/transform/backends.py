@@ -24,7 +24,15 @@ from torchrl_subgoal.transform.eager import torch_step
 from torchrl_subgoal.transform.keys import StepInputs
 from torchrl_subgoal.transform.setup import BatchSetup, Settings, Subgoals
 
-__all__ = ["Backend", "CompiledShaping", "ShapingBackend", "TorchShaping", "backend_for", "batch_for"]
+__all__ = [
+    "Backend",
+    "CompiledShaping",
+    "ShapingBackend",
+    "TorchShaping",
+    "backend_for",
+    "batch_for",
+    "with_learner",
+]
 
 Backend = Literal["auto", "compiled", "torch"]
 
@@ -32,11 +40,12 @@ Backend = Literal["auto", "compiled", "torch"]
 class ShapingBackend(Protocol):
     """What the transform asks of a backend.
 
-    ``prepare(batch, online)`` once, when a batch is set up (``online``: the env's batch, whose rows are
-    the learners, in order; else stored rows); ``step(batch, current, step, learn)`` at every step: the
-    next abstract-state entries from ``current`` (names as in :class:`~torchrl_subgoal.SubgoalKeys`),
-    ``"reward"`` the shaped reward and ``"transition"`` the step's SMDP transition when the settings
-    write it; with ``learn``, the potential is first trained online on the transitions the step closes.
+    ``prepare(batch, online)`` once, when a batch is set up (``online``: the env's batch, whose rows are the
+    learners, in order; else stored rows); ``step(batch, current, step, learn)`` at every step: from the kept
+    entries ``current`` (every one, :func:`with_learner`), the next ones (names as in
+    :class:`~torchrl_subgoal.SubgoalKeys`), ``"reward"`` the shaped reward and ``"transition"`` the step's SMDP
+    transition when the settings write it; with ``learn``, the potential is first trained online on the
+    transitions the step closes.
     """
 
     def prepare(self, batch: BatchSetup, online: bool) -> None: ...
@@ -69,7 +78,6 @@ class TorchShaping:
         self, batch: BatchSetup, current: dict[str, torch.Tensor], step: StepInputs, learn: bool
     ) -> dict[str, Any]:
         settings = self.settings
-        current = with_learner(batch, settings, current)
         if step.obs is None and settings.reads_observation:
             raise KeyError(f"SubgoalPotentialTransform: the step has no {settings.observation_key!r} entry")
         update = self.update.step if learn and self.update is not None else None
@@ -95,13 +103,13 @@ class CompiledShaping(TorchShaping):
         self, batch: BatchSetup, current: dict[str, torch.Tensor], step: StepInputs, learn: bool
     ) -> dict[str, Any]:
         if current[self.settings.keys.index].device.type == "cpu":
-            return compiled_step(batch, self.settings, with_learner(batch, self.settings, current), step, learn)
+            return compiled_step(batch, self.settings, current, step, learn)
         return super().step(batch, current, step, learn)
 
 
 def with_learner(batch: BatchSetup, settings: Settings, current: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """``current`` with each row's learner when the settings keep it and ``current`` lacks it (a step
-    called directly, from entries made before the env was reset)."""
+    """``current`` with each row's learner when the settings keep it and ``current`` lacks it: what a backend's
+    ``step`` expects of entries not read from a reset env (a step called directly)."""
     learner = settings.keys.learner
     if learner in settings.kept and learner not in current:
         current[learner] = batch.learner

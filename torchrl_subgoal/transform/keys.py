@@ -26,10 +26,9 @@ __all__ = [
     "observation",
     "observation_of",
     "read",
-    "read_kept",
+    "read_step",
     "state_specs",
     "step_in_keys",
-    "step_inputs",
     "step_out_keys",
     "transition_spec",
     "write",
@@ -205,14 +204,22 @@ class StepInputs(NamedTuple):
     td: TensorDictBase | None  #: the step's ``"next"`` entries, for the conditions
 
 
-def read_kept(root: TensorDictBase, kept: tuple[str, ...]) -> dict[str, torch.Tensor]:
-    """The kept entries of a step's input (``root``: the reward's group); a clear ``KeyError`` for one missing.
+def read_step(
+    td: TensorDictBase, nxt: TensorDictBase, env: EnvKeys, kept: tuple[str, ...], obs_key: NestedKey | None
+) -> tuple[dict[str, torch.Tensor], StepInputs, torch.Size]:
+    """What a shaping step reads: the kept entries of its input ``td`` (a clear ``KeyError`` for one missing),
+    what the shaping reads of its ``"next"`` entries ``nxt`` (``obs_key``: the observation read, ``None``:
+    none) and the batch shape of the reward's group.
 
     Examples:
         >>> from tensordict import TensorDict
-        >>> read_kept(TensorDict({"subgoal_index": torch.zeros(2, 1)}, [2]), ("subgoal_index",))["subgoal_index"].shape
-        torch.Size([2, 1])
+        >>> td = TensorDict({"subgoal_index": torch.zeros(2, 1)}, [2])
+        >>> nxt = TensorDict({"reward": torch.ones(2, 1), "done": torch.zeros(2, 1, dtype=torch.bool)}, [2])
+        >>> current, step, shape = read_step(td, nxt, EnvKeys.resolve(None), ("subgoal_index",), None)
+        >>> list(current), shape
+        (['subgoal_index'], torch.Size([2]))
     """
+    root = td.get(env.group) if env.group else td
     current = {}
     for name in kept:
         value = root._get_str(name, None)
@@ -222,28 +229,16 @@ def read_kept(root: TensorDictBase, kept: tuple[str, ...]) -> dict[str, torch.Te
                 "env through the transform (env.reset()) before stepping"
             )
         current[name] = value
-    return current
-
-
-def step_inputs(nxt: TensorDictBase, env: EnvKeys, observation_key: NestedKey, reads_observation: bool) -> StepInputs:
-    """What the shaping reads of a step's ``"next"`` entries ``nxt``.
-
-    Examples:
-        >>> from tensordict import TensorDict
-        >>> nxt = TensorDict({"reward": torch.ones(2, 1), "done": torch.zeros(2, 1, dtype=torch.bool)}, [2])
-        >>> step = step_inputs(nxt, EnvKeys.resolve(None), "observation", False)
-        >>> step.env_reward is step.reward, step.obs
-        (True, None)
-    """
     reward, done = read(nxt, env.reward), read(nxt, env.done)
-    return StepInputs(
-        read(nxt, observation_key) if reads_observation else None,
+    step = StepInputs(
+        read(nxt, obs_key) if obs_key is not None else None,
         reward,
         read(nxt, env.env_reward) if env.shaped_before else reward,
         done,
         done if env.terminated == env.done else read(nxt, env.terminated),
         nxt,
     )
+    return current, step, (nxt.get(env.group) if env.group else nxt).batch_size
 
 
 def write_step(

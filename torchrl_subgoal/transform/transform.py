@@ -16,7 +16,7 @@ from torchrl_subgoal.loss import ValueUpdate
 from torchrl_subgoal.subgoals import StateAggregation, SubgoalSeries, SubgoalTables
 from torchrl_subgoal.transform import keys, setup, stored
 from torchrl_subgoal.transform.backends import Backend, batch_for
-from torchrl_subgoal.transform.keys import EnvKeys, StepInputs, SubgoalKeys, read_kept, step_inputs, write_step
+from torchrl_subgoal.transform.keys import EnvKeys, StepInputs, SubgoalKeys, read_step, write_step
 from torchrl_subgoal.transform.setup import BatchSetup, Subgoals
 from torchrl_subgoal.transform.shaping import StartPotential
 from torchrl_subgoal.transform.transitions import rebuild
@@ -252,9 +252,8 @@ class SubgoalPotentialTransform(Transform):
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         # every env step comes here: entries are read and written unchecked (their shapes are the specs')
         env, settings = self._env, self._settings
-        current = read_kept(tensordict.get(env.group) if env.group else tensordict, settings.kept)
-        step = step_inputs(next_tensordict, env, settings.observation_key, settings.reads_observation)
-        shape = (next_tensordict.get(env.group) if env.group else next_tensordict).batch_size
+        obs_key = settings.observation_key if settings.reads_observation else None
+        current, step, shape = read_step(tensordict, next_tensordict, env, settings.kept, obs_key)
         batch = self._online  # set up again for another batch shape, or when a table moved (to shared memory…)
         if batch is None or batch.batch_shape != shape or batch.stale(self.potential):
             batch = self._online_batch(shape, step.obs)
