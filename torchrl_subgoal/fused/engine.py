@@ -62,8 +62,9 @@ from torchrl_subgoal._kernels.steps import (
 )
 from torchrl_subgoal.fused._kernels.engine import fused_run, fused_run_uncached
 from torchrl_subgoal.fused.records import EpisodeArrays, EpisodeRecords
+from torchrl_subgoal.fused.shaping_record import ShapingKernelState, shaping_record
 from torchrl_subgoal.potentials import TabularPotential
-from torchrl_subgoal.transform import ShapingKernelState, SubgoalPotentialTransform
+from torchrl_subgoal.transform import SubgoalPotentialTransform
 
 __all__ = [
     "FusedEnv",
@@ -123,7 +124,7 @@ def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase
             "the fused engine stops learners that have their episodes, so each needs its own "
             "potential table (a TabularPotential with the env's batch shape); use engine='torchrl'"
         )
-    return shaping.kernel_state(td)
+    return shaping_record(shaping, td)
 
 
 class FusedEnv(Protocol):
