@@ -115,7 +115,7 @@ def _shape_learner(potential, row, zb, znb, achieved_prev, r_h, k, reward, done,
     potential when the abstract state changes or the episode ends (``value_lr
     > 0``), then shapes the reward with the potential as it is now (see
     :func:`_shaped_reward`). ``potential`` is a
-    :class:`~torchrl_subgoal.transform.PotentialKernelState`. The one
+    :class:`~torchrl_subgoal.transform.setup.PotentialKernelState`. The one
     implementation of the step: the fused loops (:func:`shaping_step`) and
     the transform's compiled path (:func:`shape_step`) call it.
     """
@@ -165,7 +165,7 @@ def shape_step(
 ):
     """Accumulate ``r_h, k``, update a tabular potential online, and shape the reward, for every row.
 
-    ``potential`` is a :class:`~torchrl_subgoal.transform.PotentialKernelState`
+    ``potential`` is a :class:`~torchrl_subgoal.transform.setup.PotentialKernelState`
     (its ``table`` is ``[B or 1, Z]``, empty for the naive potential
     ``Φ = eta · achieved``; ``value_lr = 0`` disables the update;
     ``start_mode`` shifts a table's potential by ``V(z_0)`` (``START_ZERO``)
@@ -289,7 +289,7 @@ def _shape_shared(
 
 # --------------------------------------------------------------------------- shaping in a fused loop
 #
-# A fused loop unpacks a ShapingKernelState (torchrl_subgoal.transform) once, before its loop:
+# A fused loop unpacks a ShapingKernelState (torchrl_subgoal.fused.shaping_record) once, before its loop:
 # ``kind, regions, lookup, potential, learners = shaping``, then ``z, achieved, r_h, k, z_start = learners``
 # and ``pattern, …, offset = regions``. Per step, when ``kind != NO_SHAPING``, it advances the learner's
 # abstract state (region_search when ``kind == REGION_SHAPING``, written out in fused_run, ``lookup`` when
