@@ -28,8 +28,8 @@ from torchrl.data import Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal import State, domains, load_patterns
-from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa, engine, run_episodes
 from torchrl_subgoal.experiments.plots import ReportMap, plot_pattern_maps
+from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa, engine, run_episodes
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 from torchrl_subgoal.subgoals import Predicate
 
