@@ -36,10 +36,10 @@ from torchrl.data import Composite, TensorSpec, Unbounded
 from torchrl.envs import Compose, EnvBase, Transform, TransformedEnv
 
 from torchrl_subgoal import SubgoalPotentialTransform, TabularPotential, load_patterns
-from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
+from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.potentials import INDEX
-from torchrl_subgoal.transform import RETURN, STEPS
+from torchrl_subgoal.transform import RETURN, STEPS, SubgoalKeys
 
 PATTERNS = list(
     load_patterns(str(files("torchrl_subgoal") / "domains" / "four_rooms" / "four_rooms_participants.yaml")).values()
@@ -53,7 +53,7 @@ def shaping(n: int, write: bool) -> SubgoalPotentialTransform:
         gamma=0.99,
         observation_key="cell",
         value_update=0.25,
-        transitions_key="smdp" if write else None,
+        keys=SubgoalKeys(transitions="smdp" if write else None),
     )
 
 

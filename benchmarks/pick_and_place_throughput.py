@@ -74,9 +74,9 @@ from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.data import Bounded
 
 from torchrl_subgoal import NeuralPotential
-from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, mlp
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.training import EnvFactory, Shaping, close_collector, shaped_env
+from torchrl_subgoal.training.ddpg_parts import DDPGAgent, DDPGConfig, mlp
 
 GRADIENT_STEPS = 200 * 50 * 40  # epochs x cycles x gradient steps per cycle, both presets
 TEST_STEPS = 200 * 10 * 50  # epochs x test episodes x steps

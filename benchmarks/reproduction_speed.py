@@ -68,14 +68,14 @@ def measure_engine(domain: str, batch_size: int | None = None, shaped: bool = Fa
     from torchrl.envs import TransformedEnv
 
     from torchrl_subgoal import State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
-    from torchrl_subgoal.agents import (
+    from torchrl_subgoal.envs import FourRoomsEnv, PinBallEnv
+    from torchrl_subgoal.fused import (
         AC_PRESETS,
         SARSA_PRESETS,
         FourierActorCritic,
         SoftmaxSarsa,
         run_episodes,
     )
-    from torchrl_subgoal.envs import FourRoomsEnv, PinBallEnv
 
     torch.set_num_threads(1)
 

@@ -22,10 +22,10 @@ import torch
 from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import load_patterns
-from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.experiments.cli import check, setting
 from torchrl_subgoal.experiments.recipe import config_main
+from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 
 PARTICIPANTS = str(files("torchrl_subgoal") / "domains" / "four_rooms" / "four_rooms_participants.yaml")

@@ -17,12 +17,12 @@ import torch
 from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import domains, load_patterns, registry
-from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.experiments import Chunk, EpisodeTable, MethodSpec, Sweep
 from torchrl_subgoal.experiments.paper import PaperResults
 from torchrl_subgoal.experiments.recipe import chunk_patterns
 from torchrl_subgoal.experiments.report import write_report
+from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 from torchrl_subgoal.subgoals import SubgoalFileError
 

@@ -27,8 +27,9 @@ from torchrl_subgoal import (
 from torchrl_subgoal.potentials import ACHIEVED, INDEX
 from torchrl_subgoal.subgoals import Predicate, StateAggregation, SubgoalTables
 from torchrl_subgoal.subgoals.tables import _in_regions
-from torchrl_subgoal.transform import RETURN, STEPS
-from torchrl_subgoal.transform.compiled import StepInputs
+from torchrl_subgoal.transform import RETURN, STEPS, SubgoalKeys
+from torchrl_subgoal.transform.backends import with_learner
+from torchrl_subgoal.transform.keys import StepInputs
 
 D = 3  # observation entries
 PROPERTY = settings(
@@ -150,7 +151,8 @@ def one_step(
     """One step of ``t`` (set up for a batch of ``shape``, learning online) from the entries ``current``."""
     n = shape.numel()
     setup = t._batch(shape, torch.arange(n).reshape(*shape, 1), n, obs, online=True)
-    return t._advance(setup, current, StepInputs(obs, reward, reward, done, terminated, None), learn=True)
+    current = with_learner(setup, t._settings, current)
+    return setup.backend.step(setup, current, StepInputs(obs, reward, reward, done, terminated, None), True)
 
 
 @PROPERTY
@@ -180,9 +182,8 @@ def test_shaping_paths_agree(case: tuple, data: st.DataObject) -> None:
             potential,
             gamma=0.9,
             value_update=0.5,
-            transitions_key="smdp",
-            backend=backend,
-        )  # type: ignore[arg-type]
+            keys=SubgoalKeys(transitions="smdp"),
+        ).use_backend(backend)  # type: ignore[arg-type]
         current = {INDEX: z.clone(), RETURN: r_h.clone(), STEPS: k.clone(), ACHIEVED: torch.zeros_like(done)}
         try:
             out = one_step(t, current, obs, r.clone(), done, terminated, shape)
@@ -220,8 +221,8 @@ def test_nan_is_an_error_on_both_paths(eager: bool, reward: float, obs: float, m
     """A NaN reward would make the table NaN for good; the transform refuses it."""
     series = [SubgoalSeries([Circle((0.5, 0.5), 0.1)])]
     potential = TabularPotential(2, batch_shape=(2,))
-    t = SubgoalPotentialTransform(
-        series, potential, gamma=0.9, value_update=0.5, backend="torch" if eager else "compiled"
+    t = SubgoalPotentialTransform(series, potential, gamma=0.9, value_update=0.5).use_backend(
+        "torch" if eager else "compiled"
     )
     observation = torch.tensor([[0.5, 0.5], [0.5, obs]])
     rewards = torch.tensor([[0.0], [reward]])
@@ -249,10 +250,11 @@ def test_infinite_observations_compare_as_numbers() -> None:
 @PROPERTY
 @given(st.data())
 def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> None:
-    """``_kernels.shaping.shape_step`` against the torch functions of ``transform.shaping`` and one SGD step of
-    ``SubgoalValueLoss`` (reduction "sum"): the SMDP return, the online update (a table per row, one shared
-    table, or a table per group of rows), the start level, a monotone table and the terminal potential."""
-    from torchrl_subgoal import SubgoalValueLoss
+    """``_kernels.shaping.shape_step`` against the torch functions of ``transform.shaping`` and one
+    ``ValueUpdate.step`` of ``SubgoalValueLoss`` (reduction "sum"): the SMDP return, the online update (a table per
+    row, one shared table, or a table per group of rows), the start level, a monotone table and the terminal
+    potential."""
+    from torchrl_subgoal import SubgoalValueLoss, ValueUpdate
     from torchrl_subgoal._kernels.shaping import shape_step
     from torchrl_subgoal.transform.setup import PotentialKernelState
     from torchrl_subgoal.transform.shaping import (
@@ -349,7 +351,7 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
         loss = SubgoalValueLoss(v, expectile=expectile, bootstrap_truncated=bootstrap).make_value_estimator(
             gamma=value_gamma
         )
-        loss(
+        ValueUpdate(lr, loss).step(  # the torch reference of the kernels' update: one SGD step
             transition(
                 torch.Size([n]),
                 {INDEX: z, **learner},
@@ -361,9 +363,7 @@ def test_the_shaping_kernel_mirrors_the_torch_reference(data: st.DataObject) -> 
                 terminated,
                 z_next != z,
             )
-        )["loss_value"].backward()
-        with torch.no_grad():
-            v.table -= lr * v.table.grad
+        )
     rows = torch.zeros(n, dtype=torch.long) if shared else torch.arange(n) // group
     values = v.table.detach().reshape(-1, states)[rows]
     if ancestors is not None:

@@ -1,6 +1,6 @@
 """The core without the experiment stack: with numba, scipy, pandas, pyarrow, statsmodels, matplotlib, tyro
 and rliable absent, ``import torchrl_subgoal`` works, the README's snippet shapes an env of its own behind a
-collector (the transform stepping in torch), and ``backend="compiled"`` says what is missing.
+collector (the transform stepping in torch), and ``use_backend("compiled")`` says what is missing.
 
 ``make install-check`` makes the same check in a venv that never had them (tools/check_install.py); this
 one hides them from a fresh interpreter of the dev venv (``sys.modules[name] = None``), in seconds."""
@@ -64,8 +64,8 @@ class Walk(EnvBase):
 
 def shaped(backend):
     transform = SubgoalPotentialTransform(SubgoalSeries([State(1), State(2)]), TabularPotential(3), gamma=0.9,
-                                          observation_key="observation", value_update=0.5, backend=backend)
-    return TransformedEnv(Walk(), transform)
+                                          observation_key="observation", value_update=0.5)
+    return TransformedEnv(Walk(), transform.use_backend(backend))
 
 assert not NUMBA
 rollout = shaped("auto").rollout(3)

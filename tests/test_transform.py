@@ -25,6 +25,7 @@ from torchrl_subgoal import (
 )
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import room_aggregation
+from torchrl_subgoal.transform import SubgoalKeys
 
 from .line_env import LineEnv, make_four_rooms
 
@@ -62,10 +63,9 @@ def test_smdp_arithmetic_by_hand(backend: str, start: str) -> None:
         v,
         gamma=0.9,
         value_update=paper,
-        transitions_key="smdp",
-        start_potential=start,
-        backend=backend,  # type: ignore[arg-type]
-    )
+        start_potential=start,  # type: ignore[arg-type]
+        keys=SubgoalKeys(transitions="smdp"),
+    ).use_backend(backend)
     env = TransformedEnv(LineEnv(1), t)
     td = env.reset()
     expected = [
@@ -93,8 +93,8 @@ def test_smdp_arithmetic_by_hand(backend: str, start: str) -> None:
 
 def test_accumulators_reset_on_emission(backend: str) -> None:
     t = SubgoalPotentialTransform(
-        SubgoalSeries([State(3)]), TabularPotential(2), gamma=0.5, transitions_key="smdp", backend=backend
-    )
+        SubgoalSeries([State(3)]), TabularPotential(2), gamma=0.5, keys=SubgoalKeys(transitions="smdp")
+    ).use_backend(backend)
     env = TransformedEnv(LineEnv(1, length=6), t)
     td = env.reset()
     rewards = []
@@ -108,7 +108,9 @@ def test_accumulators_reset_on_emission(backend: str) -> None:
 
 
 def test_truncation_bootstraps_and_termination_does_not() -> None:
-    t = SubgoalPotentialTransform(SubgoalSeries([State(2)]), TabularPotential(2), gamma=0.9, transitions_key="smdp")
+    t = SubgoalPotentialTransform(
+        SubgoalSeries([State(2)]), TabularPotential(2), gamma=0.9, keys=SubgoalKeys(transitions="smdp")
+    )
     env = TransformedEnv(LineEnv(2, length=5), StepCounter(max_steps=2))
     env.append_transform(t)
     td = env.reset()
@@ -137,9 +139,8 @@ def test_shaped_reward_is_r_plus_gamma_v_next_minus_v(backend: str, zero_termina
         gamma=0.95,
         observation_key="cell",
         zero_terminal_potential=zero_terminal,
-        start_potential=start,
-        backend=backend,  # type: ignore[arg-type]
-    )
+        start_potential=start,  # type: ignore[arg-type]
+    ).use_backend(backend)
     env = TransformedEnv(FourRoomsEnv(n, max_steps=40), t)
     torch.manual_seed(0)
     data = env.rollout(120, break_when_any_done=False)
@@ -160,7 +161,7 @@ def test_shaped_reward_is_r_plus_gamma_v_next_minus_v(backend: str, zero_termina
 
 
 def test_naive_potential_pulse(backend: str) -> None:
-    t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), NaivePotential(10.0), gamma=0.9, backend=backend)
+    t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), NaivePotential(10.0), gamma=0.9).use_backend(backend)
     env = TransformedEnv(LineEnv(1, length=4, step_reward=0.0, goal_reward=0.0), t)
     td = env.reset()
     shaped = []
@@ -184,9 +185,8 @@ def test_compiled_and_torch_backends_agree() -> None:
             gamma=0.99,
             observation_key="cell",
             value_update=0.3,
-            transitions_key="smdp",
-            backend=backend,
-        )  # type: ignore[arg-type]
+            keys=SubgoalKeys(transitions="smdp"),
+        ).use_backend(backend)  # type: ignore[arg-type]
         env = TransformedEnv(FourRoomsEnv(n, max_steps=60), t)
         torch.manual_seed(1)
         data = env.rollout(300, break_when_any_done=False)
@@ -210,16 +210,16 @@ def test_compiled_and_torch_backends_agree() -> None:
 
 def test_compiled_backend_refuses_what_it_cannot_shape_in_one_line() -> None:
     t = SubgoalPotentialTransform(
-        HALLWAYS, NeuralPotential(torch.nn.Linear(2, 1)), gamma=0.9, observation_key="cell", backend="compiled"
-    )
+        HALLWAYS, NeuralPotential(torch.nn.Linear(2, 1)), gamma=0.9, observation_key="cell"
+    ).use_backend("compiled")
     with pytest.raises(
         TypeError,
-        match=r"backend='compiled'\): it shapes with a TabularPotential or a "
-        r"NaivePotential, not NeuralPotential; use backend='torch' or 'auto'",
+        match=r"backend 'compiled': it shapes with a TabularPotential or a "
+        r"NaivePotential, not NeuralPotential; use the backend 'torch' or 'auto'",
     ):
         TransformedEnv(FourRoomsEnv(2), t).reset()
     with pytest.raises(ValueError, match="backend must be 'auto', 'compiled' or 'torch', got 'numba'"):
-        SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), gamma=0.9, backend="numba")  # type: ignore[arg-type]
+        SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), gamma=0.9).use_backend("numba")  # type: ignore[arg-type]
 
 
 # ----------------------------------------------------------------- env kinds and specs
@@ -239,7 +239,7 @@ def test_single_unbatched_env() -> None:
 
 @pytest.mark.parametrize("write", [True, False])
 def test_batched_env_specs(write: bool) -> None:
-    env = TransformedEnv(FourRoomsEnv(5), transform_for((5,), transitions_key="smdp" if write else None))
+    env = TransformedEnv(FourRoomsEnv(5), transform_for((5,), keys=SubgoalKeys(transitions="smdp" if write else None)))
     check_env_specs(env)
     assert ("smdp" in list(env.observation_spec.keys())) == write
 
@@ -270,8 +270,8 @@ def test_in_a_compose_with_other_transforms() -> None:
 
 def test_partial_resets_keep_other_envs_state(backend: str) -> None:
     t = SubgoalPotentialTransform(
-        SubgoalSeries([State(1), State(2)]), TabularPotential(3, (3,)), gamma=0.9, backend=backend
-    )
+        SubgoalSeries([State(1), State(2)]), TabularPotential(3, (3,)), gamma=0.9
+    ).use_backend(backend)
     env = TransformedEnv(LineEnv(3, length=3), t)
     td = env.reset()
     for actions in ([1, 1, 0], [1, 1, 1]):
@@ -363,8 +363,8 @@ def test_start_potential_under_a_step_cost(backend: str, start: str) -> None:
     v = TabularPotential(3)
     with torch.no_grad():
         v.table.copy_(torch.tensor([-3.0, -2.0, -1.0]))
-    t = SubgoalPotentialTransform(
-        SubgoalSeries([State(1), State(3)]), v, gamma=0.9, start_potential=start, backend=backend
+    t = SubgoalPotentialTransform(SubgoalSeries([State(1), State(3)]), v, gamma=0.9, start_potential=start).use_backend(
+        backend
     )  # type: ignore[arg-type]
     env = TransformedEnv(LineEnv(1, step_reward=-1.0, goal_reward=0.0), t)
     td = env.reset()
@@ -408,7 +408,7 @@ def test_start_potential_of_an_aggregation_is_that_of_the_reset_state(backend: s
     with torch.no_grad():
         v.table.copy_(torch.tensor([[-1.0, 2.0], [-1.0, -3.0]]))
     starts_in_1 = StateAggregation(torch.tensor([1, 0, 0, 0, 0]), num_states=2)
-    t = SubgoalPotentialTransform(starts_in_1, v, gamma=0.9, start_potential=start, backend=backend)  # type: ignore[arg-type]
+    t = SubgoalPotentialTransform(starts_in_1, v, gamma=0.9, start_potential=start).use_backend(backend)  # type: ignore[arg-type]
     env = TransformedEnv(LineEnv(2, step_reward=0.0), t)
     check_env_specs(env)
     td = env.reset()
@@ -419,7 +419,7 @@ def test_start_potential_of_an_aggregation_is_that_of_the_reset_state(backend: s
     assert torch.allclose(data["next", "reward"].squeeze(-1), expected)
     assert data["next", "subgoal_start"].tolist() == [[1], [1]]  # kept through the episode
     with pytest.raises(ValueError, match="start_potential must be one of"):
-        SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), gamma=0.9, start_potential="max", backend=backend)  # type: ignore[arg-type]
+        SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), gamma=0.9, start_potential="max").use_backend(backend)  # type: ignore[arg-type]
 
 
 # ----------------------------------------------------------------- bad input
@@ -480,8 +480,8 @@ def assert_forward_matches(t: SubgoalPotentialTransform, data: TensorDict) -> No
 
 def test_forward_equals_online_on_categorical_observations(backend: str) -> None:
     t = SubgoalPotentialTransform(
-        SubgoalSeries([State(1), State(3)]), fixed_table(TabularPotential(3, (3,))), gamma=0.9, backend=backend
-    )
+        SubgoalSeries([State(1), State(3)]), fixed_table(TabularPotential(3, (3,))), gamma=0.9
+    ).use_backend(backend)
     env = TransformedEnv(LineEnv(3, length=4), t)
     torch.manual_seed(0)
     data = env.rollout(60, break_when_any_done=False)
@@ -515,7 +515,7 @@ def test_forward_equals_online_on_continuous_observations(backend: str) -> None:
     from torchrl_subgoal.envs import PinBallEnv
 
     series = SubgoalSeries([Circle((0.2, 0.85), 0.06), Circle((0.3, 0.8), 0.06)])
-    t = SubgoalPotentialTransform(series, fixed_table(TabularPotential(3, (4,))), gamma=0.99, backend=backend)
+    t = SubgoalPotentialTransform(series, fixed_table(TabularPotential(3, (4,))), gamma=0.99).use_backend(backend)
     env = TransformedEnv(PinBallEnv(4, max_steps=40, seed=0), t)
     torch.manual_seed(0)
     data = env.rollout(120, break_when_any_done=False)
@@ -530,7 +530,7 @@ def test_forward_on_a_replay_sample_of_another_batch_shape(backend: str, batch: 
 
     v = fixed_table(TabularPotential(3, (2,)))
     patterns = [HALLWAYS, SubgoalSeries([Cell(6, 2), Cell(10, 6)])]
-    t = SubgoalPotentialTransform(patterns, v, gamma=0.95, observation_key="cell", backend=backend)
+    t = SubgoalPotentialTransform(patterns, v, gamma=0.95, observation_key="cell").use_backend(backend)
     env = TransformedEnv(FourRoomsEnv(2, max_steps=80), t)
     torch.manual_seed(3)
     data = env.rollout(200, break_when_any_done=False)
@@ -550,7 +550,9 @@ def test_forward_on_a_replay_sample_of_another_batch_shape(backend: str, batch: 
 def test_forward_never_changes_parameters(backend: str) -> None:
     v = fixed_table(TabularPotential(3, (4,)))
     start = v.table.detach().clone()
-    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.99, observation_key="cell", value_update=0.5, backend=backend)
+    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.99, observation_key="cell", value_update=0.5).use_backend(
+        backend
+    )
     env = TransformedEnv(FourRoomsEnv(4, max_steps=50), t)
     env.set_seed(0)  # with the suite's seeded actions, a walk that reaches a hallway (about 6% of draws reach none)
     data = env.rollout(150, break_when_any_done=False)
@@ -584,8 +586,8 @@ def test_kernel_boundaries_check_shapes() -> None:
 def test_transitions_rebuilt_equal_the_written_ones(backend: str) -> None:
     v = fixed_table(TabularPotential(3, (6,)))
     t = SubgoalPotentialTransform(
-        HALLWAYS, v, gamma=0.97, observation_key="cell", transitions_key="smdp", backend=backend
-    )
+        HALLWAYS, v, gamma=0.97, observation_key="cell", keys=SubgoalKeys(transitions="smdp")
+    ).use_backend(backend)
     data = TransformedEnv(FourRoomsEnv(6, max_steps=60), t).rollout(200, break_when_any_done=False)
     written = data["next", "smdp"].reshape(-1)
     written = written[written["mask"].reshape(-1)]
@@ -615,12 +617,11 @@ def test_two_transforms_on_one_env(backend: str) -> None:
         fixed_table(TabularPotential(3), 1),
         gamma=0.9,
         start_potential="value",
-        backend=backend,
-    )
+    ).use_backend(backend)
     second_potential = fixed_table(TabularPotential(3, index_key="half_index"), 2)
     second = SubgoalPotentialTransform(
-        halves, second_potential, gamma=0.9, prefix="half", start_potential="value", backend=backend
-    )
+        halves, second_potential, gamma=0.9, start_potential="value", keys=SubgoalKeys("half")
+    ).use_backend(backend)
     env = TransformedEnv(LineEnv(3, length=4), Compose(first, second))
     check_env_specs(env)
     torch.manual_seed(0)
@@ -831,8 +832,8 @@ def monotone_run(
     with torch.no_grad():
         v.table.copy_(table)
     t = SubgoalPotentialTransform(
-        [patterns[i % 3] for i in range(n)], v, gamma=0.95, observation_key="cell", backend=backend, **kwargs
-    )
+        [patterns[i % 3] for i in range(n)], v, gamma=0.95, observation_key="cell", **kwargs
+    ).use_backend(backend)
     env = TransformedEnv(FourRoomsEnv(n, max_steps=40), t)
     torch.manual_seed(0)
     return env.rollout(150, break_when_any_done=False), t
@@ -927,8 +928,8 @@ def test_learners_sharing_tables_in_one_env_batch_equal_each_learner_alone(backe
 
     def run(n: int, potential: TabularPotential, acts: torch.Tensor) -> torch.Tensor:
         t = SubgoalPotentialTransform(
-            HALLWAYS, potential, gamma=0.99, observation_key="cell", value_update=0.5, backend=backend
-        )
+            HALLWAYS, potential, gamma=0.99, observation_key="cell", value_update=0.5
+        ).use_backend(backend)
         env = TransformedEnv(FourRoomsEnv(n, max_steps=40, step_reward=-1.0), t)
         td, rewards = env.reset(), []
         for a in acts:
@@ -964,7 +965,7 @@ def test_stored_rows_of_learners_sharing_tables_read_their_learners_table(backen
     v = TabularPotential(3, (2,), envs_per_table=3)
     with torch.no_grad():
         v.table.copy_(torch.tensor([[0.0, 0.5, 0.75], [-1.0, -0.5, 0.25]]))
-    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.9, observation_key="cell", backend=backend)
+    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.9, observation_key="cell").use_backend(backend)
     data = TransformedEnv(FourRoomsEnv(6, max_steps=50), t).rollout(150, break_when_any_done=False)
     assert data["next", "subgoal_index"].max() > 0
     offline = t(data.clone())
@@ -981,7 +982,7 @@ def test_stored_rows_of_learners_sharing_tables_read_their_learners_table(backen
 def test_a_device_move_it_cannot_follow_is_a_clear_error(backend: str, potential: str) -> None:
     """``transform.to("meta")`` left the compiled step shaping with the table from before the move."""
     v = TabularPotential(3) if potential == "table" else NeuralPotential(torch.nn.Linear(2, 1))
-    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.9, observation_key="cell", value_update=0.1, backend=backend)
+    t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.9, observation_key="cell", value_update=0.1).use_backend(backend)
     env = TransformedEnv(FourRoomsEnv(4, max_steps=20), t)
     data = env.rollout(10, break_when_any_done=False)
     t.to("meta")
@@ -1000,7 +1001,9 @@ def test_a_table_replaced_or_moved_is_followed_on_both_backends(change: str) -> 
 
     def run(backend: str) -> tuple[TensorDict, torch.Tensor, torch.Tensor]:
         v = TabularPotential(3)
-        t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.9, observation_key="cell", value_update=0.1, backend=backend)
+        t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.9, observation_key="cell", value_update=0.1).use_backend(
+            backend
+        )
         env = TransformedEnv(FourRoomsEnv(8, max_steps=30), t)
         torch.manual_seed(0)
         env.rollout(40, break_when_any_done=False)
@@ -1029,7 +1032,7 @@ def test_a_table_replaced_or_moved_is_followed_on_both_backends(change: str) -> 
 
 @pytest.mark.parametrize("shape", [(0,), (4, 0), (0, 5)])
 def test_forward_on_an_empty_sample_returns_it_unchanged(backend: str, shape: tuple[int, ...]) -> None:
-    t = SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), gamma=0.9, observation_key="cell", backend=backend)
+    t = SubgoalPotentialTransform(HALLWAYS, TabularPotential(3), gamma=0.9, observation_key="cell").use_backend(backend)
     data = TransformedEnv(FourRoomsEnv(4), t).rollout(5)  # [4, 5]
     empty = data[0, :0] if shape == (0,) else data[:, :0] if shape == (4, 0) else data[:0]
     assert empty.batch_size == shape

@@ -12,7 +12,7 @@ from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.envs import Compose, ParallelEnv, SerialEnv, TransformedEnv
 from torchrl.envs.utils import check_env_specs, step_mdp
 
-from torchrl_subgoal import Cell, State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
+from torchrl_subgoal import Cell, State, SubgoalKeys, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
 from torchrl_subgoal.envs import FourRoomsEnv
 
 from .agents_env import AgentsLineEnv, AutoResetLineEnv
@@ -163,7 +163,7 @@ def test_transform_inverse() -> None:
 
 
 def test_in_and_out_keys_are_what_the_step_reads_and_writes() -> None:
-    t = shaping(transitions_key="smdp")
+    t = shaping(keys=SubgoalKeys(transitions="smdp"))
     env = TransformedEnv(FourRoomsEnv(2), t)
     base = FourRoomsEnv(2)
     written = set(env.rand_step(env.reset())["next"].keys(True, True)) - set(
@@ -240,7 +240,7 @@ def test_two_transforms_with_their_own_prefixes_are_independent() -> None:
         TabularPotential(2, index_key="room_index"),
         gamma=0.9,
         observation_key="cell",
-        prefix="room",
+        keys=SubgoalKeys("room"),
     )
     both = TransformedEnv(FourRoomsEnv(2), Compose(shaping(), second))
     check_env_specs(both)

@@ -30,9 +30,9 @@ from tensordict import TensorDict
 from torchrl.collectors import Collector
 
 from torchrl_subgoal import NeuralPotential
-from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, mlp
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.training import Shaping, shaped_env
+from torchrl_subgoal.training.ddpg_parts import DDPGAgent, DDPGConfig, mlp
 from torchrl_subgoal.transform.cache import ValueCache as _ValueCache
 
 try:

@@ -46,8 +46,8 @@ import numpy as np
 import torch
 from torchrl.data import Bounded
 
-from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig
 from torchrl_subgoal.envs import fetch
+from torchrl_subgoal.training.ddpg_parts import DDPGAgent, DDPGConfig
 
 Policy = Callable[[np.ndarray, np.ndarray, dict[str, Any]], np.ndarray]
 MARGIN = fetch.SUBGOAL_MARGIN

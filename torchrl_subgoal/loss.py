@@ -59,7 +59,7 @@ class SubgoalValueLoss(LossModule):
     (``transform.transitions(data)``, or
     :func:`~torchrl_subgoal.training.smdp_transitions`), e.g. sampled from a
     replay buffer, or every step's entry a transform with a
-    ``transitions_key`` writes (``"mask"`` tells the real ones; without a
+    ``SubgoalKeys(transitions=...)`` writes (``"mask"`` tells the real ones; without a
     ``"mask"`` entry every row counts).
 
     Args:
@@ -226,7 +226,7 @@ class SubgoalValueLoss(LossModule):
             have = set(tensordict.keys(True, True))
             raise ValueError(
                 f"SubgoalValueLoss reads SMDP transitions (transform.transitions(data), or the entries a transform "
-                f"writes under its transitions_key); missing {missing}, the TensorDict has {sorted(map(str, have))}"
+                f"writes under its keys' transitions); missing {missing}, the TensorDict has {sorted(map(str, have))}"
             )
         if tensordict.batch_dims == 0:
             raise ValueError("SubgoalValueLoss needs transitions with a batch dimension, e.g. [N]")
@@ -319,3 +319,36 @@ class ValueUpdate:
             raise ValueError(f"ValueUpdate: lr must be positive, got {self.lr}")
         if self.loss is not None and not isinstance(self.loss, SubgoalValueLoss):
             raise TypeError(f"ValueUpdate: loss must be a SubgoalValueLoss, got {type(self.loss).__name__}")
+
+    def step(self, transitions: TensorDictBase) -> None:
+        """One SGD step of :attr:`loss` on ``transitions`` (SMDP layout, masked): ``θ ← θ − α_v ∇ℓ``
+        for every trainable parameter of its potential, the gradients cleared after. With a
+        :class:`~torchrl_subgoal.TabularPotential` and the default loss this is the TD update
+        ``V(z) ← V(z) + α_v w δ`` the compiled kernels apply (``w``: the expectile's weight).
+
+        Examples:
+            >>> from torchrl_subgoal import TabularPotential
+            >>> v = TabularPotential(2)
+            >>> update = ValueUpdate(0.5, SubgoalValueLoss(v, reduction="sum").make_value_estimator(gamma=0.9))
+            >>> update.step(TensorDict({"subgoal_index": torch.zeros(1, 1, dtype=torch.long),
+            ...     "steps_to_next_obs": torch.ones(1, 1, dtype=torch.long), "mask": torch.ones(1, 1, dtype=torch.bool),
+            ...     ("next", "subgoal_index"): torch.ones(1, 1, dtype=torch.long), ("next", "reward"): torch.ones(1, 1),
+            ...     ("next", "done"): torch.ones(1, 1, dtype=torch.bool),
+            ...     ("next", "terminated"): torch.ones(1, 1, dtype=torch.bool)}, [1]))
+            >>> v.table.tolist()  # V(0) += 0.5 · 2τ (1 + 0 − 0), τ = 0.9
+            [0.8999999761581421, 0.0]
+        """
+        if self.loss is None:
+            raise ValueError("ValueUpdate.step needs a loss (the transform gives the default one)")
+        parameters = [p for p in self.loss.potential.parameters() if p.requires_grad]
+        if not parameters:
+            return
+        with torch.enable_grad():
+            for parameter in parameters:
+                parameter.grad = None
+            self.loss(transitions)["loss_value"].backward()
+        with torch.no_grad():  # plain SGD: torch.optim.SGD's step without momentum, decay or state
+            for parameter in parameters:
+                if parameter.grad is not None:
+                    parameter.add_(parameter.grad, alpha=-self.lr)
+                parameter.grad = None

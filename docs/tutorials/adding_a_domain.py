@@ -28,8 +28,8 @@ from torchrl.data import Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase, TransformedEnv
 
 from torchrl_subgoal import State, domains, load_patterns
-from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, fused, run_episodes
 from torchrl_subgoal.experiments.plots import ReportMap, plot_pattern_maps
+from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa, engine, run_episodes
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 from torchrl_subgoal.subgoals import Predicate
 
@@ -142,17 +142,17 @@ class CorridorKernelState(NamedTuple):
     max_steps: int
 
 
-@fused.implements(fused.env_scratch, CorridorKernelState)
+@engine.implements(engine.env_scratch, CorridorKernelState)
 def _scratch(env: CorridorKernelState) -> np.ndarray:
     return np.empty(1, np.int64)  # the observation the shaping reads: [cell]
 
 
-@fused.implements(fused.env_observe, CorridorKernelState)
+@engine.implements(engine.env_observe, CorridorKernelState)
 def _observe(env: CorridorKernelState, b: int, scratch: np.ndarray) -> int:
     return env.position[b]  # SoftmaxSarsa's learner step reads the cell number
 
 
-@fused.implements(fused.env_step, CorridorKernelState)
+@engine.implements(engine.env_step, CorridorKernelState)
 def _step(env: CorridorKernelState, b: int, a: int, scratch: np.ndarray) -> tuple[int, np.float32, bool, bool]:
     cell = min(max(env.position[b] + 2 * a - 1, 0), env.length)
     env.position[b] = cell
@@ -161,14 +161,14 @@ def _step(env: CorridorKernelState, b: int, a: int, scratch: np.ndarray) -> tupl
     return cell, np.float32(1.0 if terminated else 0.0), terminated, terminated or env.t[b] >= env.max_steps
 
 
-@fused.implements(fused.env_reset, CorridorKernelState)
+@engine.implements(engine.env_reset, CorridorKernelState)
 def _reset(env: CorridorKernelState, b: int, scratch: np.ndarray) -> int:
     env.position[b] = 0
     env.t[b] = 0
     return env.position[b]
 
 
-@fused.implements(fused.env_shaping_observation, CorridorKernelState)
+@engine.implements(engine.env_shaping_observation, CorridorKernelState)
 def _shaping_observation(env: CorridorKernelState, cell: int, scratch: np.ndarray) -> np.ndarray:
     scratch[0] = cell
     return scratch

@@ -16,12 +16,12 @@ from torchrl.data import Bounded
 from torchrl.envs import ParallelEnv, TransformedEnv
 
 from tests.recipes.test_recipes import recipe
-from torchrl_subgoal import NeuralPotential, SubgoalPotentialTransform, SubgoalValueLoss
-from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig
+from torchrl_subgoal import NeuralPotential, SubgoalKeys, SubgoalPotentialTransform, SubgoalValueLoss
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.experiments import load_frame
 from torchrl_subgoal.experiments.cli import parse_config
 from torchrl_subgoal.training import EnvFactory, batched, close_collector, shaped_env
+from torchrl_subgoal.training.ddpg_parts import DDPGAgent, DDPGConfig
 
 GAMMA = 0.98
 
@@ -32,7 +32,10 @@ def fetch_env(num_envs: int, potential: NeuralPotential, parallel: bool):
     series = fetch.human_patterns()["participants"]
     # Φ = V (not the library's default "nonpositive" level), to compare F with V directly
     return TransformedEnv(
-        base, SubgoalPotentialTransform(series, potential, gamma=GAMMA, transitions_key="smdp", start_potential="value")
+        base,
+        SubgoalPotentialTransform(
+            series, potential, gamma=GAMMA, start_potential="value", keys=SubgoalKeys(transitions="smdp")
+        ),
     )
 
 

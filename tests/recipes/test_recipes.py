@@ -194,7 +194,7 @@ def test_four_rooms_on_ray_equals_local(tmp_path: Path) -> None:
 def test_reproductions_default_to_the_authors_conventions() -> None:
     """The recipes follow the authors' released code: the goal step is shaped with γV(z_T), Φ = V; PinBall's
     default agent is their Q-based actor-critic (docs/shaping_defaults.md, docs/pinball.md)."""
-    from torchrl_subgoal.agents import AC_PRESETS
+    from torchrl_subgoal.fused import AC_PRESETS
 
     for name in ("four_rooms", "pinball"):
         cfg = recipe(name).Config()

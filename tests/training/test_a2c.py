@@ -12,9 +12,9 @@ import pytest
 import torch
 
 from torchrl_subgoal import Cell, NaivePotential, State, SubgoalSeries, TabularPotential, domains
-from torchrl_subgoal._kernels.actor_critic import _feature_scratch, fourier_features
 from torchrl_subgoal.domains.four_rooms import four_rooms_env
 from torchrl_subgoal.envs import PinBallEnv
+from torchrl_subgoal.fused._kernels.actor_critic import _feature_scratch, fourier_features
 from torchrl_subgoal.training import (
     A2CConfig,
     A2CDomain,

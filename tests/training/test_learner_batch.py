@@ -8,7 +8,6 @@ from tensordict import TensorDictBase
 from torch import nn
 from torchrl.data import Bounded
 
-from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, TD3Settings
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.training import (
     A2CConfig,
@@ -20,6 +19,7 @@ from torchrl_subgoal.training import (
     actor_critic_modules,
     dqn_modules,
 )
+from torchrl_subgoal.training.ddpg_parts import DDPGAgent, DDPGConfig, TD3Settings
 
 SEEDS = [3, 1, 4]
 K = len(SEEDS)

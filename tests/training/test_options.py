@@ -10,7 +10,6 @@ from torchrl.data import Bounded, LazyTensorStorage, ReplayBuffer
 from torchrl.envs import ExplorationType, set_exploration_type
 
 from torchrl_subgoal import Box, SubgoalSeries, TabularPotential
-from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig
 from torchrl_subgoal.training import (
     DDPGTrainConfig,
     DQNConfig,
@@ -25,6 +24,7 @@ from torchrl_subgoal.training import (
     train_dqn,
     train_ppo,
 )
+from torchrl_subgoal.training.ddpg_parts import DDPGAgent, DDPGConfig
 
 from .corridor import Corridor, continuous_corridor, discrete_corridor
 

@@ -11,9 +11,10 @@ potentials); the tests check the two agree.
   and :func:`~.steps.implements`, with which an env's or a learner's record joins the engine;
 * :mod:`.regions`: the region search of subgoal predicates and region aggregations;
 * :mod:`.shaping`: the shaping transform's step (the SMDP return, the online update, the shaped reward);
-* :mod:`.grid`, :mod:`.sarsa`, :mod:`.actor_critic`: the four-rooms env and the paper's two learners;
-* :mod:`.records`: filing finished episodes;
-* :mod:`.engine`: :func:`~.engine.fused_run`, the fused engine's loop.
+* :mod:`.grid`: the four-rooms env.
+
+The paper's two learners' kernels, filing finished episodes and the fused engine's loop live with the
+learners, in :mod:`torchrl_subgoal.fused._kernels`.
 
 Arrays are numpy views of torch tensors (no copies); batch dimensions are
 flattened, per-learner scalars have a trailing singleton. Import the module you

@@ -48,6 +48,29 @@ def _expectile_weight(expectile, delta):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _td_step(potential, row, zb, znb, terminated, emit, r, discount):
+    """The TD error a closed transition trains ``V(z)`` of ``table[row]`` by (0 when it trains nothing:
+    no transition closed, no update, a naive potential, or a time-out inside ``z`` not bootstrapped)."""
+    table = potential.table
+    if (
+        emit
+        and potential.value_lr > 0.0
+        and table.shape[0] > 0
+        and _learns_from(potential.bootstrap_truncated, zb, znb, terminated)
+    ):
+        return _td_error(table, row, zb, znb, terminated, r, discount, potential.value_gamma)
+    return 0.0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _td_increment(potential, delta):
+    """The online TD update's step of ``V(z)``, ``α_v w δ`` (``w``: the expectile's weight): the one place
+    the kernels say how a potential changes (:meth:`torchrl_subgoal.ValueUpdate.step` is its torch
+    reference)."""
+    return potential.value_lr * _expectile_weight(potential.expectile, delta) * delta
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _table_value(table, ancestors, row, b, z):
     """``V(z)`` as the shaping reads it from ``table[row]``: the entry, or with a monotone table
     (``ancestors`` not empty) the largest entry of ``z`` and of the states before it in row ``b``'s
@@ -92,21 +115,15 @@ def _shape_learner(potential, row, zb, znb, achieved_prev, r_h, k, reward, done,
     potential when the abstract state changes or the episode ends (``value_lr
     > 0``), then shapes the reward with the potential as it is now (see
     :func:`_shaped_reward`). ``potential`` is a
-    :class:`~torchrl_subgoal.transform.PotentialKernelState`. The one
+    :class:`~torchrl_subgoal.transform.setup.PotentialKernelState`. The one
     implementation of the step: the fused loops (:func:`shaping_step`) and
     the transform's compiled path (:func:`shape_step`) call it.
     """
     emit, r, discount, kb = _smdp_accumulate(zb, znb, r_h, k, reward, done, potential.value_gamma)
     table = potential.table
-    if (
-        emit
-        and potential.value_lr > 0.0
-        and table.shape[0] > 0
-        and _learns_from(potential.bootstrap_truncated, zb, znb, terminated)
-    ):
-        delta = _td_error(table, row, zb, znb, terminated, r, discount, potential.value_gamma)
-        if delta != 0.0:
-            table[row, zb] += potential.value_lr * _expectile_weight(potential.expectile, delta) * delta
+    delta = _td_step(potential, row, zb, znb, terminated, emit, r, discount)
+    if delta != 0.0:
+        table[row, zb] += _td_increment(potential, delta)
     shaped = _shaped_reward(
         table,
         potential.ancestors,
@@ -148,7 +165,7 @@ def shape_step(
 ):
     """Accumulate ``r_h, k``, update a tabular potential online, and shape the reward, for every row.
 
-    ``potential`` is a :class:`~torchrl_subgoal.transform.PotentialKernelState`
+    ``potential`` is a :class:`~torchrl_subgoal.transform.setup.PotentialKernelState`
     (its ``table`` is ``[B or 1, Z]``, empty for the naive potential
     ``Φ = eta · achieved``; ``value_lr = 0`` disables the update;
     ``start_mode`` shifts a table's potential by ``V(z_0)`` (``START_ZERO``)
@@ -236,28 +253,21 @@ def _shape_shared(
     :func:`_shape_learner`'s three parts (accumulate and TD error; update; shape) each over the whole batch."""
     n = z.shape[0]
     table = potential.table
-    learn = potential.value_lr > 0.0 and table.shape[0] > 0
     delta = np.zeros(n)
     for b in range(n):
         emit, r, discount, kb = _smdp_accumulate(
             z[b, 0], z_next[b, 0], r_h[b, 0], k[b, 0], reward[b, 0], done[b, 0], potential.value_gamma
         )
-        if emit and learn and _learns_from(potential.bootstrap_truncated, z[b, 0], z_next[b, 0], terminated[b, 0]):
-            delta[b] = _td_error(
-                table, b // group, z[b, 0], z_next[b, 0], terminated[b, 0], r, discount, potential.value_gamma
-            )
+        delta[b] = _td_step(potential, b // group, z[b, 0], z_next[b, 0], terminated[b, 0], emit, r, discount)
         rh_out[b, 0] = 0.0 if emit else r
         k_out[b, 0] = 0 if emit else kb
         if emit_out.shape[0] > 0:
             rh_acc_out[b, 0] = r
             k_acc_out[b, 0] = kb
             emit_out[b, 0] = emit
-    if learn:
-        for b in range(n):
-            if delta[b] != 0.0:
-                table[b // group, z[b, 0]] += (
-                    potential.value_lr * _expectile_weight(potential.expectile, delta[b]) * delta[b]
-                )
+    for b in range(n):  # every TD error with the tables as they were, then every update
+        if delta[b] != 0.0:
+            table[b // group, z[b, 0]] += _td_increment(potential, delta[b])
     for b in range(n):
         reward_out[b, 0] = _shaped_reward(
             table,
@@ -279,7 +289,7 @@ def _shape_shared(
 
 # --------------------------------------------------------------------------- shaping in a fused loop
 #
-# A fused loop unpacks a ShapingKernelState (torchrl_subgoal.transform) once, before its loop:
+# A fused loop unpacks a ShapingKernelState (torchrl_subgoal.fused.shaping_record) once, before its loop:
 # ``kind, regions, lookup, potential, learners = shaping``, then ``z, achieved, r_h, k, z_start = learners``
 # and ``pattern, …, offset = regions``. Per step, when ``kind != NO_SHAPING``, it advances the learner's
 # abstract state (region_search when ``kind == REGION_SHAPING``, written out in fused_run, ``lookup`` when

@@ -1,14 +1,14 @@
 """The fused engine's per-record steps: generic functions that an env's or a learner's record implements.
 
-:func:`~torchrl_subgoal._kernels.engine.fused_run` steps any env with any learner. It names neither: it
+:func:`~torchrl_subgoal.fused._kernels.engine.fused_run` steps any env with any learner. It names neither: it
 calls the generic functions below, and an env's or a learner's record type (the NamedTuple its
 ``kernel_state()`` returns) joins the engine by implementing them, next to its own kernels, with
-``@implements(generic, RecordType)`` (also importable from :mod:`torchrl_subgoal.agents.fused`, with
+``@implements(generic, RecordType)`` (also importable from :mod:`torchrl_subgoal.fused.engine`, with
 the generic functions):
 
 - an env: env_scratch, env_observe, env_step, env_reset and env_shaping_observation
   (envs/four_rooms.py for GridKernelState, envs/pinball.py for BallKernelState);
-- a learner: learner_scratch and learner_step (agents/sarsa.py, agents/actor_critic.py).
+- a learner: learner_scratch and learner_step (fused/sarsa.py, fused/actor_critic.py).
 
 Numba picks the implementation when it compiles the loop for the records' types (``overload``, on the
 record's class) and inlines it, so a call costs what the written-out step would. An implementation
@@ -16,7 +16,7 @@ should not pass its whole record to further inlined helpers per step when the re
 numba counts a reference per array each time (see the note above
 :func:`~torchrl_subgoal._kernels.shaping.shaping_start`). Numba's on-disk cache of ``fused_run`` is keyed
 on its own file only: after editing an implementation elsewhere, delete
-``_kernels/__pycache__/engine.fused_run-*.nb[ic]``.
+``fused/_kernels/__pycache__/engine.fused_run-*.nb[ic]``.
 """
 
 from __future__ import annotations
@@ -86,7 +86,7 @@ def missing_steps(env: Any, learner: Any) -> list[str]:
 def _no_implementation(what: str, record: Any) -> TypeError:
     return TypeError(
         f"{what} runs only compiled, in fused_run, for the record types registered with "
-        f"torchrl_subgoal.agents.fused.implements; called from Python with {type(record).__name__}"
+        f"torchrl_subgoal.fused.engine.implements; called from Python with {type(record).__name__}"
     )
 
 

@@ -402,7 +402,7 @@ def draw_map(ax: Any, patterns: Mapping[str, SubgoalSeries | Sequence[tuple[int,
     ax.set_ylim(SIZE[0] - 0.5, -0.5)
 
 
-# The fused engine's env step (torchrl_subgoal._kernels.engine.fused_run): the learner reads the state number.
+# The fused engine's env step (torchrl_subgoal.fused._kernels.engine.fused_run): the learner reads the state number.
 
 
 @steps.implements(steps.env_scratch, GridKernelState)

@@ -437,7 +437,7 @@ def ball_reset(balls: BallKernelState, b: int) -> tuple[float, float, float, flo
     return balls.start_x, balls.start_y, 0.0, 0.0
 
 
-# The fused engine's env step (torchrl_subgoal._kernels.engine.fused_run): the learner and the shaping read the
+# The fused engine's env step (torchrl_subgoal.fused._kernels.engine.fused_run): the learner and the shaping read the
 # observation as PinBallEnv emits it (float32), held in float64 scratch rows: before, after and at a reset.
 
 

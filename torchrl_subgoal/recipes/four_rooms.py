@@ -36,7 +36,6 @@ from typing import Any
 from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import load_patterns
-from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import GOAL, START, free_cells, room_aggregation
 from torchrl_subgoal.experiments import Chunk, EpisodeTable, learner_seeds
@@ -57,6 +56,7 @@ from torchrl_subgoal.experiments.recipe import (
     sweep_entries,
     warm_up_chunks,
 )
+from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.methods import all_methods, paper_methods, shaping_transform
 from torchrl_subgoal.subgoals import Cell
 

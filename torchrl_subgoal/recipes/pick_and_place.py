@@ -51,7 +51,6 @@ from torchrl_subgoal import (
     SubgoalPotentialTransform,
     SubgoalSeries,
 )
-from torchrl_subgoal.agents.ddpg import DDPG_KEYS, DDPGAgent, DDPGConfig, mlp
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.experiments import (
     Chunk,
@@ -89,6 +88,7 @@ from torchrl_subgoal.training import (
     Shaping,
     train_ddpg,
 )
+from torchrl_subgoal.training.ddpg_parts import DDPG_KEYS, DDPGAgent, DDPGConfig, mlp
 
 METHODS = paper_methods(baseline="DDPG")
 #: The neural potential's target (the paper's): the mean of the SMDP returns, a time-out bootstrapped.

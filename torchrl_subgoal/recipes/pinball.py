@@ -36,7 +36,6 @@ import torch
 from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import Box, Circle, StateAggregation, load_patterns
-from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic, run_episodes
 from torchrl_subgoal.envs import PinBallEnv
 from torchrl_subgoal.experiments import Chunk, EpisodeTable, learner_seeds
 from torchrl_subgoal.experiments.cli import ConfigError, setting
@@ -56,6 +55,7 @@ from torchrl_subgoal.experiments.recipe import (
     sweep_entries,
     warm_up_chunks,
 )
+from torchrl_subgoal.fused import AC_PRESETS, FourierActorCritic, run_episodes
 from torchrl_subgoal.methods import all_methods, paper_methods, shaping_transform
 
 METHODS = all_methods(baseline="AC")

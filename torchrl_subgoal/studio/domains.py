@@ -22,7 +22,7 @@ from torchrl_subgoal.subgoals import Box
 if TYPE_CHECKING:
     from torchrl.envs import EnvBase
 
-    from torchrl_subgoal.agents.loop import OnlineAgent
+    from torchrl_subgoal.fused.loop import OnlineAgent
     from torchrl_subgoal.subgoals import Predicate
 
 __all__ = ["BoxForm", "Domain", "FormError", "Limit", "StudioDomain", "default_domains", "studio_domain"]

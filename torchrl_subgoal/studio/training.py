@@ -5,7 +5,7 @@ library's pieces: the domain's batched env and the paper's learner, both from
 its registration (the ``learner`` of its :class:`~torchrl_subgoal.studio.domains.StudioDomain`: SARSA on
 four-rooms, the Fourier actor-critic on PinBall), the shaping transform of the chosen method
 (HRS, SRS or NRS) from :func:`torchrl_subgoal.methods.shaping_transform` and
-:func:`torchrl_subgoal.agents.run_episodes` on the fused engine. Both runs use
+:func:`torchrl_subgoal.fused.run_episodes` on the fused engine. Both runs use
 the same seeds, so the two curves differ only by the shaping. This is the one
 place to update when the engine's interface changes.
 """
@@ -23,7 +23,7 @@ import torch
 from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import registry
-from torchrl_subgoal.agents import run_episodes
+from torchrl_subgoal.fused import run_episodes
 from torchrl_subgoal.methods import SRS, paper_methods, shaping_transform
 from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.studio.domains import studio_domain

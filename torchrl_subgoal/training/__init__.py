@@ -7,18 +7,21 @@ Every block trains ``len(seeds)`` learners as one program (one learner is a batc
   :mod:`~torchrl_subgoal.training.ppo` (:func:`train_ppo`; what the two share:
   :mod:`~torchrl_subgoal.training.on_policy`),
   :mod:`~torchrl_subgoal.training.dqn` (:func:`train_dqn`),
-  :mod:`~torchrl_subgoal.training.ddpg` (:func:`train_ddpg`, DDPG or TD3) and tabular
-  Q-learning (:mod:`~torchrl_subgoal.training.qlearning`);
+  :mod:`~torchrl_subgoal.training.ddpg` (:func:`train_ddpg`, DDPG or TD3; its learners are one
+  :class:`~torchrl_subgoal.training.ddpg_parts.DDPGAgent`, which the pick-and-place reproduction
+  also drives with its own loop) and tabular Q-learning (:mod:`~torchrl_subgoal.training.qlearning`);
 * their settings: :mod:`~torchrl_subgoal.training.config` (:class:`LearnerConfig`, the fields
   and the one check every learner shares; each config adds its own);
 * what they share: :mod:`~torchrl_subgoal.training.envs` (the shaped env :func:`shaped_env`,
   :class:`Shaping`, one env batch for many learners :func:`learner_envs`),
-  :mod:`~torchrl_subgoal.training.networks` (input layers, the learner seeing ``z``),
+  :mod:`~torchrl_subgoal.training.networks` (input layers, the learner seeing ``z``:
+  :mod:`~torchrl_subgoal.training.subgoal_input`),
   :mod:`~torchrl_subgoal.training.collection` (:func:`make_collector`),
   :mod:`~torchrl_subgoal.training.recording` (:class:`LearningCurve`, :class:`SuccessSignal`),
   :mod:`~torchrl_subgoal.training.potential` (:class:`PotentialTrainer`, :class:`SampleReshaper`),
   :mod:`~torchrl_subgoal.training.batch` (:class:`LearnerBatch`: ``K`` learners' env batch,
-  stacked networks, one table per learner);
+  stacked networks, one table per learner), :mod:`~torchrl_subgoal.training.stack` (``K``
+  networks and replay buffers as one);
 * what they return: :mod:`~torchrl_subgoal.training.result` (:class:`Trained`: curves, modules,
   save and load; :func:`evaluate`);
 * :mod:`~torchrl_subgoal.training.smdp`: keep only the real SMDP transitions
@@ -29,6 +32,9 @@ Every block trains ``len(seeds)`` learners as one program (one learner is a batc
   check that an env's actions suit one (:func:`check_actions`);
 * :mod:`~torchrl_subgoal.training.domains`: what a domain registers for the learner recipes
   (:class:`LearnerDomain`).
+
+The paper's four-rooms and PinBall learners (tabular SARSA, linear actor-critics) and the engines that
+run them online are in :mod:`torchrl_subgoal.fused`.
 """
 
 from __future__ import annotations

@@ -4,12 +4,12 @@
 ``K·M`` envs (learner-major: envs ``k·M … (k+1)·M − 1`` are learner ``k``'s),
 one collector and one optimiser step per update; one learner is a batch of one.
 
-* the networks and replay (:mod:`torchrl_subgoal.agents.stack`, re-exported here):
-  :class:`~torchrl_subgoal.agents.stack.LearnerStack` (``K`` networks' parameters stacked,
+* the networks and replay (:mod:`torchrl_subgoal.training.stack`, re-exported here):
+  :class:`~torchrl_subgoal.training.stack.LearnerStack` (``K`` networks' parameters stacked,
   applied with ``torch.vmap``; :func:`stack_actor_critic`, :func:`seeded`),
-  :func:`~torchrl_subgoal.agents.stack.learner_means`,
-  :func:`~torchrl_subgoal.agents.stack.clip_grad_norm_per_learner`,
-  :class:`~torchrl_subgoal.agents.stack.LearnerReplay`;
+  :func:`~torchrl_subgoal.training.stack.learner_means`,
+  :func:`~torchrl_subgoal.training.stack.clip_grad_norm_per_learner`,
+  :class:`~torchrl_subgoal.training.stack.LearnerReplay`;
 * :func:`batch_shaping`: the learners' shapings as one transform's, one table
   per learner (``TabularPotential(envs_per_table=M)``), each trained online
   exactly as the learner's own table would be;
@@ -38,13 +38,6 @@ from torchrl.envs import EnvBase
 from torchrl.modules import ProbabilisticActor, ValueOperator
 from torchrl.record.loggers import Logger
 
-from torchrl_subgoal.agents.stack import (
-    LearnerReplay,
-    LearnerStack,
-    clip_grad_norm_per_learner,
-    learner_means,
-    per_learner,
-)
 from torchrl_subgoal.potentials import NaivePotential, TabularPotential
 from torchrl_subgoal.subgoals import StateAggregation, SubgoalSeries
 from torchrl_subgoal.training.collection import close_collector, make_collector, seed_collector
@@ -54,6 +47,13 @@ from torchrl_subgoal.training.networks import subgoal_states
 from torchrl_subgoal.training.potential import PotentialTrainer, SampleReshaper
 from torchrl_subgoal.training.recording import CurveRecorder, LearningCurve, SuccessSignal
 from torchrl_subgoal.training.shared import EnvFactory
+from torchrl_subgoal.training.stack import (
+    LearnerReplay,
+    LearnerStack,
+    clip_grad_norm_per_learner,
+    learner_means,
+    per_learner,
+)
 
 __all__ = [
     "LEARNER",

@@ -1,7 +1,7 @@
 """DDPG (or TD3) on TorchRL's collectors with subgoal shaping, for any bounded continuous-action env:
 ``K`` learners as one batch (one is a batch of one).
 
-The learners are one :class:`~torchrl_subgoal.agents.ddpg.DDPGAgent` (the
+The learners are one :class:`~torchrl_subgoal.training.ddpg_parts.DDPGAgent` (the
 implementation the pick-and-place reproduction uses: actor and critic MLPs
 over the observation normalised by running statistics, TorchRL's
 :class:`~torchrl.objectives.DDPGLoss` or :class:`~torchrl.objectives.TD3Loss`,
@@ -33,9 +33,9 @@ from torch import nn
 from torchrl.data import Bounded
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, TD3Settings
 from torchrl_subgoal.training.batch import LearnerBatch, LearnerOptions
 from torchrl_subgoal.training.config import OffPolicyConfig
+from torchrl_subgoal.training.ddpg_parts import DDPGAgent, DDPGConfig, TD3Settings
 from torchrl_subgoal.training.result import Trained
 
 __all__ = ["DDPGHooks", "DDPGTrainConfig", "ddpg_agent", "ddpg_modules", "train_ddpg"]
@@ -55,7 +55,7 @@ class DDPGTrainConfig(OffPolicyConfig):
     Ornstein–Uhlenbeck noise, and no weight decay. ``td3=True`` takes the TD3 settings of
     TorchRL's TD3 example (two critics, target noise 0.2 clipped at 0.5, actor and targets
     updated every second step). The pick-and-place reproduction's settings (the authors')
-    are :class:`~torchrl_subgoal.agents.ddpg.DDPGConfig`'s.
+    are :class:`~torchrl_subgoal.training.ddpg_parts.DDPGConfig`'s.
 
     Examples:
         >>> config = DDPGTrainConfig(frames_per_batch=100, total_frames=1000)
@@ -223,7 +223,7 @@ def train_ddpg(
 
     Every batch: the batch into the replay buffer (and each learner's observation normaliser); then,
     once ``learning_starts`` frames per learner are collected, ``updates_per_batch`` gradient steps on
-    replay samples (:meth:`~torchrl_subgoal.agents.ddpg.DDPGAgent.update_on`: every learner its own
+    replay samples (:meth:`~torchrl_subgoal.training.ddpg_parts.DDPGAgent.update_on`: every learner its own
     samples, re-shaped with the current potential when ``reshape_samples``), each followed by a soft
     target update (or one after them all: ``polyak_every="batch"``); then, unless the potential is
     trained online or fixed, one step of the potential on the batch's real SMDP transitions (one

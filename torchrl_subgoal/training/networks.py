@@ -2,7 +2,7 @@
 
 * :class:`FourierFeatures`, one-hot and float inputs (:func:`input_layer`);
 * :func:`trunk`: the input layer (with the one-hot ``z`` joined when the learner sees it,
-  :class:`~torchrl_subgoal.agents.subgoal_input.SubgoalInput`) and the hidden layers;
+  :class:`~torchrl_subgoal.training.subgoal_input.SubgoalInput`) and the hidden layers;
 * :func:`network`: a trunk and output layers as one module;
 * :func:`subgoal_states` and :func:`subgoal_keys`: whether a learner's networks read ``z``, and what they read;
 * :func:`q_network`: a Q-network over them (DQN's).
@@ -20,9 +20,9 @@ from torchrl.data import Bounded, Categorical, OneHot, TensorSpec
 from torchrl.envs import EnvBase
 from torchrl.modules import QValueActor
 
-from torchrl_subgoal.agents.subgoal_input import SUBGOAL_INDEX, SubgoalInput
 from torchrl_subgoal.training.config import Features, LearnerConfig
 from torchrl_subgoal.training.envs import Shaping
+from torchrl_subgoal.training.subgoal_input import SUBGOAL_INDEX, SubgoalInput
 
 __all__ = [
     "SUBGOAL_INDEX",

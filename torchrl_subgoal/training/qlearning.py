@@ -31,8 +31,8 @@ from torchrl.data import Categorical, OneHot
 from torchrl.envs import EnvBase, ExplorationType
 from torchrl.envs.utils import exploration_type
 
-from torchrl_subgoal._kernels.records import record_episodes
-from torchrl_subgoal.agents.records import EpisodeRecords
+from torchrl_subgoal.fused._kernels.records import record_episodes
+from torchrl_subgoal.fused.records import EpisodeRecords
 from torchrl_subgoal.training.config import Settings
 from torchrl_subgoal.training.recording import SuccessSignal
 

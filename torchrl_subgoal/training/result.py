@@ -25,12 +25,12 @@ from tensordict.utils import NestedKey
 from torch import nn
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
-from torchrl_subgoal.agents.subgoal_input import SUBGOAL_INDEX
 from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.training.batch import per_learner
 from torchrl_subgoal.training.config import LearnerConfig
 from torchrl_subgoal.training.envs import Shaping, close_probe, probe_env, shaped_env
 from torchrl_subgoal.training.recording import LearningCurve, SuccessSignal
+from torchrl_subgoal.training.subgoal_input import SUBGOAL_INDEX
 
 __all__ = ["Evaluation", "Trained", "evaluate"]
 

@@ -23,7 +23,7 @@ def smdp_transitions(
     typically a few percent. With ``transform``, they are rebuilt from the
     entries it keeps (:meth:`SubgoalPotentialTransform.transitions`, nothing
     extra stored per step); without, they are read from the entries a
-    transform with ``transitions_key`` wrote under ``key`` and the
+    transform with ``SubgoalKeys(transitions=...)`` wrote under ``key`` and the
     padding rows (``mask`` false) are dropped. With a per-env potential the
     rows keep their ``"subgoal_learner"`` entry: they find their table by key,
     whatever order a replay buffer gives them back in.
@@ -36,11 +36,11 @@ def smdp_transitions(
     Examples:
         >>> import torch
         >>> from torchrl.envs import TransformedEnv
-        >>> from torchrl_subgoal import SubgoalPotentialTransform, SubgoalSeries, TabularPotential
+        >>> from torchrl_subgoal import SubgoalKeys, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
         >>> from torchrl_subgoal.envs import FourRoomsEnv
         >>> from torchrl_subgoal.subgoals import Cell
         >>> t = SubgoalPotentialTransform(SubgoalSeries([Cell(1, 2)]), TabularPotential(2), gamma=0.9,
-        ...                               observation_key="cell", transitions_key="smdp")
+        ...                               observation_key="cell", keys=SubgoalKeys(transitions="smdp"))
         >>> data = TransformedEnv(FourRoomsEnv(4, max_steps=10), t).rollout(30, break_when_any_done=False)
         >>> real = smdp_transitions(data)
         >>> bool(real["mask"].all()), real.batch_dims, len(real) == int(data["next", "smdp", "mask"].sum())
@@ -54,7 +54,7 @@ def smdp_transitions(
     if key not in data.keys(True):
         raise KeyError(
             f"no SMDP transitions under {key!r}: pass the transform (smdp_transitions(data, transform)) to "
-            f"rebuild them from its entries, or create it with transitions_key={key[-1]!r}"
+            f"rebuild them from its entries, or create it with keys=SubgoalKeys(transitions={key[-1]!r})"
         )
     flat = data.get(key).reshape(-1)
     return flat[flat.get("mask").reshape(-1)]

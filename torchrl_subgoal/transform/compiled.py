@@ -1,53 +1,31 @@
-"""The compiled step of the shaping transform (a tabular or naive potential on the CPU), and the
-records a compiled loop (the fused engine) reads the transform through."""
+"""The compiled step of the shaping transform (a tabular or naive potential on the CPU)."""
 
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import torch
-from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
 from torchrl_subgoal._kernels import NUMBA
-from torchrl_subgoal.subgoals import RegionTables, SubgoalTables
-from torchrl_subgoal.transform.setup import NO_TABLE, BatchSetup, PotentialKernelState, Settings
+from torchrl_subgoal.subgoals import SubgoalTables
+from torchrl_subgoal.transform.keys import StepInputs
+from torchrl_subgoal.transform.setup import BatchSetup, Settings
 from torchrl_subgoal.transform.transitions import transition
 
 if NUMBA:  # without numba the transform never takes this path (setup.compiles)
     from torchrl_subgoal._kernels.shaping import (
-        LOOKUP_SHAPING,
-        NO_SHAPING,
-        REGION_SHAPING,
-        START_VALUE,
         advance_and_shape,
         finite_inputs,
         shape_step,
     )
 
-__all__ = ["AbstractStates", "ShapingKernelState", "StepInputs", "check_finite", "compiled_step"]
+__all__ = ["StepInputs", "check_finite", "compiled_step"]
 
 _NO_TRANSITION = tuple(np.zeros((0, 1), dtype=d) for d in (np.float32, np.int64, np.bool_))
 _NO_ENTRIES = np.zeros((0, 0), np.float32)  # finite_inputs without an observation to check
-
-
-class StepInputs(NamedTuple):
-    """One step's entries of ``"next"`` that the shaping reads.
-
-    Examples:
-        >>> one = torch.ones(2, 1)
-        >>> StepInputs(None, one, one, one.bool(), one.bool(), None).reward.shape
-        torch.Size([2, 1])
-    """
-
-    obs: torch.Tensor | None  #: the observation the region predicates read (``None``: not read)
-    reward: torch.Tensor  #: the reward to shape
-    env_reward: torch.Tensor  #: the env's reward, which ``r_h`` accumulates (``reward`` itself but after a shaping)
-    done: torch.Tensor
-    terminated: torch.Tensor
-    td: TensorDictBase | None  #: the step's ``"next"`` entries, for the conditions
 
 
 def check_finite(reward: torch.Tensor, obs: torch.Tensor | None, reward_key: NestedKey, obs_key: NestedKey) -> None:
@@ -197,113 +175,3 @@ def _rows(obs: torch.Tensor | None, n: int, setup: BatchSetup) -> np.ndarray:
             f"{n} rows x {d} entries (batch shape {tuple(setup.batch_shape)})"
         )
     return a.reshape(n, d)
-
-
-class AbstractStates(NamedTuple):
-    """Every learner's abstract-state entries as ``[N, 1]`` arrays (a compiled loop updates them in place).
-
-    Examples:
-        >>> AbstractStates.zeros(2).z.shape
-        (2, 1)
-    """
-
-    z: np.ndarray  #: int64 abstract state of every learner
-    achieved: np.ndarray  #: bool: the last step changed it
-    r_h: np.ndarray  #: float32 discounted return since it was entered
-    k: np.ndarray  #: int64 steps since it was entered
-    z_start: np.ndarray  #: int64 abstract state the episode started in
-
-    @classmethod
-    def zeros(cls, n: int) -> AbstractStates:
-        """Every learner in ``z = 0`` at the start of an episode."""
-        return cls(
-            np.zeros((n, 1), np.int64),
-            np.zeros((n, 1), np.bool_),
-            np.zeros((n, 1), np.float32),
-            np.zeros((n, 1), np.int64),
-            np.zeros((n, 1), np.int64),
-        )
-
-
-class ShapingKernelState(NamedTuple):
-    """The shaping transform for a compiled loop: its abstraction, its potential and every learner's
-    abstract state (``[N, 1]`` arrays, updated in place), from :meth:`SubgoalPotentialTransform.kernel_state`.
-
-    A loop advances a learner with :func:`~torchrl_subgoal._kernels.regions.region_search` (or ``lookup``),
-    shapes its reward with :func:`~torchrl_subgoal._kernels.shaping.shaping_step` and carries its state over
-    (or resets it to :func:`~torchrl_subgoal._kernels.shaping.shaping_start`'s) with
-    :func:`~torchrl_subgoal._kernels.shaping.shaping_carry`.
-
-    Examples:
-        >>> state = ShapingKernelState.unshaped(3)
-        >>> state.kind == NO_SHAPING, state.learners.z.shape
-        (True, (3, 1))
-    """
-
-    kind: int  #: ``NO_SHAPING``, ``REGION_SHAPING`` (subgoal series, region aggregation) or ``LOOKUP_SHAPING``
-    regions: RegionTables  #: the regions (``REGION_SHAPING``)
-    lookup: np.ndarray  #: ``[S]`` abstract state of every state number (``LOOKUP_SHAPING``)
-    potential: PotentialKernelState
-    learners: AbstractStates  #: every learner's abstract state
-
-    @classmethod
-    def unshaped(cls, n: int) -> ShapingKernelState:
-        """No shaping, for ``n`` learners (a bare env)."""
-        empty3 = np.zeros((1, 1, 1), np.float32)
-        regions = RegionTables(
-            np.zeros(0, np.int64),
-            empty3,
-            empty3,
-            empty3,
-            empty3,
-            np.zeros((1, 1), np.float32),
-            np.zeros((1, 1, 1), np.bool_),
-            1,
-        )
-        potential = PotentialKernelState(NO_TABLE, 0.0, 0.0, 0.0, 0.0, False, START_VALUE)
-        return cls(NO_SHAPING, regions, np.zeros(1, np.int64), potential, AbstractStates.zeros(n))
-
-
-def kernel_state(
-    setup: BatchSetup, state: tuple[torch.Tensor, torch.Tensor, torch.Tensor], learn: bool, observation_size: int
-) -> ShapingKernelState:
-    """The record of a compiled loop for the env batch ``setup`` (set up for the compiled step), with every
-    learner's ``state = (z, r_h, k)`` copied; ``learn``: the loop applies the online update.
-
-    Examples:
-        >>> from torchrl.envs import TransformedEnv
-        >>> from torchrl_subgoal import State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
-        >>> from torchrl_subgoal.envs import FourRoomsEnv
-        >>> t = SubgoalPotentialTransform(SubgoalSeries([State(3)]), TabularPotential(2, (2,)), gamma=0.9)
-        >>> td = TransformedEnv(FourRoomsEnv(2), t).reset()
-        >>> state = (td["subgoal_index"], td["subgoal_return"], td["subgoal_steps"])
-        >>> kernel_state(t._online, state, learn=False, observation_size=1).learners.z.shape
-        (2, 1)
-    """
-    abstraction = setup.abstraction
-    lookup = np.zeros(1, np.int64)
-    regions = ShapingKernelState.unshaped(0).regions
-    if isinstance(abstraction, SubgoalTables):
-        if not abstraction.fusable:
-            raise TypeError("a compiled loop advances subgoal regions, not conditions")
-        kind, regions = REGION_SHAPING, abstraction.kernel_state()
-    elif isinstance(abstraction.mapping, torch.Tensor):
-        if observation_size != 1:
-            raise TypeError(
-                f"a lookup aggregation reads a state number, not an observation of {observation_size} "
-                "entries (observation_key)"
-            )
-        kind, lookup = LOOKUP_SHAPING, abstraction.mapping.numpy()
-    elif abstraction.regions is not None:
-        kind, regions = REGION_SHAPING, abstraction.regions
-    else:
-        raise TypeError(
-            "a compiled loop needs a subgoal series, a lookup or a region aggregation, not a function aggregation"
-        )
-    n = setup.batch_shape.numel()
-    z, r_h, k = (t.reshape(n, 1).numpy().copy() for t in state)
-    potential = setup.kernel[learn]  # type: ignore[index]
-    # both envs of the fused engine start every episode in the same place
-    return ShapingKernelState(
-        kind, regions, lookup, potential, AbstractStates(z, np.zeros((n, 1), np.bool_), r_h, k, z.copy())
-    )

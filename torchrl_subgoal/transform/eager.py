@@ -12,7 +12,8 @@ from tensordict.nn import TensorDictModuleBase
 
 from torchrl_subgoal.potentials import NaivePotential, TabularPotential, check_value
 from torchrl_subgoal.transform.cache import ValueCache
-from torchrl_subgoal.transform.compiled import StepInputs, check_finite
+from torchrl_subgoal.transform.compiled import check_finite
+from torchrl_subgoal.transform.keys import StepInputs
 from torchrl_subgoal.transform.setup import BatchSetup, Settings
 from torchrl_subgoal.transform.shaping import (
     accumulate,
@@ -71,7 +72,8 @@ def torch_step(
 
     Examples:
         >>> from torchrl_subgoal import State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
-        >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9, backend="torch")
+        >>> series = SubgoalSeries([State(1)])
+        >>> t = SubgoalPotentialTransform(series, TabularPotential(2), gamma=0.9).use_backend("torch")
         >>> batch = t._batch(torch.Size([2]), torch.zeros(2, 1, dtype=torch.long), 1, torch.zeros(2, 1), online=True)
         >>> z, zero = torch.zeros(2, 1, dtype=torch.long), torch.zeros(2, 1)
         >>> current = {"subgoal_index": z, "subgoal_return": zero, "subgoal_steps": z}

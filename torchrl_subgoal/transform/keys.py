@@ -15,16 +15,24 @@ from torchrl.envs import EnvBase
 
 __all__ = [
     "EnvKeys",
+    "StepInputs",
     "SubgoalKeys",
     "add_env_reward",
     "at",
     "declare",
+    "declare_observations",
+    "declare_state",
     "kept_specs",
     "observation",
+    "observation_of",
     "read",
+    "read_step",
     "state_specs",
+    "step_in_keys",
+    "step_out_keys",
     "transition_spec",
     "write",
+    "write_step",
 ]
 
 RETURN = "subgoal_return"
@@ -41,20 +49,27 @@ def _named(role: str, doc: str) -> functools.cached_property[str]:
 
 @dataclass(frozen=True)
 class SubgoalKeys:
-    """Names of the abstract-state entries one transform keeps: ``f"{prefix}_{role}"``.
+    """Names of the entries one transform writes: the abstract-state entries it keeps, ``f"{prefix}_{role}"``,
+    and where each step's SMDP transition goes, if anywhere.
 
     Give a second transform on the same env another prefix (and its potential
     the matching keys) so that the two do not share entries.
 
     Args:
-        prefix: the names' prefix (``"subgoal"``).
+        prefix: the kept entries' prefix (``"subgoal"``).
+        transitions: if given, every step also writes its SMDP transition under ``("next", transitions)``
+            (``"mask"`` tells the real ones); ``None``: rebuild them from collected data with
+            :meth:`~torchrl_subgoal.SubgoalPotentialTransform.transitions`.
 
     Examples:
         >>> SubgoalKeys("room").index
         'room_index'
+        >>> SubgoalKeys(transitions="smdp").transitions
+        'smdp'
     """
 
     prefix: str = "subgoal"
+    transitions: NestedKey | None = None
 
     index = _named("index", "``z``, the node of the subgoal series reached.")
     ret = _named("return", "``r_h``, the discounted reward since ``z`` was entered.")
@@ -170,6 +185,89 @@ def write(td: TensorDictBase, key: NestedKey, value: torch.Tensor) -> None:
         td._set_str(key, value, inplace=False, validated=True)
     else:
         td._set_tuple(key, value, inplace=False, validated=True)
+
+
+class StepInputs(NamedTuple):
+    """One step's entries of ``"next"`` that the shaping reads.
+
+    Examples:
+        >>> one = torch.ones(2, 1)
+        >>> StepInputs(None, one, one, one.bool(), one.bool(), None).reward.shape
+        torch.Size([2, 1])
+    """
+
+    obs: torch.Tensor | None  #: the observation the region predicates read (``None``: not read)
+    reward: torch.Tensor  #: the reward to shape
+    env_reward: torch.Tensor  #: the env's reward, which ``r_h`` accumulates (``reward`` itself but after a shaping)
+    done: torch.Tensor
+    terminated: torch.Tensor
+    td: TensorDictBase | None  #: the step's ``"next"`` entries, for the conditions
+
+
+def read_step(
+    td: TensorDictBase, nxt: TensorDictBase, env: EnvKeys, kept: tuple[str, ...], obs_key: NestedKey | None
+) -> tuple[dict[str, torch.Tensor], StepInputs, torch.Size]:
+    """What a shaping step reads: the kept entries of its input ``td`` (a clear ``KeyError`` for one missing),
+    what the shaping reads of its ``"next"`` entries ``nxt`` (``obs_key``: the observation read, ``None``:
+    none) and the batch shape of the reward's group.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> td = TensorDict({"subgoal_index": torch.zeros(2, 1)}, [2])
+        >>> nxt = TensorDict({"reward": torch.ones(2, 1), "done": torch.zeros(2, 1, dtype=torch.bool)}, [2])
+        >>> current, step, shape = read_step(td, nxt, EnvKeys.resolve(None), ("subgoal_index",), None)
+        >>> list(current), shape
+        (['subgoal_index'], torch.Size([2]))
+    """
+    root = td.get(env.group) if env.group else td
+    current = {}
+    for name in kept:
+        value = root._get_str(name, None)
+        if value is None:
+            raise KeyError(
+                f"SubgoalPotentialTransform: {name!r} is missing from the step's input: reset the "
+                "env through the transform (env.reset()) before stepping"
+            )
+        current[name] = value
+    reward, done = read(nxt, env.reward), read(nxt, env.done)
+    step = StepInputs(
+        read(nxt, obs_key) if obs_key is not None else None,
+        reward,
+        read(nxt, env.env_reward) if env.shaped_before else reward,
+        done,
+        done if env.terminated == env.done else read(nxt, env.terminated),
+        nxt,
+    )
+    return current, step, (nxt.get(env.group) if env.group else nxt).batch_size
+
+
+def write_step(
+    nxt: TensorDictBase,
+    env: EnvKeys,
+    kept: tuple[str, ...],
+    out: dict[str, Any],
+    reward: torch.Tensor,
+    transitions_key: NestedKey | None,
+) -> TensorDictBase:
+    """Write a step's outputs ``out`` (a backend's) into its ``"next"`` entries ``nxt``: the kept entries, the
+    shaped reward, the env's ``reward`` (unless an earlier shaping keeps it) and the SMDP transition.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> nxt = TensorDict({"reward": torch.ones(2, 1)}, [2])
+        >>> out = {"subgoal_index": torch.ones(2, 1, dtype=torch.long), "reward": torch.zeros(2, 1)}
+        >>> write_step(nxt, EnvKeys.resolve(None), ("subgoal_index",), out, nxt["reward"], None)["env_reward"].sum()
+        tensor(2.)
+    """
+    root = nxt.get(env.group) if env.group else nxt
+    for name in kept:
+        root._set_str(name, out[name], inplace=False, validated=True)
+    write(nxt, env.reward, out["reward"])
+    if not env.shaped_before:
+        write(nxt, env.env_reward, reward)
+    if transitions_key is not None:
+        write(nxt, transitions_key, out["transition"])
+    return nxt
 
 
 def state_specs(
@@ -317,3 +415,58 @@ def declare(spec: Composite, parent: EnvBase, env: EnvKeys, specs: dict[str, Ten
                 "give this one another prefix (prefix='room') and its potential matching keys"
             )
         spec[key] = value
+
+
+def declare_observations(
+    spec: Composite, parent: EnvBase, env: EnvKeys, specs: dict[str, TensorSpec], read: NestedKey | None, settings: Any
+) -> None:
+    """Declare the kept entries (``specs``) as observations, after checking the observation ``read`` (``None``:
+    none is read) exists, and the SMDP transition entry when ``settings.keys.transitions`` names one."""
+    if read is not None:
+        observation(spec, read, "observation_key")
+    declare(spec, parent, env, specs, refuse_taken=True)
+    key = settings.keys.transitions
+    if key is not None:
+        inputs = {k: s for k, s in specs.items() if k in settings.inputs}
+        spec[key] = transition_spec(inputs, specs[settings.keys.index].shape[:-1])
+
+
+def declare_state(input_spec: Composite, parent: EnvBase, env: EnvKeys, specs: dict[str, TensorSpec]) -> None:
+    """Declare the kept entries (``specs``) as state carried from step to step, as ``RewardSum``'s and
+    ``StepCounter``'s are."""
+    state = input_spec["full_state_spec"]
+    if state is None:
+        state = Composite(shape=input_spec.shape, device=input_spec.device)
+    declare(state, parent, env, specs, refuse_taken=False)
+    input_spec["full_state_spec"] = state
+
+
+def step_in_keys(env: EnvKeys, observation_key: NestedKey | None) -> list[NestedKey]:
+    """A shaping step's entries read: the reward, an earlier shaping's env reward, the done and terminated
+    entries, and the observation (``None``: not read).
+
+    Examples:
+        >>> step_in_keys(EnvKeys.resolve(None), "cell")
+        ['reward', 'done', 'terminated', 'cell']
+    """
+    done = [env.done] if env.terminated == env.done else [env.done, env.terminated]
+    obs = [observation_key] if observation_key is not None else []
+    return [env.reward, *([env.env_reward] if env.shaped_before else []), *done, *obs]
+
+
+def step_out_keys(env: EnvKeys, kept: tuple[str, ...], transitions: NestedKey | None) -> list[NestedKey]:
+    """A shaping step's entries written: the shaped reward, the env reward (unless an earlier shaping keeps it),
+    the ``kept`` entries in the reward's group, and the transition entry (``None``: none).
+
+    Examples:
+        >>> step_out_keys(EnvKeys.resolve(None), ("subgoal_index",), None)
+        ['reward', 'env_reward', 'subgoal_index']
+    """
+    written = [env.reward, *([] if env.shaped_before else [env.env_reward])]
+    written += [at(env.group, name) for name in kept]
+    return written + ([transitions] if transitions is not None else [])
+
+
+def observation_of(parent: EnvBase | None, key: NestedKey) -> TensorSpec | None:
+    """The spec of the observation ``key`` of ``parent`` (``None`` without a parent env yet)."""
+    return None if parent is None else observation(parent.full_observation_spec, key, "observation_key")

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
+from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from tensordict.utils import NestedKey
 from torchrl.data import OneHot, TensorSpec
@@ -23,14 +24,16 @@ from torchrl_subgoal.subgoals import (
     SubgoalSeries,
     SubgoalTables,
 )
-from torchrl_subgoal.transform.keys import SubgoalKeys
+from torchrl_subgoal.transform.keys import SubgoalKeys, write
 from torchrl_subgoal.transform.shaping import START_MODES, StartPotential
+from torchrl_subgoal.transform.transitions import empty_transition
 
 __all__ = [
     "BatchSetup",
     "PotentialKernelState",
     "Settings",
     "Subgoals",
+    "check_backend",
     "check_monotone",
     "check_options",
     "check_potential",
@@ -41,6 +44,7 @@ __all__ = [
     "observation_layout",
     "online_update",
     "settings",
+    "write_start",
 ]
 
 #: ``table`` of a naive potential in the kernels: no table, ``Φ = η · achieved``
@@ -218,26 +222,11 @@ def check_device(potential: TensorDictModuleBase, data: torch.Tensor | None) -> 
             )
 
 
-def trained_parameters(
-    potential: TensorDictModuleBase, update: ValueUpdate | None
-) -> tuple[list[torch.nn.Parameter], torch.optim.SGD | None]:
-    """The potential's parameters as they are now, and the online update's SGD over them (plain SGD keeps no
-    state, so one made anew after a move that replaced them loses nothing).
+def check_options(gamma: float, start: str) -> None:
+    """Refuse a discount outside ``[0, 1]`` or an unknown start level.
 
     Examples:
-        >>> parameters, optimizer = trained_parameters(TabularPotential(3), None)
-        >>> len(parameters), optimizer
-        (1, None)
-    """
-    parameters = list(potential.parameters())
-    return parameters, torch.optim.SGD(parameters, update.lr) if update else None
-
-
-def check_options(gamma: float, start: str, backend: str) -> None:
-    """Refuse a discount outside ``[0, 1]``, an unknown start level or backend.
-
-    Examples:
-        >>> check_options(0.9, "highest", "auto")
+        >>> check_options(0.9, "highest")
         Traceback (most recent call last):
         ...
         ValueError: start_potential must be one of ['nonpositive', 'value', 'zero'], got 'highest'
@@ -246,6 +235,17 @@ def check_options(gamma: float, start: str, backend: str) -> None:
         raise ValueError(f"gamma must lie in [0, 1], got {gamma}")
     if start not in START_MODES:
         raise ValueError(f"start_potential must be one of {sorted(START_MODES)}, got {start!r}")
+
+
+def check_backend(backend: str) -> None:
+    """Refuse an unknown backend.
+
+    Examples:
+        >>> check_backend("fast")
+        Traceback (most recent call last):
+        ...
+        ValueError: backend must be 'auto', 'compiled' or 'torch', got 'fast'
+    """
     if backend not in ("auto", "compiled", "torch"):
         raise ValueError(f"backend must be 'auto', 'compiled' or 'torch', got {backend!r}")
 
@@ -257,7 +257,6 @@ def settings(
     gamma: float,
     update: ValueUpdate | None,
     observation_key: NestedKey,
-    transitions_key: NestedKey | None,
     *,
     zero_terminal: bool,
     start: StartPotential,
@@ -266,7 +265,7 @@ def settings(
 
     Examples:
         >>> from torchrl_subgoal import State
-        >>> s = settings(SubgoalKeys(), TabularPotential(2), Subgoals(SubgoalSeries([State(1)])), 0.9, None, "o", None,
+        >>> s = settings(SubgoalKeys(), TabularPotential(2), Subgoals(SubgoalSeries([State(1)])), 0.9, None, "o",
         ...              zero_terminal=True, start="value")
         >>> s.value_gamma, s.kept
         (0.9, ('subgoal_index', 'subgoal_return', 'subgoal_steps'))
@@ -276,7 +275,7 @@ def settings(
     if isinstance(potential, TabularPotential) and potential.monotone:
         check_monotone(subgoals)
     return Settings(keys, kept, float(gamma), value_gamma, zero_terminal, start, observation_key,
-                    subgoals.reads_observation, transitions_key is not None, tuple(potential.in_keys))  # fmt: skip
+                    subgoals.reads_observation, keys.transitions is not None, tuple(potential.in_keys))  # fmt: skip
 
 
 def check_monotone(subgoals: Subgoals) -> None:
@@ -348,7 +347,7 @@ def check_table(potential: TensorDictModuleBase, n_learners: int, num_states: in
 
 def compiles(backend: str, potential: TensorDictModuleBase, update: ValueUpdate | None) -> bool:
     """Whether the compiled step shapes with ``potential`` (trained online by ``update``) under ``backend``;
-    ``backend="compiled"`` where it cannot is a ``TypeError`` saying why.
+    ``"compiled"`` where it cannot is a ``TypeError`` saying why.
 
     Examples:
         >>> compiles("auto", TabularPotential(3), None), compiles("torch", TabularPotential(3), None)
@@ -364,27 +363,8 @@ def compiles(backend: str, potential: TensorDictModuleBase, update: ValueUpdate 
         else compiled_potential(potential, update.loss if update else None)
     )
     if why is not None and backend == "compiled":
-        raise TypeError(f"SubgoalPotentialTransform(backend='compiled'): {why}; use backend='torch' or 'auto'")
+        raise TypeError(f"SubgoalPotentialTransform backend 'compiled': {why}; use the backend 'torch' or 'auto'")
     return why is None
-
-
-def compiled_batch(
-    batch: BatchSetup | None, backend: str, potential: TensorDictModuleBase, update: ValueUpdate | None
-) -> BatchSetup:
-    """The env's batch set up for the compiled step, for a compiled loop; a ``TypeError`` saying why not.
-
-    Examples:
-        >>> compiled_batch(None, "auto", TabularPotential(3), None)
-        Traceback (most recent call last):
-        ...
-        TypeError: kernel_state needs the env reset through the transform first (env.reset())
-    """
-    if batch is None:
-        raise TypeError("kernel_state needs the env reset through the transform first (env.reset())")
-    if not batch.compiled:
-        why = compiled_potential(potential, update.loss if update else None) or f"backend={backend!r}"
-        raise TypeError(f"a compiled loop shapes as the compiled step does, which it cannot here: {why}")
-    return batch
 
 
 @dataclass
@@ -412,6 +392,8 @@ class BatchSetup:
     table_ptr: int = 0
     z_start: np.ndarray = field(default_factory=lambda: np.zeros((1, 1), np.int64))
     ancestors: torch.Tensor | None = None  #: with a monotone table: what comes before each ``z``, ``[R, Z, Z]``
+    observation_size: int = 1  #: entries of one observation the abstraction reads
+    backend: Any = None  #: the :class:`~torchrl_subgoal.transform.backends.ShapingBackend` that shapes it
 
     def __post_init__(self) -> None:
         self.rows = self.batch_shape.numel()  #: rows of the batch
@@ -590,3 +572,35 @@ def initial_state(setup: BatchSetup, settings: Settings, obs: torch.Tensor | Non
     if k.start in kept:
         state[k.start] = state[k.anchor if k.anchor in kept else k.index]
     return state
+
+
+def write_start(
+    td: TensorDictBase,
+    root: TensorDictBase,
+    reset: torch.Tensor | None,
+    setup: BatchSetup,
+    settings: Settings,
+    obs: torch.Tensor | None,
+) -> None:
+    """Write the kept entries at a reset into ``root`` (``td``'s reward group): every row's, or those of the rows
+    ``reset`` flags (an env that reset itself in its step); a full reset also writes an empty transition.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> from torchrl_subgoal import State, SubgoalPotentialTransform
+        >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9)
+        >>> td = TensorDict({}, [2])
+        >>> obs = torch.zeros(2, 1, dtype=torch.long)
+        >>> batch = t._batch(torch.Size([2]), torch.arange(2).reshape(2, 1), 2, obs, online=True)
+        >>> write_start(td, td, None, batch, t._settings, obs)
+        >>> td["subgoal_index"].tolist()
+        [[0], [0]]
+    """
+    state = initial_state(setup, settings, obs)
+    for name, value in state.items():
+        if reset is not None:
+            value = torch.where(reset.reshape(*setup.batch_shape, 1), value, root.get(name))
+        write(root, name, value)
+    key = settings.keys.transitions
+    if key is not None and reset is None:
+        write(td, key, empty_transition(setup.batch_shape, state, settings.inputs, settings.keys))

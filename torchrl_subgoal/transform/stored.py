@@ -12,8 +12,7 @@ from tensordict.nn import TensorDictModuleBase
 from tensordict.utils import NestedKey
 
 from torchrl_subgoal.potentials import TabularPotential
-from torchrl_subgoal.transform.compiled import StepInputs
-from torchrl_subgoal.transform.keys import ENV_REWARD, EnvKeys, at, read
+from torchrl_subgoal.transform.keys import ENV_REWARD, EnvKeys, StepInputs, at, read
 from torchrl_subgoal.transform.setup import BatchSetup, Settings, Subgoals, initial_state
 
 __all__ = ["learners_of", "shape_stored", "time_dim"]
@@ -99,9 +98,14 @@ def shape_stored(
     set_up: Callable[[torch.Size, torch.Tensor | None, int, torch.Tensor | None], BatchSetup],
     advance: Callable[[BatchSetup, dict[str, torch.Tensor], StepInputs], dict[str, Any]],
 ) -> TensorDictBase:
-    """Shape stored trajectories ``data`` ``[*B, T]`` (see ``SubgoalPotentialTransform.forward``):
+    """Shape stored trajectories ``data`` ``[*B, T]`` (``SubgoalPotentialTransform.forward``):
     ``set_up(batch_shape, stored learner entry, time dim, first observation)`` sets the rows up,
     ``advance`` makes one step without training.
+
+    The data holds the root observation and the step's ``in_keys`` under ``"next"``. The abstract state
+    starts from the stored entries of the first step when the data has them (a slice from the middle of an
+    episode), else from the first observation as at a reset, and restarts after every ``done``. The reward
+    shaped is the env reward (``"env_reward"`` when stored).
 
     Examples:
         >>> from torchrl.envs import TransformedEnv

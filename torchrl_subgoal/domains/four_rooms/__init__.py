@@ -16,11 +16,11 @@ from typing import Any
 from torchrl.envs import EnvBase
 
 from torchrl_subgoal import domains
-from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
-from torchrl_subgoal.agents.loop import OnlineAgent
 from torchrl_subgoal.envs import four_rooms
 from torchrl_subgoal.experiments.paper import PaperResults, paper_table
 from torchrl_subgoal.experiments.plots import ReportMap
+from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa
+from torchrl_subgoal.fused.loop import OnlineAgent
 from torchrl_subgoal.studio.domains import Limit, StudioDomain
 from torchrl_subgoal.subgoals import Cell, Predicate, State
 from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig, SuccessSignal

@@ -17,11 +17,11 @@ import torch
 from torchrl.envs import EnvBase
 
 from torchrl_subgoal import domains
-from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic
-from torchrl_subgoal.agents.loop import OnlineAgent
 from torchrl_subgoal.envs import pinball
 from torchrl_subgoal.experiments.paper import PaperResults, paper_table
 from torchrl_subgoal.experiments.plots import ReportMap
+from torchrl_subgoal.fused import AC_PRESETS, FourierActorCritic
+from torchrl_subgoal.fused.loop import OnlineAgent
 from torchrl_subgoal.studio.domains import Limit, StudioDomain
 from torchrl_subgoal.subgoals import Box, Circle, Predicate, StateAggregation
 from torchrl_subgoal.training import A2CConfig, DQNConfig, LearnerDomain, PPOConfig, SuccessSignal

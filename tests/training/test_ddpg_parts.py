@@ -9,7 +9,7 @@ from tensordict import TensorDict
 from torchrl.data import Bounded
 from torchrl.envs import ExplorationType, set_exploration_type
 
-from torchrl_subgoal.agents.ddpg import DDPGAgent, DDPGConfig, RunningNorm, TD3Settings
+from torchrl_subgoal.training.ddpg_parts import DDPGAgent, DDPGConfig, RunningNorm, TD3Settings
 
 SPEC = Bounded(-1.0, 1.0, shape=(4,))
 

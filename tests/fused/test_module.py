@@ -10,15 +10,15 @@ import torch
 from tensordict import TensorDict
 from torch import nn
 
-from torchrl_subgoal.agents import (
+from torchrl_subgoal.envs import FourRoomsEnv, PinBallEnv
+from torchrl_subgoal.fused import (
     AC_PRESETS,
     SARSA_PRESETS,
     FourierActorCritic,
     SoftmaxSarsa,
     run_episodes,
 )
-from torchrl_subgoal.agents.module import KernelLearner
-from torchrl_subgoal.envs import FourRoomsEnv, PinBallEnv
+from torchrl_subgoal.fused.module import KernelLearner
 
 AC_STATE = ["w", "theta", "phi", "probs", "streams"]
 

@@ -1,4 +1,4 @@
-"""The fused engine: :func:`~torchrl_subgoal.agents.run_episodes` without per-step TorchRL calls.
+"""The fused engine: :func:`~torchrl_subgoal.fused.run_episodes` without per-step TorchRL calls.
 
 Batched learning is limited by its slowest learner: every step of the batch
 waits for it. In four-rooms, the slowest of 1,000 NRS learners needs about
@@ -9,18 +9,18 @@ the env, its :class:`~torchrl_subgoal.SubgoalPotentialTransform` and the
 learner — and runs them in one compiled loop that calls, per learner, the
 same kernels in the same order with the same random numbers (each learner
 draws from its own stream), so its records are identical to the TorchRL
-loop's (``tests/agents/test_fused.py``) while a learner-step costs tens of
+loop's (``tests/fused/test_engine.py``) while a learner-step costs tens of
 nanoseconds (four-rooms) or a few microseconds (PinBall).
 
-One loop, :func:`torchrl_subgoal._kernels.engine.fused_run`, runs every env and
+One loop, :func:`torchrl_subgoal.fused._kernels.engine.fused_run`, runs every env and
 learner: it calls an env's and a learner's compiled steps (``env_step``,
 ``env_reset``, ``learner_step``, …), which each record type (what the env's
 and the learner's ``kernel_state()`` return) implements next to its own
 kernels with :func:`implements`; the loop names no domain. Built in:
 :class:`~torchrl_subgoal.envs.FourRoomsEnv` with
-:class:`~torchrl_subgoal.agents.SoftmaxSarsa`, and
+:class:`~torchrl_subgoal.fused.SoftmaxSarsa`, and
 :class:`~torchrl_subgoal.envs.PinBallEnv` with
-:class:`~torchrl_subgoal.agents.FourierActorCritic`; another env or learner
+:class:`~torchrl_subgoal.fused.FourierActorCritic`; another env or learner
 joins by implementing the steps (docs/adding_a_domain.md). Each runs alone
 or in a ``TransformedEnv`` whose only transform is a
 :class:`~torchrl_subgoal.SubgoalPotentialTransform` with a tabular or naive
@@ -49,7 +49,6 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, TransformedEnv
 
-from torchrl_subgoal._kernels.engine import fused_run, fused_run_uncached
 from torchrl_subgoal._kernels.steps import (
     env_observe,
     env_reset,
@@ -61,9 +60,11 @@ from torchrl_subgoal._kernels.steps import (
     learner_step,
     missing_steps,
 )
-from torchrl_subgoal.agents.records import EpisodeArrays, EpisodeRecords
+from torchrl_subgoal.fused._kernels.engine import fused_run, fused_run_uncached
+from torchrl_subgoal.fused.records import EpisodeArrays, EpisodeRecords
+from torchrl_subgoal.fused.shaping_record import ShapingKernelState, shaping_record
 from torchrl_subgoal.potentials import TabularPotential
-from torchrl_subgoal.transform import ShapingKernelState, SubgoalPotentialTransform
+from torchrl_subgoal.transform import SubgoalPotentialTransform
 
 __all__ = [
     "FusedEnv",
@@ -123,7 +124,7 @@ def _shaping_state(shaping: SubgoalPotentialTransform | None, td: TensorDictBase
             "the fused engine stops learners that have their episodes, so each needs its own "
             "potential table (a TabularPotential with the env's batch shape); use engine='torchrl'"
         )
-    return shaping.kernel_state(td)
+    return shaping_record(shaping, td)
 
 
 class FusedEnv(Protocol):
@@ -148,7 +149,7 @@ class FusedLearner(Protocol):
     (:func:`implements`; see docs/adding_a_domain.md).
 
     Examples:
-        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
+        >>> from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa
         >>> agent: FusedLearner = SoftmaxSarsa(2, 5, 4, SARSA_PRESETS["released"], seed=0)
         >>> missing_steps((), agent.kernel_state())  # a record that is not an env's: its steps are missing
         ['env_scratch', 'env_observe', 'env_step', 'env_reset', 'env_shaping_observation']
@@ -170,8 +171,8 @@ def run_episodes_fused(
 
     The env (a :class:`FusedEnv`) and the learner give their records (``kernel_state()``), whose types
     implement the engine's steps: :class:`~torchrl_subgoal.envs.FourRoomsEnv` with
-    :class:`~torchrl_subgoal.agents.SoftmaxSarsa`, :class:`~torchrl_subgoal.envs.PinBallEnv` with
-    :class:`~torchrl_subgoal.agents.FourierActorCritic`, or any env and learner whose records do
+    :class:`~torchrl_subgoal.fused.SoftmaxSarsa`, :class:`~torchrl_subgoal.envs.PinBallEnv` with
+    :class:`~torchrl_subgoal.fused.FourierActorCritic`, or any env and learner whose records do
     (docs/adding_a_domain.md). A pair that does not fit is a ``TypeError`` that says why.
 
     Args:
@@ -182,7 +183,7 @@ def run_episodes_fused(
         progress: called with the number of episodes filed after each compiled block.
 
     Examples:
-        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
+        >>> from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa
         >>> from torchrl_subgoal.envs import FourRoomsEnv
         >>> env = FourRoomsEnv(num_envs=8)
         >>> agent = SoftmaxSarsa(8, env.num_states, 4, SARSA_PRESETS["released"], seed=0)
@@ -208,7 +209,7 @@ def run_episodes_fused(
     if missing:
         raise TypeError(
             f"{type(record).__name__} and {type(learner).__name__} do not implement the fused engine's "
-            f"{', '.join(missing)} (register them with torchrl_subgoal.agents.fused.implements; "
+            f"{', '.join(missing)} (register them with torchrl_subgoal.fused.engine.implements; "
             "docs/adding_a_domain.md)"
         )
     packaged = all(type(r).__module__.startswith("torchrl_subgoal.") for r in (record, learner))

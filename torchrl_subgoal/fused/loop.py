@@ -11,8 +11,8 @@ from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.envs import EnvBase
 
-from torchrl_subgoal._kernels.records import record_episodes
-from torchrl_subgoal.agents.records import EpisodeRecords
+from torchrl_subgoal.fused._kernels.records import record_episodes
+from torchrl_subgoal.fused.records import EpisodeRecords
 
 __all__ = ["EpisodeRecords", "OnlineAgent", "run_episodes"]
 
@@ -21,7 +21,7 @@ class OnlineAgent(Protocol):
     """What :func:`run_episodes` needs from a learner batched like the env.
 
     Examples:
-        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
+        >>> from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa
         >>> from torchrl_subgoal.envs import FourRoomsEnv
         >>> env = FourRoomsEnv(num_envs=4)
         >>> agent = SoftmaxSarsa(4, env.num_states, 4, SARSA_PRESETS["released"], seed=0)
@@ -70,13 +70,13 @@ def run_episodes(
             ``"fused"`` runs the same objects in one compiled loop with
             identical records, much faster (FourRoomsEnv with SoftmaxSarsa,
             PinBallEnv with FourierActorCritic, or an env and a learner whose
-            records implement its steps; see :mod:`torchrl_subgoal.agents.fused`).
+            records implement its steps; see :mod:`torchrl_subgoal.fused.engine`).
 
     Returns:
         steps, (unshaped) return and success (terminated) of every episode.
 
     Examples:
-        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa
+        >>> from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa
         >>> from torchrl_subgoal.envs import FourRoomsEnv
         >>> env = FourRoomsEnv(num_envs=4)
         >>> agent = SoftmaxSarsa(4, env.num_states, 4, SARSA_PRESETS["released"], seed=0)
@@ -85,7 +85,7 @@ def run_episodes(
         torch.Size([4, 3])
     """
     if engine == "fused":
-        from torchrl_subgoal.agents.fused import run_episodes_fused
+        from torchrl_subgoal.fused.engine import run_episodes_fused
 
         if return_key is not None:
             raise ValueError("the fused engine records the unshaped reward; return_key is not supported")

@@ -18,9 +18,9 @@ import torch
 from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import load_patterns
-from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
 from torchrl_subgoal.envs.four_rooms import room_aggregation
+from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 
 PATTERNS = list(

@@ -8,8 +8,8 @@ from tensordict import TensorDict
 from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import Cell, SubgoalSeries
-from torchrl_subgoal.agents import SARSA_PRESETS, SarsaConfig, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.envs import FourRoomsEnv
+from torchrl_subgoal.fused import SARSA_PRESETS, SarsaConfig, SoftmaxSarsa, run_episodes
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 
 

@@ -12,9 +12,9 @@ from torchrl_subgoal._kernels.random import _exp_shifted, _inverse_cdf, uniform
 # ``fastmath`` lets LLVM vectorise these loops (about 30% of a PinBall learner-step). The
 # per-learner steps (:func:`_ac_learner`, :func:`_qac_learner`) are compiled once, not
 # inlined, and called by both the batch kernels (the TorchRL loop) and the fused engine, so
-# the two run the same machine code and agree bit for bit (``tests/agents/test_fused.py``).
+# the two run the same machine code and agree bit for bit (``tests/fused/test_engine.py``).
 # Numba's on-disk cache of a compiled caller is keyed on its own file only: after editing
-# this file, delete the ``__pycache__/*.nb[ic]`` of ``agents/fused.py`` (or touch it).
+# this file, delete the ``__pycache__/*.nb[ic]`` of ``engine.py`` next to it (or touch that file).
 
 
 @numba.njit(cache=True, nogil=True, inline="always", fastmath=True)
@@ -365,7 +365,7 @@ def qac_step(
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def ac_learner_step(learner, b, a, reward, obs_next, terminated, done, obs_root, scratch, phi_next):
-    """Learner ``b``'s step of an :class:`~torchrl_subgoal.agents.actor_critic.ActorCriticKernelState`
+    """Learner ``b``'s step of an :class:`~torchrl_subgoal.fused.actor_critic.ActorCriticKernelState`
     (:func:`_qac_learner` or :func:`_ac_learner`, by its critic); returns its next action."""
     L = learner
     if L.q_critic:

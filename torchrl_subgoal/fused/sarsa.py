@@ -12,9 +12,9 @@ from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
 from torchrl_subgoal._kernels.random import AGENT_STREAM, learner_keys, new_streams
-from torchrl_subgoal._kernels.sarsa import sarsa_learner_step, sarsa_step, softmax_sample
 from torchrl_subgoal._kernels.steps import implements, learner_scratch, learner_step
-from torchrl_subgoal.agents.module import KernelLearner
+from torchrl_subgoal.fused._kernels.sarsa import sarsa_learner_step, sarsa_step, softmax_sample
+from torchrl_subgoal.fused.module import KernelLearner
 
 __all__ = ["SARSA_PRESETS", "SarsaConfig", "SarsaKernelState", "SoftmaxSarsa"]
 
@@ -84,7 +84,7 @@ class SoftmaxSarsa(KernelLearner):
     An ``nn.Module``: the table ``q`` and the random ``streams`` are buffers,
     so ``state_dict()`` checkpoints a learner (a reloaded one continues as the
     original would) and ``.to(dtype=...)`` casts the table; it learns on the
-    CPU (see :class:`~torchrl_subgoal.agents.module.KernelLearner`). Calling
+    CPU (see :class:`~torchrl_subgoal.fused.module.KernelLearner`). Calling
     the module is :meth:`act`.
 
     Args:
@@ -109,8 +109,8 @@ class SoftmaxSarsa(KernelLearner):
 
     Examples:
         >>> import torch
-        >>> from torchrl_subgoal.agents import SoftmaxSarsa, SARSA_PRESETS
-        >>> from torchrl_subgoal.agents.loop import run_episodes
+        >>> from torchrl_subgoal.fused import SoftmaxSarsa, SARSA_PRESETS
+        >>> from torchrl_subgoal.fused.loop import run_episodes
         >>> from torchrl_subgoal.envs import FourRoomsEnv
         >>> env = FourRoomsEnv(num_envs=8)
         >>> agent = SoftmaxSarsa(8, env.num_states, 4, SARSA_PRESETS["released"], seed=0)
@@ -232,7 +232,7 @@ def _flat(t: torch.Tensor) -> np.ndarray:
     return t.numpy().reshape(-1)
 
 
-# The fused engine's learner step (torchrl_subgoal._kernels.engine.fused_run): a row per state and abstract state.
+# The fused engine's learner step (torchrl_subgoal.fused._kernels.engine.fused_run): a row per state and abstract state.
 
 
 @implements(learner_scratch, SarsaKernelState)

@@ -11,15 +11,15 @@ from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import Cell, SubgoalSeries
 from torchrl_subgoal._kernels.random import learner_keys
-from torchrl_subgoal.agents import (
+from torchrl_subgoal.envs import FourRoomsEnv
+from torchrl_subgoal.envs.four_rooms import room_aggregation
+from torchrl_subgoal.fused import (
     AC_PRESETS,
     SARSA_PRESETS,
     FourierActorCritic,
     SoftmaxSarsa,
     run_episodes,
 )
-from torchrl_subgoal.envs import FourRoomsEnv
-from torchrl_subgoal.envs.four_rooms import room_aggregation
 from torchrl_subgoal.methods import paper_methods, shaping_transform
 
 from ..line_env import LineEnv
@@ -209,8 +209,8 @@ class LineWithRecord(LineEnv):
 
 def pinball_setup(method: str, n: int, max_steps: int, preset: str = "released") -> tuple[object, object]:
     from torchrl_subgoal import Box, Circle, StateAggregation
-    from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic
     from torchrl_subgoal.envs import PinBallEnv
+    from torchrl_subgoal.fused import AC_PRESETS, FourierActorCritic
 
     cfg = AC_PRESETS[preset]
     env = PinBallEnv(n, seed=3, max_steps=max_steps, step_penalty=-1.0, thrust_penalty=-5.0)

@@ -16,7 +16,7 @@
 * a TorchRL :class:`~torchrl.data.ReplayBuffer` of the DDPG keys only.
 
 :class:`DDPGAgent` holds them all, for one learner or a batch of ``K`` (stacked networks,
-per-learner normalisers and replay: :mod:`torchrl_subgoal.agents.stack`), and exposes what a
+per-learner normalisers and replay: :mod:`torchrl_subgoal.training.stack`), and exposes what a
 training loop needs:
 ``policy`` (exploring) and ``greedy`` (for evaluation), ``extend`` (store a
 collected batch and update the normaliser), ``update`` (one gradient step
@@ -42,8 +42,8 @@ from torchrl.modules import MLP, Actor, ValueOperator
 from torchrl.objectives import DDPGLoss, SoftUpdate, TD3Loss
 from torchrl.objectives.value import TD0Estimator
 
-from torchrl_subgoal.agents.stack import LearnerReplay, LearnerStack, learner_means
-from torchrl_subgoal.agents.subgoal_input import SUBGOAL_INDEX, SubgoalInput
+from torchrl_subgoal.training.stack import LearnerReplay, LearnerStack, learner_means
+from torchrl_subgoal.training.subgoal_input import SUBGOAL_INDEX, SubgoalInput
 
 __all__ = ["ClippedTD0Estimator", "DDPGAgent", "DDPGConfig", "GaussianOrRandom", "RunningNorm", "TD3Settings", "mlp"]
 
@@ -286,9 +286,9 @@ class DDPGAgent(nn.Module):
     """Actor, critic, their optimisers, target networks, exploration and replay buffer of ``K`` learners.
 
     One learner is a batch of one. With several (``seeds``), every network is a
-    :class:`~torchrl_subgoal.agents.stack.LearnerStack` of the learners' own (each
+    :class:`~torchrl_subgoal.training.stack.LearnerStack` of the learners' own (each
     started from its seed), the normaliser keeps each learner's statistics, the
-    replay buffer has a learner dim (:class:`~torchrl_subgoal.agents.stack.LearnerReplay`:
+    replay buffer has a learner dim (:class:`~torchrl_subgoal.training.stack.LearnerReplay`:
     each learner samples its own transitions), and each learner's losses are its own
     means over its own samples: what Adam, the target updates and the exploration do
     is each learner's alone. The acting inputs' first dim is the learners' env batch,
@@ -304,7 +304,7 @@ class DDPGAgent(nn.Module):
         observation_key: the observation entry the networks read.
         subgoal_states: if positive, actor and critic also read ``"subgoal_index"`` (the abstract
             state ``z`` of the shaping transform, one-hot over this many states), concatenated to the
-            normalised observation (:class:`~torchrl_subgoal.agents.subgoal_input.SubgoalInput`).
+            normalised observation (:class:`~torchrl_subgoal.training.subgoal_input.SubgoalInput`).
         td3: TD3 instead of DDPG (``config.action_l2`` must then be 0).
         keys: more entries the replay buffer keeps (e.g. what re-shaping a sample reads).
         seeds: one per learner: torch is seeded with it before the learner's actor and critic are built

@@ -16,7 +16,7 @@ class EpisodeRecords:
     """Per-learner, per-episode results: ``[num_learners, num_episodes]`` tensors.
 
     Examples:
-        >>> from torchrl_subgoal.agents import SARSA_PRESETS, SoftmaxSarsa, run_episodes
+        >>> from torchrl_subgoal.fused import SARSA_PRESETS, SoftmaxSarsa, run_episodes
         >>> from torchrl_subgoal.envs import FourRoomsEnv
         >>> env = FourRoomsEnv(num_envs=4)
         >>> agent = SoftmaxSarsa(4, env.num_states, 4, SARSA_PRESETS["released"], seed=0)

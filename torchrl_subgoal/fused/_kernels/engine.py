@@ -5,7 +5,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from torchrl_subgoal._kernels.records import _active_learners, _record_learner
 from torchrl_subgoal._kernels.regions import _in_region
 from torchrl_subgoal._kernels.shaping import (
     NO_SHAPING,
@@ -23,6 +22,7 @@ from torchrl_subgoal._kernels.steps import (
     learner_scratch,
     learner_step,
 )
+from torchrl_subgoal.fused._kernels.records import _active_learners, _record_learner
 
 
 @numba.njit(cache=True, nogil=True)
@@ -34,10 +34,10 @@ def fused_run(env, shaping, learner, action, max_steps_run, records):
     env's and the learner's steps are their record types' implementations of
     the generic functions above. ``action[b]`` is learner ``b``'s next action;
     episodes are filed in ``records``
-    (:class:`~torchrl_subgoal.agents.records.EpisodeArrays`).
+    (:class:`~torchrl_subgoal.fused.records.EpisodeArrays`).
 
     Per learner, the same kernels in the same order with the same random
-    numbers as one iteration of :func:`torchrl_subgoal.agents.run_episodes`
+    numbers as one iteration of :func:`torchrl_subgoal.fused.run_episodes`
     with a ``TransformedEnv(env, SubgoalPotentialTransform)``: env step,
     transform step, reset, learner step, records. Learners are independent
     (own streams, own tables), so each runs its steps of the block in one go

@@ -12,16 +12,16 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
-from torchrl_subgoal._kernels.actor_critic import (
+from torchrl_subgoal._kernels.random import AGENT_STREAM, learner_keys, new_streams
+from torchrl_subgoal._kernels.steps import implements, learner_scratch, learner_step
+from torchrl_subgoal.fused._kernels.actor_critic import (
     _feature_scratch,
     ac_act,
     ac_learner_step,
     ac_step,
     qac_step,
 )
-from torchrl_subgoal._kernels.random import AGENT_STREAM, learner_keys, new_streams
-from torchrl_subgoal._kernels.steps import implements, learner_scratch, learner_step
-from torchrl_subgoal.agents.module import KernelLearner
+from torchrl_subgoal.fused.module import KernelLearner
 
 __all__ = ["AC_PRESETS", "ActorCriticConfig", "ActorCriticKernelState", "FourierActorCritic", "fourier_coefficients"]
 
@@ -135,7 +135,7 @@ class FourierActorCritic(KernelLearner):
     ``streams`` are buffers (float64, the streams uint64), so ``state_dict()``
     checkpoints a learner (a reloaded one continues as the original would)
     and ``.to(dtype=...)`` casts the tables; it learns on the CPU (see
-    :class:`~torchrl_subgoal.agents.module.KernelLearner`). Calling the module
+    :class:`~torchrl_subgoal.fused.module.KernelLearner`). Calling the module
     is :meth:`act`.
 
     Args:
@@ -150,7 +150,7 @@ class FourierActorCritic(KernelLearner):
         observation_key: the observation.
 
     Examples:
-        >>> from torchrl_subgoal.agents import AC_PRESETS, FourierActorCritic, run_episodes
+        >>> from torchrl_subgoal.fused import AC_PRESETS, FourierActorCritic, run_episodes
         >>> from torchrl_subgoal.envs import PinBallEnv
         >>> env = PinBallEnv(4, seed=0, max_steps=50)
         >>> spec = env.observation_spec["observation"]
@@ -321,7 +321,7 @@ class FourierActorCritic(KernelLearner):
         next_root.set("action", torch.from_numpy(action))
 
 
-# The fused engine's learner step (torchrl_subgoal._kernels.engine.fused_run): features of the observation array.
+# The fused engine's learner step (torchrl_subgoal.fused._kernels.engine.fused_run): features of the observation array.
 
 
 @implements(learner_scratch, ActorCriticKernelState)

@@ -77,7 +77,7 @@ def _sarsa_row(sarsa, s, z):
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def sarsa_learner_step(sarsa, b, s, z, a, reward, s_next, z_next, terminated, done, s_root, z_root, scratch):
-    """:func:`_sarsa_learner` for learner ``b`` of a :class:`~torchrl_subgoal.agents.sarsa.SarsaKernelState`,
+    """:func:`_sarsa_learner` for learner ``b`` of a :class:`~torchrl_subgoal.fused.sarsa.SarsaKernelState`,
     from states and abstract states; returns its next action."""
     return _sarsa_learner(
         sarsa.q[b],

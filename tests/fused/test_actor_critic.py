@@ -8,9 +8,9 @@ import torch
 from tensordict import TensorDict
 
 from torchrl_subgoal._kernels.random import draw_uniforms
-from torchrl_subgoal.agents import AC_PRESETS, ActorCriticConfig, FourierActorCritic, run_episodes
-from torchrl_subgoal.agents.actor_critic import fourier_coefficients
 from torchrl_subgoal.envs import PinBallEnv
+from torchrl_subgoal.fused import AC_PRESETS, ActorCriticConfig, FourierActorCritic, run_episodes
+from torchrl_subgoal.fused.actor_critic import fourier_coefficients
 
 LOW, HIGH = [0.0, 0.0, -2.0, -2.0], [1.0, 1.0, 2.0, 2.0]
 
