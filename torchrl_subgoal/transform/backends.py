@@ -46,6 +46,10 @@ class ShapingBackend(Protocol):
     :class:`~torchrl_subgoal.SubgoalKeys`), ``"reward"`` the shaped reward and ``"transition"`` the step's SMDP
     transition when the settings write it; with ``learn``, the potential is first trained online on the
     transitions the step closes.
+
+    Examples:
+        >>> isinstance(TorchShaping, type) and all(hasattr(TorchShaping, m) for m in ("prepare", "step"))
+        True
     """
 
     def prepare(self, batch: BatchSetup, online: bool) -> None: ...
@@ -109,7 +113,15 @@ class CompiledShaping(TorchShaping):
 
 def with_learner(batch: BatchSetup, settings: Settings, current: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     """``current`` with each row's learner when the settings keep it and ``current`` lacks it: what a backend's
-    ``step`` expects of entries not read from a reset env (a step called directly)."""
+    ``step`` expects of entries not read from a reset env (a step called directly).
+
+    Examples:
+        >>> from torchrl_subgoal import State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
+        >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2, (2,)), gamma=0.9)
+        >>> batch = t._batch(torch.Size([2]), torch.arange(2).reshape(2, 1), 2, torch.zeros(2, 1), online=True)
+        >>> with_learner(batch, t._settings, {})["subgoal_learner"].tolist()
+        [[0], [1]]
+    """
     learner = settings.keys.learner
     if learner in settings.kept and learner not in current:
         current[learner] = batch.learner

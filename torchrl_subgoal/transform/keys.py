@@ -421,7 +421,18 @@ def declare_observations(
     spec: Composite, parent: EnvBase, env: EnvKeys, specs: dict[str, TensorSpec], read: NestedKey | None, settings: Any
 ) -> None:
     """Declare the kept entries (``specs``) as observations, after checking the observation ``read`` (``None``:
-    none is read) exists, and the SMDP transition entry when ``settings.keys.transitions`` names one."""
+    none is read) exists, and the SMDP transition entry when ``settings.keys.transitions`` names one.
+
+    Examples:
+        >>> from torchrl.envs import TransformedEnv
+        >>> from torchrl_subgoal import State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9,
+        ...                               keys=SubgoalKeys(transitions="smdp"))
+        >>> env = TransformedEnv(FourRoomsEnv(2), t)  # transform_observation_spec calls it
+        >>> "smdp" in env.observation_spec.keys(), "subgoal_index" in env.observation_spec.keys()
+        (True, True)
+    """
     if read is not None:
         observation(spec, read, "observation_key")
     declare(spec, parent, env, specs, refuse_taken=True)
@@ -433,7 +444,17 @@ def declare_observations(
 
 def declare_state(input_spec: Composite, parent: EnvBase, env: EnvKeys, specs: dict[str, TensorSpec]) -> None:
     """Declare the kept entries (``specs``) as state carried from step to step, as ``RewardSum``'s and
-    ``StepCounter``'s are."""
+    ``StepCounter``'s are.
+
+    Examples:
+        >>> from torchrl.envs import TransformedEnv
+        >>> from torchrl_subgoal import State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2), gamma=0.9)
+        >>> env = TransformedEnv(FourRoomsEnv(2), t)  # transform_input_spec calls it
+        >>> "subgoal_steps" in env.full_state_spec.keys()
+        True
+    """
     state = input_spec["full_state_spec"]
     if state is None:
         state = Composite(shape=input_spec.shape, device=input_spec.device)
@@ -468,5 +489,11 @@ def step_out_keys(env: EnvKeys, kept: tuple[str, ...], transitions: NestedKey | 
 
 
 def observation_of(parent: EnvBase | None, key: NestedKey) -> TensorSpec | None:
-    """The spec of the observation ``key`` of ``parent`` (``None`` without a parent env yet)."""
+    """The spec of the observation ``key`` of ``parent`` (``None`` without a parent env yet).
+
+    Examples:
+        >>> from torchrl_subgoal.envs import FourRoomsEnv
+        >>> observation_of(FourRoomsEnv(2), "cell").shape, observation_of(None, "cell")
+        (torch.Size([2, 2]), None)
+    """
     return None if parent is None else observation(parent.full_observation_spec, key, "observation_key")
