@@ -20,9 +20,9 @@ from torchrl_subgoal.training import (
     PPOConfig,
     Shaping,
     SuccessSignal,
-    Trained,
     evaluate,
     learner_envs,
+    load_trained,
     train_ddpg,
     train_dqn,
     train_ppo,
@@ -36,11 +36,11 @@ SERIES = SubgoalSeries([Box((0.625,), (0.375,), (0,)), Box((0.75,), (0.25,), (0,
 
 _RELOAD = """
 import json, sys
-from torchrl_subgoal.training import SuccessSignal, Trained
+from torchrl_subgoal.training import SuccessSignal, load_trained
 from tests.training.corridor import continuous_corridor, discrete_corridor
 
 path, env = sys.argv[1], {"discrete": discrete_corridor, "continuous": continuous_corridor}[sys.argv[2]]
-trained = Trained.load(path, env)
+trained = load_trained(path, env)
 print(json.dumps([vars(trained.evaluate(env, 3, learner=k, success=SuccessSignal(min_return=1.0)))
                   for k in range(len(trained.seeds))]))
 """
@@ -94,7 +94,7 @@ def test_a_trained_ddpg_agent_reloads_with_its_normaliser(tmp_path: Path) -> Non
     assert here[0] != here[1]  # two learners, two policies
     trained.save(tmp_path / "ddpg.pt")
     assert _reload(tmp_path / "ddpg.pt", "continuous") == here
-    again = Trained.load(tmp_path / "ddpg.pt", continuous_corridor)
+    again = load_trained(tmp_path / "ddpg.pt", continuous_corridor)
     assert torch.equal(again.modules["agent"].norm.mean, trained.modules["agent"].norm.mean)
     assert repr(again.curves) == repr(trained.curves)  # (NaN: success not measured on the corridor)
 

@@ -28,8 +28,8 @@ Every block trains ``len(seeds)`` learners as one program (one learner is a batc
   (:func:`smdp_transitions`, :func:`extend_transitions` into a replay buffer);
 * :mod:`~torchrl_subgoal.training.shared`: :class:`EnvFactory`, one potential
   for envs in collector worker processes (shared memory);
-* :mod:`~torchrl_subgoal.training.learners`: the building blocks by name (:data:`LEARNERS`) and the
-  check that an env's actions suit one (:func:`check_actions`);
+* :mod:`~torchrl_subgoal.training.learners`: the building blocks by name (:data:`LEARNERS`), reloading
+  what one saved (:func:`load_trained`) and the check that an env's actions suit one (:func:`check_actions`);
 * :mod:`~torchrl_subgoal.training.domains`: what a domain registers for the learner recipes
   (:class:`LearnerDomain`).
 
@@ -69,7 +69,7 @@ from torchrl_subgoal.training.envs import (
     probe_env,
     shaped_env,
 )
-from torchrl_subgoal.training.learners import LEARNERS, Learner, action_kind, check_actions
+from torchrl_subgoal.training.learners import LEARNERS, Learner, action_kind, check_actions, load_trained
 from torchrl_subgoal.training.networks import FourierFeatures, q_network, subgoal_states
 from torchrl_subgoal.training.on_policy import actor_critic, actor_critic_modules, train_on_policy
 from torchrl_subgoal.training.potential import PotentialTrainer, SampleReshaper
@@ -130,6 +130,7 @@ __all__ = [
     "extend_transitions",
     "learner_envs",
     "learner_means",
+    "load_trained",
     "make_collector",
     "per_learner",
     "ppo_actor_critic",

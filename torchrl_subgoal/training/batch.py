@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Generator, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, Generic, TypedDict, TypeVar
+from typing import Any, Generic, TypedDict, TypeVar
 
 import torch
 from tensordict import TensorDictBase
@@ -46,6 +46,7 @@ from torchrl_subgoal.training.envs import Shaping, close_probe, learner_envs, pr
 from torchrl_subgoal.training.networks import subgoal_states
 from torchrl_subgoal.training.potential import PotentialTrainer, SampleReshaper
 from torchrl_subgoal.training.recording import CurveRecorder, LearningCurve, SuccessSignal
+from torchrl_subgoal.training.result import Trained
 from torchrl_subgoal.training.shared import EnvFactory
 from torchrl_subgoal.training.stack import (
     LearnerReplay,
@@ -70,9 +71,6 @@ __all__ = [
     "seeded",
     "stack_actor_critic",
 ]
-
-if TYPE_CHECKING:
-    from torchrl_subgoal.training.result import Trained
 
 C = TypeVar("C", bound=LearnerConfig)
 T = TypeVar("T")
@@ -391,8 +389,6 @@ class LearnerBatch(Generic[C]):
 
     def result(self, algo: str, modules: dict[str, nn.Module]) -> Trained:
         """What the block returns: the curves and its ``modules`` (:class:`~torchrl_subgoal.training.Trained`)."""
-        from torchrl_subgoal.training.result import Trained
-
         return Trained(
             algo,
             self.settings,

@@ -11,20 +11,25 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Literal
 
+import torch
 from torch import nn
 from torchrl.data import Bounded, Categorical, OneHot
 from torchrl.envs import EnvBase
 
 from torchrl_subgoal.training.a2c import A2CConfig, train_a2c
+from torchrl_subgoal.training.batch import batch_shaping
 from torchrl_subgoal.training.ddpg import DDPGTrainConfig, ddpg_modules, train_ddpg
 from torchrl_subgoal.training.dqn import DQNConfig, dqn_modules, train_dqn
+from torchrl_subgoal.training.envs import Shaping, close_probe, probe_env
 from torchrl_subgoal.training.on_policy import actor_critic_modules
 from torchrl_subgoal.training.ppo import PPOConfig, train_ppo
+from torchrl_subgoal.training.recording import LearningCurve
 from torchrl_subgoal.training.result import Trained
 
-__all__ = ["LEARNERS", "Actions", "Learner", "action_kind", "check_actions"]
+__all__ = ["LEARNERS", "Actions", "Learner", "action_kind", "check_actions", "load_trained"]
 
 Actions = Literal["discrete", "continuous"]
 
@@ -40,7 +45,7 @@ class Learner:
             ``len(seeds)`` learners as one batch.
         actions: the action kinds it handles.
         modules: ``modules(env, config, observation_key, subgoal_states, seeds)``, the block's networks over
-            ``len(seeds)`` learners (what :meth:`~torchrl_subgoal.training.Trained.load` rebuilds).
+            ``len(seeds)`` learners (what :func:`load_trained` rebuilds).
 
     Examples:
         >>> LEARNERS["dqn"].actions, LEARNERS["ppo"].actions
@@ -124,3 +129,40 @@ def check_actions(algo: str, env: EnvBase, domain: str) -> None:
         f"{algo} needs {' or '.join(LEARNERS[algo].actions)} actions; {domain}'s are "
         f"{kind or 'neither discrete nor bounded continuous'}: {choose}"
     )
+
+
+def load_trained(path: str | Path, make_env: Callable[[int], EnvBase], *, shaping: Shaping | None = None) -> Trained:
+    """What :meth:`Trained.save <torchrl_subgoal.training.Trained.save>` wrote, rebuilt on ``make_env``'s specs
+    (on the CPU), by the learner's own ``modules``.
+
+    Args:
+        path: the saved file.
+        make_env: the env factory the learners trained on (one learner's, for its specs).
+        shaping: the shaping the learners trained with (its subgoals; the saved tables are loaded into it),
+            needed to evaluate a policy that reads the subgoal index.
+
+    Examples:
+        >>> load_trained("no/such/file.pt", None)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        FileNotFoundError: ...
+    """
+    saved = torch.load(path, map_location="cpu", weights_only=True)
+    learner = LEARNERS[saved["algo"]]
+    config = learner.config(**{**saved["config"], "device": "cpu"})
+    env, _ = probe_env(make_env)
+    try:
+        modules = learner.modules(env, config, saved["observation_key"], saved["subgoal_states"], saved["seeds"])
+    finally:
+        close_probe(env)
+    for name, state in saved["modules"].items():
+        modules[name].load_state_dict(state)
+    if shaping is not None and saved["potential"] is not None:
+        shaping = batch_shaping([shaping] * len(saved["seeds"]), config.num_envs)
+        assert shaping is not None
+        shaping.potential.load_state_dict(saved["potential"])
+    curves = [LearningCurve(**c) for c in saved["curves"]]
+    return Trained(
+        saved["algo"], config, list(saved["seeds"]), curves, modules, saved["observation_key"], saved["subgoal_states"],
+        shaping,
+    )  # fmt: skip

@@ -4,7 +4,7 @@ Every ``train_<algo>`` returns a :class:`Trained`: the learners' curves, their
 networks (stacked over the learners: actor, critic or Q-network, the DDPG
 agent's normaliser), the shaping potential (one table per learner) and how to
 get one learner's greedy policy (:meth:`Trained.policy`). :meth:`Trained.save`
-writes them as state dicts with the settings; :meth:`Trained.load` rebuilds
+writes them as state dicts with the settings; :func:`~torchrl_subgoal.training.load_trained` rebuilds
 them in another process from the same env factory. :func:`evaluate` runs a
 policy's greedy episodes and reports their returns, lengths and success.
 """
@@ -26,10 +26,10 @@ from torch import nn
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
 from torchrl_subgoal.potentials import TabularPotential
-from torchrl_subgoal.training.batch import per_learner
 from torchrl_subgoal.training.config import LearnerConfig
-from torchrl_subgoal.training.envs import Shaping, close_probe, probe_env, shaped_env
+from torchrl_subgoal.training.envs import Shaping, shaped_env
 from torchrl_subgoal.training.recording import LearningCurve, SuccessSignal
+from torchrl_subgoal.training.stack import per_learner
 from torchrl_subgoal.training.subgoal_input import SUBGOAL_INDEX
 
 __all__ = ["Evaluation", "Trained", "evaluate"]
@@ -212,45 +212,6 @@ class Trained:
                 "potential": self.shaping.potential.state_dict() if self.shaping is not None else None,
             },
             path,
-        )
-
-    @classmethod
-    def load(cls, path: str | Path, make_env: Callable[[int], EnvBase], *, shaping: Shaping | None = None) -> Trained:
-        """What :meth:`save` wrote, rebuilt on ``make_env``'s specs (on the CPU).
-
-        Args:
-            path: the saved file.
-            make_env: the env factory the learners trained on (one learner's, for its specs).
-            shaping: the shaping the learners trained with (its subgoals; the saved tables are loaded into it),
-                needed to evaluate a policy that reads the subgoal index.
-        """
-        from torchrl_subgoal.training.learners import LEARNERS  # the blocks import this module
-
-        saved = torch.load(path, map_location="cpu", weights_only=True)
-        learner = LEARNERS[saved["algo"]]
-        config = learner.config(**{**saved["config"], "device": "cpu"})
-        env, _ = probe_env(make_env)
-        try:
-            modules = learner.modules(env, config, saved["observation_key"], saved["subgoal_states"], saved["seeds"])
-        finally:
-            close_probe(env)
-        for name, state in saved["modules"].items():
-            modules[name].load_state_dict(state)
-        if shaping is not None and saved["potential"] is not None:
-            from torchrl_subgoal.training.batch import batch_shaping
-
-            shaping = batch_shaping([shaping] * len(saved["seeds"]), config.num_envs)
-            assert shaping is not None
-            shaping.potential.load_state_dict(saved["potential"])
-        return cls(
-            saved["algo"],
-            config,
-            list(saved["seeds"]),
-            [LearningCurve(**c) for c in saved["curves"]],
-            modules,
-            saved["observation_key"],
-            saved["subgoal_states"],
-            shaping,
         )
 
     def _check(self, learner: int) -> None:
