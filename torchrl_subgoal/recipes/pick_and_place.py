@@ -438,7 +438,7 @@ SHAPING_SET_BY_THE_RECIPE = ("gamma", "value_update")
 
 def check_shaping(options: Mapping[str, Any]) -> None:
     """``--shaping`` checked against the options of :class:`~torchrl_subgoal.SubgoalPotentialTransform`:
-    each must be one of its keyword options that the recipe does not set, with a JSON value of the
+    each must be one of its keyword options that the recipe does not set (or ``"backend"``), with a JSON value of the
     option's kind (``true``/``false`` for a flag, a string for a name, a number for a number).
 
     Args:
@@ -454,20 +454,21 @@ def check_shaping(options: Mapping[str, Any]) -> None:
         ...
         torchrl_subgoal.experiments.cli.ConfigError: --shaping: unknown option 'foo'; ...
     """
-    parameters = {
-        name: p
+    defaults = {
+        name: p.default
         for name, p in inspect.signature(SubgoalPotentialTransform).parameters.items()
-        if p.kind is inspect.Parameter.KEYWORD_ONLY
+        if p.kind is inspect.Parameter.KEYWORD_ONLY and name != "keys"  # entry names: not a JSON value
     }
-    allowed = [name for name in parameters if name not in SHAPING_SET_BY_THE_RECIPE]
+    defaults["backend"] = "auto"  # SubgoalPotentialTransform.use_backend
+    allowed = [name for name in defaults if name not in SHAPING_SET_BY_THE_RECIPE]
     for name, value in options.items():
         if name in SHAPING_SET_BY_THE_RECIPE:
             raise ConfigError(f"--shaping: {name!r} is set by the recipe for every learner; leave it out")
-        if name not in parameters:
+        if name not in defaults:
             raise ConfigError(
                 f"--shaping: unknown option {name!r}; SubgoalPotentialTransform takes {', '.join(allowed)}"
             )
-        default = parameters[name].default
+        default = defaults[name]
         kinds = {
             bool: ((bool,), "true or false"),
             str: ((str,), "a string"),

@@ -54,8 +54,9 @@ class Shaping:
             a :class:`~torchrl_subgoal.NaivePotential` or frozen.
         options: further keyword arguments of
             :class:`~torchrl_subgoal.SubgoalPotentialTransform` (``observation_key``,
-            ``zero_terminal_potential``…); ``gamma`` and the online update's learning
-            rate come from the learner's config.
+            ``zero_terminal_potential``…), and ``"backend"`` for its
+            :meth:`~torchrl_subgoal.SubgoalPotentialTransform.use_backend`; ``gamma`` and the online
+            update's learning rate come from the learner's config.
         loss: keyword arguments of :class:`~torchrl_subgoal.SubgoalValueLoss` where the potential is
             trained per batch (``online_potential=False``; e.g. the paper's mean target,
             ``{"expectile": 0.5, "bootstrap_truncated": True}``).
@@ -84,7 +85,10 @@ class Shaping:
         self, potential: TensorDictModuleBase, gamma: float, value_lr: float | None
     ) -> SubgoalPotentialTransform:
         """The transform over ``potential`` (the process's view of the shared one)."""
-        return SubgoalPotentialTransform(self.subgoals, potential, gamma=gamma, value_update=value_lr, **self.options)
+        options = dict(self.options)
+        backend = options.pop("backend", "auto")
+        transform = SubgoalPotentialTransform(self.subgoals, potential, gamma=gamma, value_update=value_lr, **options)
+        return transform.use_backend(backend)
 
 
 def batched(make_single: Callable[[], EnvBase]) -> Callable[[int], EnvBase]:
