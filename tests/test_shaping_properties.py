@@ -28,7 +28,6 @@ from torchrl_subgoal.potentials import ACHIEVED, INDEX
 from torchrl_subgoal.subgoals import Predicate, StateAggregation, SubgoalTables
 from torchrl_subgoal.subgoals.tables import _in_regions
 from torchrl_subgoal.transform import RETURN, STEPS, SubgoalKeys
-from torchrl_subgoal.transform.backends import with_learner
 from torchrl_subgoal.transform.keys import StepInputs
 
 D = 3  # observation entries
@@ -151,7 +150,8 @@ def one_step(
     """One step of ``t`` (set up for a batch of ``shape``, learning online) from the entries ``current``."""
     n = shape.numel()
     setup = t._batch(shape, torch.arange(n).reshape(*shape, 1), n, obs, online=True)
-    current = with_learner(setup, t._settings, current)
+    if t.keys.learner in t._settings.kept:  # a backend's step reads every kept entry
+        current.setdefault(t.keys.learner, setup.learner)
     return setup.backend.step(setup, current, StepInputs(obs, reward, reward, done, terminated, None), True)
 
 

@@ -31,7 +31,6 @@ __all__ = [
     "TorchShaping",
     "backend_for",
     "batch_for",
-    "with_learner",
 ]
 
 Backend = Literal["auto", "compiled", "torch"]
@@ -42,7 +41,7 @@ class ShapingBackend(Protocol):
 
     ``prepare(batch, online)`` once, when a batch is set up (``online``: the env's batch, whose rows are the
     learners, in order; else stored rows); ``step(batch, current, step, learn)`` at every step: from the kept
-    entries ``current`` (every one, :func:`with_learner`), the next ones (names as in
+    entries ``current`` (every one), the next ones (names as in
     :class:`~torchrl_subgoal.SubgoalKeys`), ``"reward"`` the shaped reward and ``"transition"`` the step's SMDP
     transition when the settings write it; with ``learn``, the potential is first trained online on the
     transitions the step closes.
@@ -109,23 +108,6 @@ class CompiledShaping(TorchShaping):
         if current[self.settings.keys.index].device.type == "cpu":
             return compiled_step(batch, self.settings, current, step, learn)
         return super().step(batch, current, step, learn)
-
-
-def with_learner(batch: BatchSetup, settings: Settings, current: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """``current`` with each row's learner when the settings keep it and ``current`` lacks it: what a backend's
-    ``step`` expects of entries not read from a reset env (a step called directly).
-
-    Examples:
-        >>> from torchrl_subgoal import State, SubgoalPotentialTransform, SubgoalSeries, TabularPotential
-        >>> t = SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2, (2,)), gamma=0.9)
-        >>> batch = t._batch(torch.Size([2]), torch.arange(2).reshape(2, 1), 2, torch.zeros(2, 1), online=True)
-        >>> with_learner(batch, t._settings, {})["subgoal_learner"].tolist()
-        [[0], [1]]
-    """
-    learner = settings.keys.learner
-    if learner in settings.kept and learner not in current:
-        current[learner] = batch.learner
-    return current
 
 
 def backend_for(
