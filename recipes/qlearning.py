@@ -9,7 +9,9 @@ Q-learning update per step; :mod:`torchrl_subgoal.training.qlearning`) against:
   ``--bootstrap-truncated`` change them),
 * HRS-mean — the same with the paper's mean target, time-outs bootstrapped,
 * NRS      — naive subgoal shaping, ``Φ = η`` once a subgoal is achieved,
-* SRS      — a fixed potential rising with each subgoal achieved (the progress prior).
+* SRS      — a fixed potential rising with each subgoal achieved (the progress prior),
+* HRS-D    — HRS whose potential also rises as the next subgoal's cell comes nearer (straight-line
+  distance, walls ignored; :mod:`torchrl_subgoal.transform.segments`).
 
 The shaped learners' tables are over ``(s, z)`` (``--agent-state s`` for ``s``). Tasks:
 ``four_rooms`` (the participants' subgoal series; ``--reward step-cost``: −1 per step and
@@ -52,7 +54,7 @@ from torchrl_subgoal.experiments.recipe import (
     recipe_main,
     sweep_entries,
 )
-from torchrl_subgoal.methods import SRS, Method, shaping_transform
+from torchrl_subgoal.methods import HRS_D, SRS, Method, shaping_transform
 from torchrl_subgoal.training import SuccessSignal
 from torchrl_subgoal.training.qlearning import QLearningConfig, train_qlearning
 
@@ -62,6 +64,7 @@ METHODS = {
     "HRS-mean": Method("HRS-mean", "subgoals", "human"),
     "NRS": Method("NRS", "naive", "human"),
     "SRS": SRS,
+    "HRS-D": HRS_D,
 }
 #: the paper's target (HRS-mean); HRS's comes from the flags (default: the library's)
 MEAN_TARGET = {"expectile": 0.5, "bootstrap_truncated": True}

@@ -153,3 +153,18 @@ def test_a_learner_on_the_other_route_is_never_charged_for_entering_a_subgoal() 
 
     assert entering_cost() >= -1e-6
     assert entering_cost(progress_scale=0.0, monotone_potential=False) < -0.5
+
+
+def test_hrs_d_is_hrs_with_an_interpolating_table() -> None:
+    from torchrl_subgoal.experiments.learners import learner_methods
+    from torchrl_subgoal.methods import HRS_D
+
+    assert learner_methods("dqn")["HRS-D"] is HRS_D
+    patterns = [SubgoalSeries([Cell(3, 6), Cell(7, 9)])]
+    t = shaping_transform(HRS_D, torch.Size([2]), gamma=0.99, value_lr=0.1, patterns=patterns,
+                          observation_key="cell")  # fmt: skip
+    assert t is not None and isinstance(t.potential, TabularPotential)
+    assert t.potential.interpolate and t.potential.monotone and t._settings.interpolate
+    plain = shaping_transform(paper_methods("A2C")["HRS"], torch.Size([2]), gamma=0.99, value_lr=0.1,
+                              patterns=patterns, observation_key="cell")  # fmt: skip
+    assert plain is not None and not plain._settings.interpolate

@@ -443,3 +443,30 @@ def test_ancestral_max_lifts_each_state_to_what_comes_before_it(case: tuple) -> 
         assert all(out[0, z] >= out[0, a] for a in range(n) if ancestors[z, a])
     assert (out >= values).all()
     assert torch.equal(ancestral_max(out, ancestors[None]), out)
+
+
+@PROPERTY
+@given(batch(), st.data())
+def test_the_within_segment_term_lies_between_zero_and_the_step_to_a_next_subgoal(
+    case: tuple, data: st.DataObject
+) -> None:
+    """``segment_term`` is never negative, never more than the largest step up to a subgoal that counts from
+    ``z``, and the whole step where the observation is inside that subgoal's region (finite observations)."""
+    from torchrl_subgoal.transform.segments import segment_term
+
+    series, shape, index, z, obs = case
+    obs = torch.nan_to_num(obs.to(torch.float64), nan=0.0, posinf=1e6, neginf=-1e6)
+    tables = SubgoalTables(series, index, D)
+    n = tables.num_states
+    rows = shape.numel()
+    values = torch.tensor(data.draw(st.lists(st.floats(-5, 5), min_size=rows * n, max_size=rows * n))).view(rows, n)
+    term = segment_term(tables, values.float(), z, obs).reshape(-1)
+    flat_z = z.reshape(-1)
+    counts = tables.succ[torch.arange(rows), flat_z]  # [rows, J]
+    reached = values.float()[:, (torch.arange(counts.shape[1]) + 1).clamp(max=n - 1)]
+    step_up = (reached - values.float().gather(1, flat_z.unsqueeze(1))).clamp(min=0.0)
+    bound = torch.where(counts, step_up, torch.zeros_like(step_up)).amax(-1)
+    assert (term >= 0).all() and (term <= bound + 1e-5).all()
+    inside = tables.inside(obs) & counts
+    whole = torch.where(inside, step_up, torch.zeros_like(step_up)).amax(-1)
+    assert (term >= whole - 1e-5).all()

@@ -4,7 +4,10 @@ The learner recipes log each shaped learner's table after every batch (``potenti
 ``potential_z1``, … under ``RESULTS/logs/<method>_<pattern>_<learning>/scalars``). This prints
 
 * every learner's final table, marking (``*``) a table that values a subgoal below the one
-  before it (the shaping then charges the agent for reaching that subgoal);
+  before it (the shaping then charges the agent for reaching that subgoal), and the subgoals its
+  episodes reached (``subgoals_reached``: the mean over its recent finished episodes, at its
+  highest in the run and at the end; a learned value stays at its initial one while every
+  episode that enters its ``z`` times out there, since time-outs do not train it by default);
 * with ``--at F1,F2,…``: the mean (s.d.) of each ``V(z)`` over the learners at those frames, and
   how many tables are still all zero (no learner return has reached them yet): when, in a run,
   the potential starts to say something;
@@ -57,6 +60,15 @@ def learner_tables(results: Path, method: str) -> dict[tuple[str, int], list[Ser
     return tables
 
 
+def subgoals_reached(results: Path, method: str, pattern: str, learning: int) -> str:
+    """``"most, last"`` of a learner's logged ``subgoals_reached`` (``"—"`` where it logged none)."""
+    path = results / "logs" / f"{method}_{pattern}_{learning}" / "scalars" / "subgoals_reached.csv"
+    if not path.exists():
+        return "—"
+    _, values = _read(path)
+    return f"{values.max():.2f}, {values[-1]:.2f}" if len(values) else "—"
+
+
 def _read(path: Path) -> Series:
     with path.open() as f:
         rows = [(float(step), float(value)) for step, value in csv.reader(f)]
@@ -96,11 +108,12 @@ def main(argv: list[str] | None = None) -> int:
         disorder = [key for key, table in finals.items() if not in_order(table)]
         print(f"\n{results}: {opts.method}, {len(finals)} learners, {len(disorder)} tables out of order (*)\n")
         width = max(len(t) for t in finals.values())
-        print("| learner | " + " | ".join(f"V(z{z})" for z in range(width)) + " |")
-        print("|---|" + "---|" * width)
+        print("| learner | " + " | ".join(f"V(z{z})" for z in range(width)) + " | subgoals reached: most, last |")
+        print("|---|" + "---|" * (width + 1))
         for (pattern, learning), table in finals.items():
             mark = " *" if (pattern, learning) in disorder else ""
-            print(f"| {pattern} {learning}{mark} | " + " | ".join(f"{v:.3g}" for v in table) + " |")
+            reached = subgoals_reached(results, opts.method, pattern, learning)
+            print(f"| {pattern} {learning}{mark} | " + " | ".join(f"{v:.3g}" for v in table) + f" | {reached} |")
             if opts.json and pattern not in chosen and (in_order(table) or not opts.in_order):
                 chosen[pattern] = table
         if checkpoints:

@@ -7,6 +7,7 @@ HRS        learned potential over the subgoal series (ours)     people's
 RRS        the same, with random subgoals                       random
 NRS        fixed potential ``η`` on achieving a subgoal          people's
 SRS        fixed potential rising with each subgoal achieved     people's
+HRS-D      HRS, also rising towards the next subgoal's region    people's
 SARSA-RS   learned potential over a hand-given ``z = g(s)``     — (aggregation)
 baseline   none (SARSA, actor-critic, DDPG)                     —
 =========  ==================================================  ===============
@@ -33,7 +34,16 @@ from torchrl_subgoal.potentials import NaivePotential, Potential, TabularPotenti
 from torchrl_subgoal.subgoals import Predicate, StateAggregation, SubgoalSeries
 from torchrl_subgoal.transform import StartPotential, SubgoalPotentialTransform
 
-__all__ = ["SRS", "Method", "all_methods", "paper_methods", "random_patterns", "shaping_parts", "shaping_transform"]
+__all__ = [
+    "HRS_D",
+    "SRS",
+    "Method",
+    "all_methods",
+    "paper_methods",
+    "random_patterns",
+    "shaping_parts",
+    "shaping_transform",
+]
 
 Shaping = Literal["none", "subgoals", "naive", "progress", "aggregation"]
 
@@ -48,6 +58,8 @@ class Method:
             ``"naive"`` (fixed ``η``), ``"progress"`` (fixed, rising with each subgoal),
             ``"aggregation"`` (learned over ``g(s)``) or ``"none"``.
         subgoals: which patterns it uses: ``"human"``, ``"random"`` or ``"none"``.
+        interpolate: its table also rises within each segment as the observation nears the next subgoal
+            (``TabularPotential(interpolate=True)``; subgoals that are regions).
 
     Examples:
         >>> method = Method("HRS", "subgoals", "human")
@@ -58,6 +70,7 @@ class Method:
     name: str
     shaping: Shaping
     subgoals: Literal["human", "random", "none"]
+    interpolate: bool = False
 
 
 def paper_methods(baseline: str) -> dict[str, Method]:
@@ -79,6 +92,8 @@ def paper_methods(baseline: str) -> dict[str, Method]:
 
 #: subgoal-based reward shaping with a fixed potential (Okudo & Yamada's SRS)
 SRS = Method("SRS", "progress", "human")
+#: HRS with the within-segment term: the potential also rises as the next subgoal's region comes nearer
+HRS_D = Method("HRS-D", "subgoals", "human", interpolate=True)
 
 
 def all_methods(baseline: str) -> dict[str, Method]:
@@ -139,7 +154,9 @@ def shaping_parts(
     (:meth:`~torchrl_subgoal.SubgoalSeries.progress` of ``progress_scale``, in reward units: what
     reaching the goal is worth; 0 starts them at 0, as the paper) and, with ``monotone_potential``,
     shape non-decreasing along the series (``TabularPotential(monotone=True)``). SRS's fixed tables
-    are the prior itself. The naive potential and an aggregation's table are shaped as they are.
+    are the prior itself. A method that interpolates (HRS-D) also rises within each segment as the
+    observation nears the next subgoal (``TabularPotential(interpolate=True)``). The naive potential
+    and an aggregation's table are shaped as they are.
 
     Examples:
         >>> from torchrl_subgoal.subgoals import Cell
@@ -174,7 +191,11 @@ def shaping_parts(
     shape = torch.Size(batch_shape)
     series = per_env if shape.numel() == len(per_env) else per_env[:1]  # a table per env's series, or shared
     potential = TabularPotential.for_subgoals(
-        series, progress_scale, shape, monotone=monotone_potential and method.shaping == "subgoals"
+        series,
+        progress_scale,
+        shape,
+        monotone=monotone_potential and method.shaping == "subgoals",
+        interpolate=method.interpolate,
     )
     if method.shaping == "progress":
         potential.table.requires_grad_(False)  # SRS: the prior itself, fixed

@@ -153,6 +153,10 @@ class TabularPotential(Potential):
             subgoal below an earlier one, the shaping then neither charges the agent for reaching it
             nor pays it for staying before it. For subgoal series in a total order (the transform
             refuses an aggregation); the transform's torch step shapes with it.
+        interpolate: between subgoals, ``Φ(s, z)`` also rises from ``V[z]`` towards the value of the next
+            subgoal as the observation nears its region (:mod:`torchrl_subgoal.transform.segments`), so the
+            potential guides before the next subgoal is reached. For subgoals that are regions (boxes,
+            circles, cells); the transform's torch step shapes with it.
         index_key: the abstract state entry read.
         learner_key: the learner entry read (with a batch of tables).
         out_key: where the value is written.
@@ -185,6 +189,7 @@ class TabularPotential(Potential):
         init: float | Sequence[float] | torch.Tensor = 0.0,
         *,
         monotone: bool = False,
+        interpolate: bool = False,
         envs_per_table: int = 1,
         index_key: NestedKey = INDEX,
         learner_key: NestedKey = LEARNER,
@@ -195,6 +200,7 @@ class TabularPotential(Potential):
         self.optional_in_keys = (learner_key,)
         self.num_states = int(num_states)
         self.monotone = bool(monotone)
+        self.interpolate = bool(interpolate)
         if self.num_states < 1:
             raise ValueError(f"num_states must be >= 1, got {num_states}")
         self.envs_per_table = int(envs_per_table)

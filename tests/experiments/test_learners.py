@@ -50,7 +50,7 @@ def test_the_help_lists_the_learners_settings_and_choices_once(capsys: pytest.Ca
     assert "--gradient-steps" in out and "--clip-epsilon" not in out  # DQN's own settings
     assert "(default: 0.004)" in " ".join(out.split())  # mountain_car's DQN learning rate (wrapped anywhere)
     methods = out[out.index("--methods") : out.index("--learnings")]
-    assert methods.count("(default:") == 1 and "the unshaped learner,HRS,NRS" in methods
+    assert methods.count("(default:") == 1 and "theunshapedlearner,HRS,NRS" in "".join(methods.split())
 
 
 def test_a_learner_without_defaults_for_the_domain_takes_its_own() -> None:

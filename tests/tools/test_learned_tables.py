@@ -32,7 +32,7 @@ def test_final_tables_over_time_and_the_frozen_file(tmp_path, capsys) -> None:
     out = tmp_path / "tables.json"
     assert tool.main([str(first), str(second), "--at", "50,100,250", "--json", str(out), "--in-order"]) == 0
     printed = capsys.readouterr().out
-    assert "2 learners, 1 tables out of order" in printed and "| bob 0 * | 0.5 | 0.2 | 0.9 |" in printed
+    assert "2 learners, 1 tables out of order" in printed and "| bob 0 * | 0.5 | 0.2 | 0.9 | — |" in printed
     assert "| 50 | 0.000 (0.000) | 0.000 (0.000) | 0.000 (0.000) | 2 of 2 |" in printed  # before the first log
     assert "| 100 | 0.000 (0.000) | 0.000 (0.000) | 0.050 (0.050) | 1 of 2 |" in printed
     assert "| 250 | 0.300 (0.200) | 0.300 (0.100) | 0.850 (0.050) | 0 of 2 |" in printed
@@ -40,6 +40,14 @@ def test_final_tables_over_time_and_the_frozen_file(tmp_path, capsys) -> None:
     assert json.loads(out.read_text()) == {"alice": [0.1, 0.4, 0.8], "bob": [0.3, 0.6, 0.7]}
     tool.main([str(first), "--json", str(out)])
     assert json.loads(out.read_text())["bob"] == [0.5, 0.2, 0.9]
+
+
+def test_the_subgoals_each_learner_reached(tmp_path, capsys) -> None:
+    tool = load_tool("learned_tables")
+    root = _results(tmp_path / "a", {"alice": [[0, 1 / 3, 2 / 3], [-9.0, 1 / 3, 2 / 3]]})
+    (root / "logs" / "HRS_alice_0" / "scalars" / "subgoals_reached.csv").write_text("100,0.0\n200,0.75\n300,0.5\n")
+    assert tool.main([str(root)]) == 0
+    assert "| alice 0 | -9 | 0.333 | 0.667 | 0.75, 0.50 |" in capsys.readouterr().out
 
 
 def test_what_it_cannot_read_is_named(tmp_path) -> None:

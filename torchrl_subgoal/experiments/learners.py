@@ -51,7 +51,7 @@ from torchrl_subgoal.experiments.recipe import (
     quiet_torchrl,
 )
 from torchrl_subgoal.experiments.results import Chunk, EpisodeTable
-from torchrl_subgoal.methods import Method, all_methods, shaping_parts
+from torchrl_subgoal.methods import HRS_D, Method, all_methods, shaping_parts
 from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.registry import load_patterns
 from torchrl_subgoal.training import (
@@ -140,8 +140,8 @@ class LearnerRecipeConfig(RecipeConfig):
     )
     methods: str = setting(
         "",
-        "comma-separated methods: the learner's name for the unshaped learner (A2C, PPO, DQN, DDPG), HRS, NRS, "
-        "RRS, SARSA-RS, SRS",
+        "comma-separated methods: the learner's name for the unshaped learner (A2C, PPO, DQN, DDPG), HRS, "
+        "HRS-D, NRS, RRS, SARSA-RS, SRS",
         shown_default="the unshaped learner,HRS,NRS",
     )
     learnings: int = setting(1, "learnings per subgoal pattern (unshaped: as many per pattern of the file)")
@@ -233,13 +233,14 @@ class LearnerRecipeConfig(RecipeConfig):
 
 
 def learner_methods(algo: str) -> dict[str, Method]:
-    """The methods a sweep of learner ``algo`` compares: the paper's, the unshaped one named after the learner.
+    """The methods a sweep of learner ``algo`` compares: the paper's, the unshaped one named after the learner,
+    SRS and HRS-D (HRS with the within-segment term, which the compiled engines of the paper's recipes lack).
 
     Examples:
         >>> list(learner_methods("ppo"))
-        ['HRS', 'RRS', 'PPO', 'NRS', 'SARSA-RS', 'SRS']
+        ['HRS', 'RRS', 'PPO', 'NRS', 'SARSA-RS', 'SRS', 'HRS-D']
     """
-    return all_methods(baseline=LEARNERS[algo].title)
+    return {**all_methods(baseline=LEARNERS[algo].title), HRS_D.name: HRS_D}
 
 
 def learner_settings(cfg: LearnerRecipeConfig, algo: str, domain: LearnerDomain) -> Any:

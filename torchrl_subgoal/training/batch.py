@@ -212,7 +212,10 @@ def _batch_potential(potentials: Sequence[nn.Module], envs_per_learner: int) -> 
     if len(frozen) > 1:
         raise ValueError("a learner batch cannot mix frozen and trained tables")
     states = max(p.num_states for p in tables)
-    batch = TabularPotential(states, (len(tables),), monotone=tables[0].monotone, envs_per_table=envs_per_learner)
+    batch = TabularPotential(
+        states, (len(tables),), monotone=tables[0].monotone, interpolate=tables[0].interpolate,
+        envs_per_table=envs_per_learner,
+    )  # fmt: skip
     with torch.no_grad():
         for k, p in enumerate(tables):
             batch.table[k, : p.num_states] = p.table

@@ -23,6 +23,7 @@ from tensordict.utils import NestedKey
 from torch import nn
 from torchrl.record.loggers import Logger
 
+from torchrl_subgoal.potentials import INDEX
 from torchrl_subgoal.training.envs import EPISODE_RETURN
 
 __all__ = ["CurveRecorder", "EpisodeWindow", "LearningCurve", "SuccessSignal"]
@@ -30,6 +31,8 @@ __all__ = ["CurveRecorder", "EpisodeWindow", "LearningCurve", "SuccessSignal"]
 #: The entries an env may write under ``"next"`` to say an episode succeeded (gymnasium-robotics'
 #: ``"is_success"``, its PointMaze's ``"success"``), looked for in this order.
 SUCCESS_KEYS: tuple[NestedKey, ...] = ("is_success", "success")
+#: the shaping transform's abstract state (its default keys): the subgoals an episode achieved
+REACHED: NestedKey = INDEX
 
 
 @dataclass(frozen=True)
@@ -125,8 +128,9 @@ class EpisodeWindow:
     the window (the rate at which episodes end): unlike a mean over the last
     finished episodes, it does not favour the short episodes that finish
     first while long ones are still running. With no episode finished in the
-    window it is the env's episode cap. Returns and successes are those of the
-    last ``4 × window`` finished episodes.
+    window it is the env's episode cap. Returns, successes and the subgoals
+    reached (a shaped env's ``"subgoal_index"`` where the episode ended) are
+    those of the last ``4 × window`` finished episodes.
 
     Args:
         window: batches the statistics span.
@@ -148,6 +152,7 @@ class EpisodeWindow:
         self.batches: list[tuple[int, int]] = []  # (frames, episodes finished) per batch
         self.returns: list[float] = []
         self.successes: list[bool] | None = []  # None: not measured
+        self.reached: list[float] = []  # subgoals achieved when the episode ended (a shaped env)
         self.count = 0
         self.window, self.cap, self.reward_scale = window, cap, reward_scale
         self.signal = success if success is not None else SuccessSignal()
@@ -162,6 +167,9 @@ class EpisodeWindow:
         nxt = data.get("next").reshape(-1)[done]
         returns = nxt.get(EPISODE_RETURN).reshape(-1) / self.reward_scale
         self.returns = (self.returns + returns.tolist())[-4 * self.window :]
+        reached = nxt.get(REACHED, None)
+        if reached is not None:
+            self.reached = (self.reached + reached.reshape(-1).float().tolist())[-4 * self.window :]
         success = self.signal.read(nxt, returns)
         if success is None:
             self.successes = None
@@ -178,6 +186,10 @@ class EpisodeWindow:
     def mean_return(self) -> float:
         """Mean env return of the recent finished episodes."""
         return float(np.mean(self.returns)) if self.returns else 0.0
+
+    def subgoals_reached(self) -> float:
+        """Mean subgoals achieved by the recent finished episodes (NaN before any, or unshaped)."""
+        return float(np.mean(self.reached)) if self.reached else math.nan
 
     def success_rate(self) -> float:
         """Fraction of the recent finished episodes that succeeded (NaN before any, or when not measured)."""
@@ -242,6 +254,7 @@ class CurveRecorder:
                 "episode_length": curve.episode_length[-1],
                 "episode_return": curve.episode_return[-1],
                 "success": curve.success[-1],
+                "subgoals_reached": episodes.subgoals_reached(),
                 "episodes": float(episodes.count),
                 **scalars,
                 "frames_per_second": frames / max(time.perf_counter() - self.start, 1e-9),

@@ -172,7 +172,7 @@ class Trained:
             return None
         potential = self.shaping.potential
         if isinstance(potential, TabularPotential) and potential.batch_shape:
-            own = TabularPotential(potential.num_states, monotone=potential.monotone)
+            own = TabularPotential(potential.num_states, monotone=potential.monotone, interpolate=potential.interpolate)
             return own.freeze(potential.table.detach()[learner].cpu())
         return potential
 

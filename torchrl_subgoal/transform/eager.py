@@ -11,9 +11,11 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
 from torchrl_subgoal.potentials import NaivePotential, TabularPotential, check_value
+from torchrl_subgoal.subgoals.tables import SubgoalTables
 from torchrl_subgoal.transform.cache import ValueCache
 from torchrl_subgoal.transform.compiled import check_finite
 from torchrl_subgoal.transform.keys import StepInputs
+from torchrl_subgoal.transform.segments import segment_term
 from torchrl_subgoal.transform.setup import BatchSetup, Settings
 from torchrl_subgoal.transform.shaping import (
     accumulate,
@@ -25,7 +27,7 @@ from torchrl_subgoal.transform.shaping import (
 )
 from torchrl_subgoal.transform.transitions import transition
 
-__all__ = ["monotone_values", "potential_value", "start_entries", "torch_step"]
+__all__ = ["monotone_values", "potential_value", "row_values", "start_entries", "torch_step"]
 
 
 def potential_value(
@@ -132,6 +134,13 @@ def torch_step(
             v_start = None
             if settings.start != "value" and not isinstance(potential, NaivePotential):
                 v_start = potential_value(potential, cache, start_entries(current, settings), batch_shape, "start")
+        if settings.interpolate:  # Φ(s, z): the within-segment term on each side of the step
+            assert isinstance(potential, TabularPotential) and isinstance(setup.abstraction, SubgoalTables)
+            if step.obs_before is None or step.obs is None:
+                raise KeyError(f"an interpolating potential reads {settings.observation_key!r} before and after a step")
+            values = row_values(potential, setup)
+            phi = phi + segment_term(setup.abstraction, values, current[keys.index], step.obs_before)
+            phi_next = phi_next + segment_term(setup.abstraction, values, z_next, step.obs)
         if v_start is not None and settings.start != "value":
             level = start_level(v_start, settings.start)
             assert level is not None
@@ -161,12 +170,27 @@ def monotone_values(potential: TabularPotential, setup: BatchSetup, indices: lis
         >>> [phi.item() for phi in monotone_values(v, batch, [torch.tensor([[1]]), torch.tensor([[2]])])]
         [1.0, 2.0]
     """
+    lifted = row_values(potential, setup)
+    return [lifted.gather(1, z.reshape(-1, 1)).view(*setup.batch_shape, 1) for z in indices]
+
+
+def row_values(potential: TabularPotential, setup: BatchSetup) -> torch.Tensor:
+    """Each row's table as it shapes, ``[rows, n]``: its learner's, made non-decreasing along the series
+    when the table is monotone.
+
+    Examples:
+        >>> from torchrl_subgoal import State, SubgoalSeries, TabularPotential
+        >>> from torchrl_subgoal.transform.setup import Subgoals
+        >>> v, learner = TabularPotential(3, init=[0.0, 2.0, 1.0]), torch.zeros(2, 1, dtype=torch.long)
+        >>> subgoals = Subgoals(SubgoalSeries([State(1), State(2)]))
+        >>> batch = BatchSetup(torch.Size([2]), subgoals.compile(learner, torch.Size([2]), 1, (1, False), "o"), learner)
+        >>> row_values(v, batch).tolist()
+        [[0.0, 2.0, 1.0], [0.0, 2.0, 1.0]]
+    """
     rows = setup.learner.reshape(-1)
     table = potential.table.detach().reshape(-1, potential.num_states)
     per_row = table[rows // potential.envs_per_table] if potential.batch_shape else table.expand(rows.numel(), -1)
-    assert setup.ancestors is not None
-    lifted = ancestral_max(per_row, setup.ancestors)
-    return [lifted.gather(1, z.reshape(-1, 1)).view(*setup.batch_shape, 1) for z in indices]
+    return per_row if setup.ancestors is None else ancestral_max(per_row, setup.ancestors)
 
 
 def start_entries(current: dict[str, torch.Tensor], settings: Settings) -> dict[str, torch.Tensor]:

@@ -202,14 +202,20 @@ class StepInputs(NamedTuple):
     done: torch.Tensor
     terminated: torch.Tensor
     td: TensorDictBase | None  #: the step's ``"next"`` entries, for the conditions
+    obs_before: torch.Tensor | None = None  #: the observation the step started from (an interpolating potential)
 
 
 def read_step(
-    td: TensorDictBase, nxt: TensorDictBase, env: EnvKeys, kept: tuple[str, ...], obs_key: NestedKey | None
+    td: TensorDictBase,
+    nxt: TensorDictBase,
+    env: EnvKeys,
+    kept: tuple[str, ...],
+    obs_key: NestedKey | None,
+    before: bool = False,
 ) -> tuple[dict[str, torch.Tensor], StepInputs, torch.Size]:
     """What a shaping step reads: the kept entries of its input ``td`` (a clear ``KeyError`` for one missing),
     what the shaping reads of its ``"next"`` entries ``nxt`` (``obs_key``: the observation read, ``None``:
-    none) and the batch shape of the reward's group.
+    none; ``before``: that of ``td`` too) and the batch shape of the reward's group.
 
     Examples:
         >>> from tensordict import TensorDict
@@ -237,6 +243,7 @@ def read_step(
         done,
         done if env.terminated == env.done else read(nxt, env.terminated),
         nxt,
+        read(td, obs_key) if before and obs_key is not None else None,
     )
     return current, step, (nxt.get(env.group) if env.group else nxt).batch_size
 

@@ -73,6 +73,7 @@ class Settings(NamedTuple):
     reads_observation: bool  #: whether a region predicate or an aggregation reads it
     transitions: bool  #: whether every step writes its SMDP transition entry
     inputs: tuple[NestedKey, ...]  #: the potential's inputs (a transition keeps them at z and z')
+    interpolate: bool = False  #: ``Φ(s, z)`` has the within-segment term (:mod:`.segments`)
 
 
 class Subgoals:
@@ -194,6 +195,8 @@ def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss
     if isinstance(potential, TabularPotential):
         if potential.table.device.type != "cpu":
             return f"it reads the potential's table on the CPU, not {potential.table.device}"
+        if potential.interpolate:
+            return "an interpolating table (interpolate=True) shapes in torch"
     elif not isinstance(potential, NaivePotential):
         return f"it shapes with a TabularPotential or a NaivePotential, not {type(potential).__name__}"
     if update is not None and (type(update) is not SubgoalValueLoss or update.reduction != "sum"):
@@ -274,8 +277,35 @@ def settings(
     kept = kept_entries(keys, potential, subgoals, start)
     if isinstance(potential, TabularPotential) and potential.monotone:
         check_monotone(subgoals)
+    interpolate = isinstance(potential, TabularPotential) and potential.interpolate
+    if interpolate:
+        check_interpolate(subgoals)
     return Settings(keys, kept, float(gamma), value_gamma, zero_terminal, start, observation_key,
-                    subgoals.reads_observation, keys.transitions is not None, tuple(potential.in_keys))  # fmt: skip
+                    subgoals.reads_observation, keys.transitions is not None, tuple(potential.in_keys),
+                    interpolate)  # fmt: skip
+
+
+def check_interpolate(subgoals: Subgoals) -> None:
+    """Refuse an interpolating table (``TabularPotential(interpolate=True)``) where a subgoal has no distance: an
+    aggregation, or a discrete ``state`` predicate (conditions add no term).
+
+    Examples:
+        >>> from torchrl_subgoal import State
+        >>> check_interpolate(Subgoals(SubgoalSeries([State(1)])))
+        Traceback (most recent call last):
+        ...
+        ValueError: TabularPotential(interpolate=True): subgoals[0] of pattern 'pattern' is a state, which has no ...
+    """
+    if subgoals.aggregation is not None:
+        raise ValueError("TabularPotential(interpolate=True): the shaping needs subgoal series, not an aggregation")
+    for series in subgoals.patterns:
+        for j, pred in enumerate(series.predicates):
+            if pred.kind == "state":
+                label = series.names[j] if series.names else f"subgoals[{j}]"
+                raise ValueError(
+                    f"TabularPotential(interpolate=True): {label} of pattern {series.name!r} is a state, which "
+                    "has no distance; interpolate needs regions (box, circle, cell)"
+                )
 
 
 def check_monotone(subgoals: Subgoals) -> None:

@@ -153,9 +153,9 @@ def shape_stored(
         reward = read(step_next, env.reward) if reward is None else reward
         done, terminated = read(step_next, env.done), read(step_next, env.terminated)
         obs = read(step_next, settings.observation_key) if settings.reads_observation else None
-        out = advance(
-            setup, current, StepInputs(obs, reward, reward, done, done if terminated is None else terminated, step_next)
-        )
+        before = read(step, settings.observation_key) if settings.interpolate else None
+        terminated = done if terminated is None else terminated
+        out = advance(setup, current, StepInputs(obs, reward, reward, done, terminated, step_next, before))
         outs.append({**out, ENV_REWARD: reward})
         if t + 1 < len(steps):
             restart = initial_state(setup, settings, read(steps[t + 1], settings.observation_key))

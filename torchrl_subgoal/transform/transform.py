@@ -253,7 +253,8 @@ class SubgoalPotentialTransform(Transform):
         # every env step comes here: entries are read and written unchecked (their shapes are the specs')
         env, settings = self._env, self._settings
         obs_key = settings.observation_key if settings.reads_observation else None
-        current, step, shape = read_step(tensordict, next_tensordict, env, settings.kept, obs_key)
+        before = settings.interpolate  # an interpolating potential reads the observation the step started from
+        current, step, shape = read_step(tensordict, next_tensordict, env, settings.kept, obs_key, before)
         batch = self._online  # set up again for another batch shape, or when a table moved (to shared memory…)
         if batch is None or batch.batch_shape != shape or batch.stale(self.potential):
             batch = self._online_batch(shape, step.obs)

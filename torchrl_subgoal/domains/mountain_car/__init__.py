@@ -82,7 +82,12 @@ LEARNERS = LearnerDomain(
         # 50 batches of 16 steps per env = 4 whole 200-step episodes: while a learner never reaches the flag, its
         # 16 envs time out together every 200 steps, and a window of any other length counts 1 time-out too many
         # or too few (with 8 batches, 128 steps read as 128-step episodes, below every threshold)
-        "a2c": A2CConfig(num_envs=16, frames_per_batch=256, total_frames=500_000, record_window=50),
+        # A linear policy and critic over order-3 Fourier features of (position, velocity) scaled to the observation's
+        # bounds: an MLP over the raw observation (velocity within ±0.07) reached the flag with no method in 500,000
+        # frames (docs/does_it_help.md)
+        "a2c": A2CConfig(
+            num_envs=16, frames_per_batch=256, total_frames=500_000, record_window=50, features="fourier", hidden=()
+        ),
         "ppo": PPOConfig(num_envs=16, frames_per_batch=256 * 16, minibatch_size=256, total_frames=500_000),
     },
 )
