@@ -94,6 +94,13 @@ RUNS = (
         ("benchmarks/seed_batch.py", "--quick"),
     ),
     Run(
+        "arithmetic_bound",
+        "How far a batch of DQN or DDPG learners can go on this CPU",
+        "FLOPs per learner frame of DQN (MountainCar) and DDPG (PointMaze UMaze), the rate one core multiplies "
+        "ten stacked copies of their MLPs, and the learner frames per CPU second a batch cannot exceed.",
+        ("benchmarks/arithmetic_bound.py", "--frames", "2000", "--repeats", "20"),
+    ),
+    Run(
         "transform_cost",
         "What the shaping transform costs a collector and an A2C iteration",
         "Python calls per collector batch (16 four-rooms envs x 16 steps) the shaping transform adds over an "
