@@ -40,6 +40,7 @@ from torch.utils.flop_counter import flop_registry
 from torchrl_subgoal import domains as registry
 from torchrl_subgoal.training import LEARNERS, LearnerDomain
 
+
 class CountFlops(TorchDispatchMode):
     """FLOPs of the matrix products and convolutions run inside it (``torch.utils.flop_counter``'s formulas;
     its ``FlopCounterMode`` also tracks modules, which TensorDict modules do not allow)."""
@@ -130,7 +131,9 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=200, help="passes timed for the multiply rate")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    print(f"one torch thread; runs of {args.frames:,} and {2 * args.frames:,} frames; K = {args.learners} stacked networks\n")
+    print(
+        f"one torch thread; runs of {args.frames:,} and {2 * args.frames:,} frames; K = {args.learners} stacked networks\n"
+    )
     print("| block | domain | FLOPs per learner frame | multiply rate (GFLOP/s) | one at a time (frames/s) "
           "| arithmetic at that rate | batch can reach at most | batch / one at a time at most |")  # fmt: skip
     print("|---|---|---|---|---|---|---|---|")
