@@ -132,7 +132,8 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     print(
-        f"one torch thread; runs of {args.frames:,} and {2 * args.frames:,} frames; K = {args.learners} stacked networks\n"
+        f"one torch thread; runs of {args.frames:,} and {2 * args.frames:,} frames; "
+        f"K = {args.learners} stacked networks\n"
     )
     print("| block | domain | FLOPs per learner frame | multiply rate (GFLOP/s) | one at a time (frames/s) "
           "| arithmetic at that rate | batch can reach at most | batch / one at a time at most |")  # fmt: skip
