@@ -38,6 +38,7 @@ from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils.flop_counter import flop_registry
 
 from torchrl_subgoal import domains as registry
+from torchrl_subgoal import load_patterns
 from torchrl_subgoal.training import LEARNERS, LearnerDomain
 
 
@@ -58,12 +59,12 @@ class CountFlops(TorchDispatchMode):
         return out
 
 
-#: the domain each block is measured on, the networks' input and output sizes there, and its sample batch
-CELLS = {"dqn": ("mountain_car", 2, 3), "ddpg": ("point_maze_umaze", 8, 2)}
+#: the domain each block is measured on
+CELLS = {"dqn": "mountain_car", "ddpg": "point_maze_umaze"}
 
 
 def config_for(block: str, frames: int) -> tuple[Any, LearnerDomain]:
-    domain = registry.part(CELLS[block][0], LearnerDomain)
+    domain = registry.part(CELLS[block], LearnerDomain)
     config = dataclasses.replace(domain.defaults[block], total_frames=frames)
     return dataclasses.replace(config, learning_starts=config.frames_per_batch), domain
 
@@ -83,15 +84,23 @@ def one_learner(block: str, frames: int) -> tuple[int, float, float]:
 
 
 def domain_route(domain: LearnerDomain) -> str:
-    from torchrl_subgoal import load_patterns
-
     return next(iter(load_patterns(domain.participants, domain=domain.name)))
+
+
+def network_sizes(block: str) -> tuple[int, int]:
+    """The observation's and the action's sizes of ``block``'s domain (the MLP's input and output)."""
+    _, domain = config_for(block, 1)
+    env = domain.env_for(domain_route(domain), 0)(1)
+    observation = env.observation_spec[domain.observation_key].shape[-1]
+    actions = env.action_spec.shape[-1] if env.action_spec.shape[-1:] != (1,) else int(env.action_spec.space.n)
+    env.close()
+    return observation, actions
 
 
 def multiply_rate(block: str, learners: int, repeats: int) -> float:
     """FLOPs per CPU second of a forward and backward pass of ``learners`` stacked MLPs of ``block``'s shape."""
     config, _ = config_for(block, 1)
-    _, inputs, outputs = CELLS[block]
+    inputs, outputs = network_sizes(block)
     sizes = [inputs, *config.hidden, outputs]
     nets = []
     for _ in range(learners):
@@ -150,7 +159,7 @@ def main() -> None:
         peak = rate / per_frame
         share = one * per_frame / rate
         print(
-            f"| {block.upper()} | {CELLS[block][0]} | {per_frame / 1e6:.1f} M | {rate / 1e9:.1f} | {one:,.0f} "
+            f"| {block.upper()} | {CELLS[block]} | {per_frame / 1e6:.1f} M | {rate / 1e9:.1f} | {one:,.0f} "
             f"| {share:.0%} of one learner's time | {peak:,.0f} frames/s | {peak / one:.1f} times |"
         )
 
