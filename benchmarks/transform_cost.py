@@ -7,7 +7,9 @@ Part 1 counts the Python function calls (cProfile's count: calls into C count on
 * ``RewardSum + StepCounter``: TorchRL's two stateful transforms together, the yardstick;
 * ``shaping, built-in predicates``: ``SubgoalPotentialTransform`` with the two hallways as ``Cell``
   predicates over ``"cell"`` and one shared ``TabularPotential`` (the A2C recipe's set-up);
-* ``shaping, callable predicates``: the same subgoals written as plain functions of the TensorDict.
+* ``shaping, callable predicates``: the same subgoals written as plain functions of the TensorDict;
+* ``shaping, the default potential``: the built-in predicates with ``TabularPotential.for_subgoals``
+  (the progress prior, the monotone lift and the within-segment term).
 
 It prints each set-up's calls per batch added over ``empty``. A count depends only on the work done,
 not on the machine's load, so two versions of the library compare exactly: run the script with each on
@@ -53,10 +55,13 @@ def in_south_hallway(td: TensorDictBase) -> torch.Tensor:
     return (td.get("cell") == SOUTH_HALLWAY).all(-1)
 
 
-def shaping(callable_predicates: bool) -> SubgoalPotentialTransform:
-    """The hallways as built-in ``Cell`` predicates or as plain functions; one shared table."""
+def shaping(callable_predicates: bool, default: bool = False) -> SubgoalPotentialTransform:
+    """The hallways as built-in ``Cell`` predicates or as plain functions; one shared table (a plain one, or
+    the library's default potential)."""
     subgoals = [in_west_hallway, in_south_hallway] if callable_predicates else [Cell(3, 6), Cell(7, 9)]
-    return SubgoalPotentialTransform(SubgoalSeries(subgoals), TabularPotential(3), gamma=0.99, observation_key="cell")
+    series = SubgoalSeries(subgoals)
+    potential = TabularPotential.for_subgoals(series) if default else TabularPotential(3)
+    return SubgoalPotentialTransform(series, potential, gamma=0.99, observation_key="cell")
 
 
 def setups() -> dict[str, Callable[[], Transform]]:
@@ -65,6 +70,7 @@ def setups() -> dict[str, Callable[[], Transform]]:
         "RewardSum + StepCounter": lambda: Compose(RewardSum(), StepCounter()),
         "shaping, built-in predicates": lambda: shaping(False),
         "shaping, callable predicates": lambda: shaping(True),
+        "shaping, the default potential": lambda: shaping(False, default=True),
     }
 
 

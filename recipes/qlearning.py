@@ -10,8 +10,9 @@ Q-learning update per step; :mod:`torchrl_subgoal.training.qlearning`) against:
 * HRS-mean — the same with the paper's mean target, time-outs bootstrapped,
 * NRS      — naive subgoal shaping, ``Φ = η`` once a subgoal is achieved,
 * SRS      — a fixed potential rising with each subgoal achieved (the progress prior),
-* HRS-D    — HRS whose potential also rises as the next subgoal's cell comes nearer (straight-line
-  distance, walls ignored; :mod:`torchrl_subgoal.transform.segments`).
+* HRS-D    — the library's default potential (``TabularPotential.for_subgoals``): HRS whose potential
+  also rises as the next subgoal's cell comes nearer (straight-line distance, walls ignored;
+  :mod:`torchrl_subgoal.transform.segments`).
 
 The shaped learners' tables are over ``(s, z)`` (``--agent-state s`` for ``s``). Tasks:
 ``four_rooms`` (the participants' subgoal series; ``--reward step-cost``: −1 per step and
@@ -103,7 +104,8 @@ SPARSE_ROOMS_ROUTE = SubgoalSeries([Cell(5, 10), Cell(9, 15)], name="through_the
 
 @dataclass
 class Config(RecipeConfig):
-    """Tabular ε-greedy Q-learning with HRS (library defaults), HRS-mean and NRS against no shaping."""
+    """Tabular ε-greedy Q-learning with HRS-D (the library's default potential), HRS, HRS-mean and NRS against no
+    shaping."""
 
     domain: str = setting("four_rooms", "four_rooms, sparse_rooms or taxi", choices=sorted(TASKS))
     reward: str = setting(
@@ -111,7 +113,7 @@ class Config(RecipeConfig):
         "four_rooms and sparse_rooms: step-cost (-1 per step) or goal (+1 at the goal)",
         choices=["step-cost", "goal"],
     )
-    methods: str = setting("Q,HRS,HRS-mean,NRS", f"comma-separated methods to run, of {', '.join(METHODS)}")
+    methods: str = setting("Q,HRS-D,HRS,HRS-mean,NRS", f"comma-separated methods to run, of {', '.join(METHODS)}")
     learnings: int = setting(2, "learnings per subgoal pattern (four_rooms has 10 patterns, taxi 1)")
     episodes: int = setting(200, "episodes per learning")
     lr: float = setting(0.25, "Q-learning step size alpha")

@@ -37,6 +37,7 @@ LAYERS: dict[str, int] = {
     "torchrl_subgoal.loss": 4,
     "torchrl_subgoal.transform": 5,
     "torchrl_subgoal._kernels.shaping": 5,
+    "torchrl_subgoal._kernels.segments": 5,
     "torchrl_subgoal.envs": 6,
     "torchrl_subgoal._kernels.grid": 6,
     "torchrl_subgoal.fused.module": 6,

@@ -146,13 +146,15 @@ def one_step(
     done: torch.Tensor,
     terminated: torch.Tensor,
     shape: torch.Size,
+    obs_before: torch.Tensor | None = None,
 ) -> dict:
     """One step of ``t`` (set up for a batch of ``shape``, learning online) from the entries ``current``."""
     n = shape.numel()
     setup = t._batch(shape, torch.arange(n).reshape(*shape, 1), n, obs, online=True)
     if t.keys.learner in t._settings.kept:  # a backend's step reads every kept entry
         current.setdefault(t.keys.learner, setup.learner)
-    return setup.backend.step(setup, current, StepInputs(obs, reward, reward, done, terminated, None), True)
+    step = StepInputs(obs, reward, reward, done, terminated, None, obs_before)
+    return setup.backend.step(setup, current, step, True)
 
 
 @PROPERTY
@@ -160,8 +162,11 @@ def one_step(
 def test_shaping_paths_agree(case: tuple, data: st.DataObject) -> None:
     """One transform step through the compiled kernels and through torch operations only:
     the same abstract states, accumulators, shaped rewards and trained tables, or the
-    same error for a NaN/inf reward or a NaN observation."""
+    same error for a NaN/inf reward or a NaN observation; with or without the monotone lift and the
+    within-segment term (read at the step's starting observation, another row's)."""
     series, shape, index, z, obs = case
+    monotone, interpolate = data.draw(st.booleans()), data.draw(st.booleans())
+    obs_before = obs.reshape(-1, obs.shape[-1]).roll(1, 0).reshape(obs.shape)
     n = shape.numel()
     r = torch.tensor(data.draw(st.lists(rewards, min_size=n, max_size=n)), dtype=torch.float32).reshape(*shape, 1)
     done = torch.tensor(data.draw(st.lists(st.booleans(), min_size=n, max_size=n))).reshape(*shape, 1)
@@ -174,7 +179,7 @@ def test_shaping_paths_agree(case: tuple, data: st.DataObject) -> None:
     table = torch.randn(*shape, states, generator=torch.Generator().manual_seed(data.draw(st.integers(0, 99))))
     outcomes = []
     for backend in ("compiled", "torch"):
-        potential = TabularPotential(states, batch_shape=shape)
+        potential = TabularPotential(states, batch_shape=shape, monotone=monotone, interpolate=interpolate)
         with torch.no_grad():
             potential.table.copy_(table)
         t = SubgoalPotentialTransform(
@@ -186,7 +191,7 @@ def test_shaping_paths_agree(case: tuple, data: st.DataObject) -> None:
         ).use_backend(backend)  # type: ignore[arg-type]
         current = {INDEX: z.clone(), RETURN: r_h.clone(), STEPS: k.clone(), ACHIEVED: torch.zeros_like(done)}
         try:
-            out = one_step(t, current, obs, r.clone(), done, terminated, shape)
+            out = one_step(t, current, obs, r.clone(), done, terminated, shape, obs_before)
         except ValueError as exc:
             outcomes.append(("error", str(exc), potential.table.detach().clone()))
             continue

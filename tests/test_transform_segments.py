@@ -96,21 +96,45 @@ def test_stored_steps_shape_as_the_env_did() -> None:
     assert torch.allclose(stored["next", "reward"], online)
 
 
-def test_learning_interpolating_tables_in_a_batch_runs_in_torch() -> None:
-    t = line_transform(frozen=False, value_update=0.5)
-    env = TransformedEnv(LineEnv(3, length=4), t)
-    env.rollout(20, policy=right, break_when_any_done=False)
-    assert type(t._online.backend).__name__ == "TorchShaping"
-    assert t.potential.table[1] != 1.0 or t.potential.table[0] != 0.0  # it learned
-    with pytest.raises(TypeError, match="interpolat"):
-        line_transform().use_backend("compiled")._batch(
-            torch.Size([1]), torch.zeros(1, 1, dtype=torch.long), 1, torch.zeros(1, 1), online=True
-        )
+@pytest.mark.parametrize("monotone", [False, True])
+@pytest.mark.parametrize("shared", [False, True])
+def test_the_compiled_step_shapes_and_learns_as_the_torch_step(monotone: bool, shared: bool) -> None:
+    """Learning online, one table per env or one shared, the compiled step and the torch step give the same
+    shaped rewards and tables (the fused loops against the compiled step: tests/fused/test_engine.py)."""
+    series = SubgoalSeries([Box((2.0,), (0.5,), (0,)), Circle((4.0,), 1.0)])
+    outcomes = []
+    for backend in ("compiled", "torch"):
+        v = TabularPotential(3, () if shared else (3,), init=[0.0, 0.5, 0.2], monotone=monotone, interpolate=True)
+        t = SubgoalPotentialTransform(series, v, gamma=0.9, value_update=0.5).use_backend(backend)
+        env = TransformedEnv(LineEnv(3, length=6, goal_reward=5.0), t)
+        torch.manual_seed(0)
+        data = env.rollout(30, policy=lambda td: td.set("action", torch.randint(0, 2, td.batch_size)),
+                           break_when_any_done=False)  # fmt: skip
+        assert type(t._online.backend).__name__ == f"{backend.title()}Shaping"
+        outcomes.append((data["next", "reward"], v.table.detach().clone()))
+    (reward_c, table_c), (reward_t, table_t) = outcomes
+    assert not torch.equal(table_c, torch.tensor([0.0, 0.5, 0.2]).expand_as(table_c))  # it learned
+    torch.testing.assert_close(reward_c, reward_t, rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(table_c, table_t, rtol=1e-5, atol=1e-5)
 
 
-def test_subgoals_without_a_distance_are_refused() -> None:
-    with pytest.raises(ValueError, match=r"subgoals\[0\] of pattern 'pattern' is a state"):
-        SubgoalPotentialTransform(SubgoalSeries([State(1)]), TabularPotential(2, interpolate=True), gamma=0.9)
+def test_states_add_no_term_and_an_aggregation_is_refused() -> None:
+    """A discrete state has no distance: the interpolating table shapes a series of states exactly as the plain
+    one (Taxi's subgoals), and a state beside a region adds nothing while the region still pulls."""
+    tables = tables_of(State(2), Box((4.0,), (1.0,), (0,)), rows=2, size=1)
+    assert closeness(tables, torch.tensor([[1.0], [3.0]]))[:, 0].tolist() == [0.0, 0.0]
+    assert closeness(tables, torch.tensor([[3.0]] * 2))[:, 1].tolist() == [1.0, 1.0]
+
+    def shaped(interpolate: bool) -> torch.Tensor:
+        series = SubgoalSeries([State(1), State(3)])
+        t = SubgoalPotentialTransform(series, TabularPotential(3, init=[0.0, 1.0, 2.0], interpolate=interpolate),
+                                      gamma=0.9)  # fmt: skip
+        env = TransformedEnv(LineEnv(2, length=4), t)
+        rewards = env.rollout(6, policy=right, break_when_any_done=False)["next", "reward"]
+        assert type(t._online.backend).__name__ == "CompiledShaping"  # no term to add: the compiled step shapes
+        return rewards
+
+    assert torch.equal(shaped(True), shaped(False))
     aggregation = StateAggregation(torch.tensor([0, 0, 1]), num_states=2)
     with pytest.raises(ValueError, match="not an aggregation"):
         SubgoalPotentialTransform(aggregation, TabularPotential(2, interpolate=True), gamma=0.9)

@@ -92,18 +92,19 @@ def paper_methods(baseline: str) -> dict[str, Method]:
 
 #: subgoal-based reward shaping with a fixed potential (Okudo & Yamada's SRS)
 SRS = Method("SRS", "progress", "human")
-#: HRS with the within-segment term: the potential also rises as the next subgoal's region comes nearer
+#: the library's default potential (``TabularPotential.for_subgoals``): HRS with the within-segment term, which also
+#: rises as the next subgoal's region comes nearer
 HRS_D = Method("HRS-D", "subgoals", "human", interpolate=True)
 
 
 def all_methods(baseline: str) -> dict[str, Method]:
-    """The paper's methods and SRS.
+    """The paper's methods, SRS and HRS-D (the library's default potential).
 
     Examples:
         >>> list(all_methods("PPO"))
-        ['HRS', 'RRS', 'PPO', 'NRS', 'SARSA-RS', 'SRS']
+        ['HRS', 'RRS', 'PPO', 'NRS', 'SARSA-RS', 'SRS', 'HRS-D']
     """
-    return {**paper_methods(baseline), SRS.name: SRS}
+    return {**paper_methods(baseline), SRS.name: SRS, HRS_D.name: HRS_D}
 
 
 def random_patterns(

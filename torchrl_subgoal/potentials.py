@@ -147,16 +147,17 @@ class TabularPotential(Potential):
             (learner indices) ``t·envs_per_table … (t+1)·envs_per_table − 1``, so a batch of
             learners that each step several envs is one env batch (learner-major) with one table
             per learner, each updated as that learner's shared table would be on its own.
-        monotone: the shaping transform shapes with the nearest table that does not decrease along
-            ``z`` (least squares, each learner's table on its own) instead of the table as learned.
-            Training and :meth:`value` read the table as it is. Where a learned table values a later
-            subgoal below an earlier one, the shaping then neither charges the agent for reaching it
-            nor pays it for staying before it. For subgoal series in a total order (the transform
-            refuses an aggregation); the transform's torch step shapes with it.
+        monotone: the shaping transform shapes with the table lifted so that it does not decrease along
+            the series (each ``z`` takes the largest value among itself and the states before it, each
+            learner's table on its own) instead of the table as learned. Training and :meth:`value`
+            read the table as it is. Where a learned table values a later subgoal below an earlier one,
+            the shaping then neither charges the agent for reaching it nor pays it for staying before
+            it. For subgoal series (the transform refuses an aggregation); every backend shapes with it.
         interpolate: between subgoals, ``Φ(s, z)`` also rises from ``V[z]`` towards the value of the next
             subgoal as the observation nears its region (:mod:`torchrl_subgoal.transform.segments`), so the
-            potential guides before the next subgoal is reached. For subgoals that are regions (boxes,
-            circles, cells); the transform's torch step shapes with it.
+            potential guides before the next subgoal is reached. Towards subgoals that are regions (boxes,
+            circles, cells; a discrete state or a condition adds nothing); every backend shapes with it
+            (the default of :meth:`for_subgoals`).
         index_key: the abstract state entry read.
         learner_key: the learner entry read (with a batch of tables).
         out_key: where the value is written.
@@ -230,12 +231,14 @@ class TabularPotential(Potential):
         **kwargs: Any,
     ) -> TabularPotential:
         """The library's default potential over ``subgoals``: a table that starts at the series' progress
-        prior (:meth:`~torchrl_subgoal.SubgoalSeries.progress`) and is shaped non-decreasing along the
-        series (``monotone=True``), to be learned online by the shaping transform.
+        prior (:meth:`~torchrl_subgoal.SubgoalSeries.progress`), is shaped non-decreasing along the
+        series (``monotone=True``) and, between subgoals that are regions, rises as the next one comes
+        nearer (``interpolate=True``), to be learned online by the shaping transform.
 
         Before the first success under a sparse goal reward every return is 0, so a table learned from 0
         stays 0 and cannot guide; this one rises with each subgoal from the first step and becomes the
-        learned value as the transitions come in (docs/shaping_defaults.md).
+        learned value as the transitions come in (docs/shaping_defaults.md). Pass ``interpolate=False``
+        for a potential over ``z`` alone (the paper's).
 
         Args:
             subgoals: one series (one table, or the same prior in every table of ``batch_shape``), or one
@@ -251,8 +254,8 @@ class TabularPotential(Potential):
             >>> from torchrl_subgoal import Cell, SubgoalSeries
             >>> series = SubgoalSeries([Cell(3, 6), Cell(7, 9)])
             >>> v = TabularPotential.for_subgoals(series, scale=3.0)
-            >>> v.table.tolist(), v.monotone
-            ([0.0, 1.0, 2.0], True)
+            >>> v.table.tolist(), v.monotone, v.interpolate
+            ([0.0, 1.0, 2.0], True, True)
             >>> TabularPotential.for_subgoals([series, SubgoalSeries([Cell(3, 6)])], scale=2.0).table.tolist()
             [[0.0, 0.6666666865348816, 1.3333333730697632], [0.0, 1.0, 1.0]]
         """
@@ -279,6 +282,7 @@ class TabularPotential(Potential):
                 "per table"
             )
         kwargs.setdefault("monotone", True)
+        kwargs.setdefault("interpolate", True)
         return cls(num_states, shape, init, **kwargs)
 
     @property

@@ -50,7 +50,7 @@ def test_the_help_lists_the_learners_settings_and_choices_once(capsys: pytest.Ca
     assert "--gradient-steps" in out and "--clip-epsilon" not in out  # DQN's own settings
     assert "(default: 0.004)" in " ".join(out.split())  # mountain_car's DQN learning rate (wrapped anywhere)
     methods = out[out.index("--methods") : out.index("--learnings")]
-    assert methods.count("(default:") == 1 and "theunshapedlearner,HRS,NRS" in "".join(methods.split())
+    assert methods.count("(default:") == 1 and "theunshapedlearner,HRS-D,NRS" in "".join(methods.split())
 
 
 def test_a_learner_without_defaults_for_the_domain_takes_its_own() -> None:
@@ -77,7 +77,7 @@ def test_the_unshaped_method_is_named_after_the_learner() -> None:
 def test_the_plan_stores_the_learner_and_reports_frames() -> None:
     plan = learner_plan(recipe_config("dqn", "mountain_car", learner={"total_frames": 1600}, results="r"), "dqn")
     assert plan.domain == "dqn_mountain_car" and plan.episodes == 100 and plan.chunk_size == 1
-    assert [spec.name for spec in plan.specs] == ["DQN", "HRS", "NRS"]  # in --methods order
+    assert [spec.name for spec in plan.specs] == ["DQN", "HRS-D", "NRS"]  # in --methods order
     config = plan.config
     assert (
         config["algo"] == "dqn"

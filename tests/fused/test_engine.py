@@ -20,7 +20,7 @@ from torchrl_subgoal.fused import (
     SoftmaxSarsa,
     run_episodes,
 )
-from torchrl_subgoal.methods import paper_methods, shaping_transform
+from torchrl_subgoal.methods import HRS_D, paper_methods, shaping_transform
 
 from ..line_env import LineEnv
 
@@ -46,7 +46,7 @@ def setup(
         m, max_steps=max_steps, goal_reward=0.0 if step_cost else 1.0, step_reward=-1.0 if step_cost else 0.0
     )
     shaping = shaping_transform(
-        paper_methods("SARSA")[method],
+        {**paper_methods("SARSA"), HRS_D.name: HRS_D}[method],
         env.batch_size,
         gamma=cfg.gamma,
         value_lr=cfg.value_lr,
@@ -78,6 +78,8 @@ def _tables(env: object, agent: SoftmaxSarsa) -> tuple[torch.Tensor, torch.Tenso
         ("SARSA-RS", 1, False, "zero", True),
         ("HRS", 1, True, "zero", True),
         ("SARSA-RS", 1, True, "value", False),
+        ("HRS-D", 1, False, "nonpositive", True),  # the within-segment term: the default potential
+        ("HRS-D", 4, True, "value", False),
     ],
 )
 def test_fused_equals_torchrl(
@@ -220,7 +222,7 @@ def pinball_setup(method: str, n: int, max_steps: int, preset: str = "released")
     ]
     thirds = StateAggregation.from_regions([Box((c,), (1 / 6,), (0,)) for c in (1 / 6, 1 / 2, 5 / 6)], 4)
     shaping = shaping_transform(
-        paper_methods("AC")[method],
+        {**paper_methods("AC"), HRS_D.name: HRS_D}[method],
         env.batch_size,
         gamma=cfg.gamma,
         value_lr=cfg.value_lr,
@@ -244,6 +246,7 @@ def pinball_setup(method: str, n: int, max_steps: int, preset: str = "released")
         ("SARSA-RS", "released"),
         ("AC", "released-td"),
         ("HRS", "released-td"),
+        ("HRS-D", "released"),
     ],
 )
 def test_pinball_fused_equals_torchrl(method: str, preset: str) -> None:

@@ -19,9 +19,9 @@ def test_dqn_on_mountain_car_reports_frames_and_resumes(tmp_path: Path, capsys: 
     args = ["--algo", "dqn", "--domain", "mountain_car", "--total-frames", "320"]
     assert run(tmp_path, *args) == 0
     out = capsys.readouterr().out
-    assert "One update is 16 frames" in out and "mean frames" in out and "| 120 | HRS |" in out
+    assert "One update is 16 frames" in out and "mean frames" in out and "| 120 | HRS-D |" in out
     summary = json.loads((tmp_path / "res" / "summary.json").read_text())
-    assert set(summary["methods"]) == {"DQN", "HRS", "NRS"}  # the default methods: unshaped, HRS, NRS
+    assert set(summary["methods"]) == {"DQN", "HRS-D", "NRS"}  # the default methods: unshaped, the default, NRS
     assert summary["n_episodes"] == 20 and summary["unit"] == "update" and summary["frames_per_unit"] == 16
     config = json.loads((tmp_path / "res" / "config.json").read_text())["config"]
     assert config["learner"]["lr"] == 0.004 and config["start_potential"] == "nonpositive"  # the preset; the default

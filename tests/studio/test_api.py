@@ -328,7 +328,7 @@ def gated(monkeypatch: pytest.MonkeyPatch) -> Iterator[threading.Event]:
     gate = threading.Event()
 
     def blocked(
-        domain: str, series: Any, settings: Any, *, method: str = "HRS", map: Any = None, progress: Any = None
+        domain: str, series: Any, settings: Any, *, method: str = "HRS-D", map: Any = None, progress: Any = None
     ) -> Any:
         while not gate.wait(0.01):
             progress(0)  # raises once cancelled
@@ -369,7 +369,7 @@ def test_one_job_per_pattern_and_a_few_at_once(client: FlaskClient, gated: threa
     assert first.status_code == 202 and first.json["state"] == "running"
     again = client.post("/api/try", json=four_rooms((7, 9), name="a"))
     assert again.status_code == 409
-    assert again.json["error"].startswith("four_rooms/a/HRS: a learning with this pattern is already running")
+    assert again.json["error"].startswith("four_rooms/a/HRS-D: a learning with this pattern is already running")
     second = client.post("/api/try", json=four_rooms((3, 6), name="b"))
     assert second.status_code == 202
     third = client.post("/api/try", json=four_rooms((3, 6), name="c"))
@@ -409,16 +409,18 @@ def test_try_runs_and_reports_curves_and_potential(client: FlaskClient) -> None:
 
 
 def test_try_it_takes_the_shaping_method(client: FlaskClient) -> None:
-    """ "Try it" runs HRS by default, or the method the page chose (SRS: its fixed prior is the table
-    shown; NRS: no table); any other method is a 400 naming the field."""
+    """ "Try it" runs HRS-D (the library's default potential) by default, or the method the page chose (SRS:
+    its fixed prior is the table shown; NRS: no table); any other method is a 400 naming the field."""
     jobs = client.application.extensions["studio"].jobs
-    for method, table in (("SRS", [0.0, 0.333, 0.667]), ("NRS", [])):
-        started = client.post("/api/try", json=four_rooms((3, 6), (7, 9)) | {"episodes": 2, "method": method})
+    for method, table in (("HRS-D", None), ("SRS", [0.0, 0.333, 0.667]), ("NRS", [])):
+        chosen = {} if method == "HRS-D" else {"method": method}
+        started = client.post("/api/try", json=four_rooms((3, 6), (7, 9)) | {"episodes": 2, **chosen})
         assert started.status_code == 202, started.json
         job = jobs.wait(started.json["id"], 600)
         assert job.state == "done", job.error
         result = client.get(f"/api/try/{job.id}").json["result"]
         assert result["method"] == method
-        assert [round(v, 3) for v in result["potential"]] == table
+        if table is not None:
+            assert [round(v, 3) for v in result["potential"]] == table
     wrong = client.post("/api/try", json=four_rooms((3, 6)) | {"method": "PBRS"})
-    assert wrong.status_code == 400 and "method: expected one of ['HRS', 'SRS', 'NRS']" in wrong.json["error"]
+    assert wrong.status_code == 400 and "method: expected one of ['HRS-D', 'HRS', 'SRS', 'NRS']" in wrong.json["error"]

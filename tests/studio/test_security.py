@@ -50,7 +50,7 @@ def gated(monkeypatch: pytest.MonkeyPatch) -> Iterator[threading.Event]:
     gate = threading.Event()
 
     def blocked(
-        domain: str, series: Any, settings: Any, *, method: str = "HRS", map: Any = None, progress: Any = None
+        domain: str, series: Any, settings: Any, *, method: str = "HRS-D", map: Any = None, progress: Any = None
     ) -> Any:
         while not gate.wait(0.01):
             progress(0)

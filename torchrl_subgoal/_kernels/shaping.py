@@ -290,7 +290,7 @@ def _shape_shared(
 # --------------------------------------------------------------------------- shaping in a fused loop
 #
 # A fused loop unpacks a ShapingKernelState (torchrl_subgoal.fused.shaping_record) once, before its loop:
-# ``kind, regions, lookup, potential, learners = shaping``, then ``z, achieved, r_h, k, z_start = learners``
+# ``kind, regions, lookup, potential, learners, measured = shaping``, then ``z, achieved, r_h, k, z_start = learners``
 # and ``pattern, …, offset = regions``. Per step, when ``kind != NO_SHAPING``, it advances the learner's
 # abstract state (region_search when ``kind == REGION_SHAPING``, written out in fused_run, ``lookup`` when
 # LOOKUP_SHAPING) and

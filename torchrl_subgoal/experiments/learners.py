@@ -51,7 +51,7 @@ from torchrl_subgoal.experiments.recipe import (
     quiet_torchrl,
 )
 from torchrl_subgoal.experiments.results import Chunk, EpisodeTable
-from torchrl_subgoal.methods import HRS_D, Method, all_methods, shaping_parts
+from torchrl_subgoal.methods import Method, all_methods, shaping_parts
 from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.registry import load_patterns
 from torchrl_subgoal.training import (
@@ -142,7 +142,7 @@ class LearnerRecipeConfig(RecipeConfig):
         "",
         "comma-separated methods: the learner's name for the unshaped learner (A2C, PPO, DQN, DDPG), HRS, "
         "HRS-D, NRS, RRS, SARSA-RS, SRS",
-        shown_default="the unshaped learner,HRS,NRS",
+        shown_default="the unshaped learner,HRS-D,NRS",
     )
     learnings: int = setting(1, "learnings per subgoal pattern (unshaped: as many per pattern of the file)")
     subgoals: str = setting("", "subgoal file of the human patterns", shown_default="the domain's")
@@ -234,13 +234,13 @@ class LearnerRecipeConfig(RecipeConfig):
 
 def learner_methods(algo: str) -> dict[str, Method]:
     """The methods a sweep of learner ``algo`` compares: the paper's, the unshaped one named after the learner,
-    SRS and HRS-D (HRS with the within-segment term, which the compiled engines of the paper's recipes lack).
+    SRS and HRS-D (the library's default potential).
 
     Examples:
         >>> list(learner_methods("ppo"))
         ['HRS', 'RRS', 'PPO', 'NRS', 'SARSA-RS', 'SRS', 'HRS-D']
     """
-    return {**all_methods(baseline=LEARNERS[algo].title), HRS_D.name: HRS_D}
+    return all_methods(baseline=LEARNERS[algo].title)
 
 
 def learner_settings(cfg: LearnerRecipeConfig, algo: str, domain: LearnerDomain) -> Any:
@@ -304,7 +304,7 @@ def learner_plan(cfg: LearnerRecipeConfig, algo: str, *, final_updates: int | No
             f"--logger: {cfg.logger} needs the {cfg.logger} package: pip install 'torchrl_subgoal[{cfg.logger}]'"
         )
     methods = learner_methods(algo)
-    names = check_methods(methods, cfg.method_names or [LEARNERS[algo].title, "HRS", "NRS"])
+    names = check_methods(methods, cfg.method_names or [LEARNERS[algo].title, "HRS-D", "NRS"])
     if "SARSA-RS" in names and domain.aggregation() is None:
         raise ConfigError(f"--methods: SARSA-RS needs an aggregation g(s), which {cfg.domain} does not register")
     settings = learner_settings(cfg, algo, domain)

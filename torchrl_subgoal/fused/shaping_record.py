@@ -47,6 +47,10 @@ class AbstractStates(NamedTuple):
         )
 
 
+#: ``ShapingKernelState.measured`` of a potential over ``z`` alone
+NO_MEASURED = np.zeros((0, 0), np.bool_)
+
+
 class ShapingKernelState(NamedTuple):
     """The shaping transform for a compiled loop: its abstraction, its potential and every learner's
     abstract state (``[N, 1]`` arrays, updated in place), from :func:`shaping_record`.
@@ -67,6 +71,8 @@ class ShapingKernelState(NamedTuple):
     lookup: np.ndarray  #: ``[S]`` abstract state of every state number (``LOOKUP_SHAPING``)
     potential: PotentialKernelState
     learners: AbstractStates  #: every learner's abstract state
+    #: ``[N, J]``: the regions an interpolating table measures a distance to; empty: no within-segment term
+    measured: np.ndarray = NO_MEASURED
 
     @classmethod
     def unshaped(cls, n: int) -> ShapingKernelState:
@@ -142,7 +148,11 @@ def shaping_record(transform: SubgoalPotentialTransform, tensordict: TensorDictB
         tensordict.get(written[name]).reshape(n, 1).numpy().copy() for name in (keys.index, keys.ret, keys.steps)
     )
     potential = setup.kernel[transform.learning]  # type: ignore[index]
+    measured = NO_MEASURED
+    if transform._settings.interpolate:
+        assert isinstance(abstraction, SubgoalTables)
+        measured = abstraction.measured.numpy()
     # both envs of the fused engine start every episode in the same place
     return ShapingKernelState(
-        kind, regions, lookup, potential, AbstractStates(z, np.zeros((n, 1), np.bool_), r_h, k, z.copy())
+        kind, regions, lookup, potential, AbstractStates(z, np.zeros((n, 1), np.bool_), r_h, k, z.copy()), measured
     )

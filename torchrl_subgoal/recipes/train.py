@@ -8,9 +8,12 @@ learner's settings is a flag (``--total-frames``, ``--lr``, ``--clip-epsilon``,
 ``--hidden 32 32`` ...; ``--algo ppo --domain pinball --help`` lists PPO's with
 PinBall's defaults). The shaping transform sits on the outer env;
 ``SubgoalValueLoss`` trains its potential from each batch's SMDP transitions.
-Methods: the unshaped learner (named after it: A2C, PPO, DQN, DDPG), HRS (the
-learned potential over the domain's subgoal file), NRS (a fixed η on reaching a
-subgoal), and where the domain allows them RRS and SARSA-RS. The learner must
+Methods: the unshaped learner (named after it: A2C, PPO, DQN, DDPG), HRS-D (the
+library's default potential over the domain's subgoal file: learned, and rising
+towards the next subgoal within each segment), HRS (the same over the subgoals
+reached alone), SRS (the progress prior, fixed), NRS (a fixed η on reaching a
+subgoal), and where the domain allows them RRS and SARSA-RS; by default the
+unshaped learner, HRS-D and NRS. The learner must
 suit the domain's actions: DQN and A2C need discrete ones, DDPG continuous ones,
 PPO takes either.
 

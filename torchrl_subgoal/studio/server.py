@@ -377,7 +377,7 @@ def create_app(
         name = data.get("pattern", next(iter(drawing.patterns)) if len(drawing.patterns) == 1 else None)
         if not isinstance(name, str) or name not in drawing.patterns:
             raise RequestError(f"pattern: expected one of {list(drawing.patterns)}, got {name!r}")
-        method = data.get("method", "HRS")
+        method = data.get("method", "HRS-D")
         if not isinstance(method, str) or method not in METHODS:
             raise RequestError(f"method: expected one of {list(METHODS)}, got {method!r}")
         domain = drawing.domain

@@ -4,7 +4,7 @@ Everything the studio trains goes through :func:`try_pattern`, built from the
 library's pieces: the domain's batched env and the paper's learner, both from
 its registration (the ``learner`` of its :class:`~torchrl_subgoal.studio.domains.StudioDomain`: SARSA on
 four-rooms, the Fourier actor-critic on PinBall), the shaping transform of the chosen method
-(HRS, SRS or NRS) from :func:`torchrl_subgoal.methods.shaping_transform` and
+(HRS-D, the default, HRS, SRS or NRS) from :func:`torchrl_subgoal.methods.shaping_transform` and
 :func:`torchrl_subgoal.fused.run_episodes` on the fused engine. Both runs use
 the same seeds, so the two curves differ only by the shaping. This is the one
 place to update when the engine's interface changes.
@@ -24,7 +24,7 @@ from torchrl.envs import TransformedEnv
 
 from torchrl_subgoal import registry
 from torchrl_subgoal.fused import run_episodes
-from torchrl_subgoal.methods import SRS, paper_methods, shaping_transform
+from torchrl_subgoal.methods import HRS_D, SRS, paper_methods, shaping_transform
 from torchrl_subgoal.potentials import TabularPotential
 from torchrl_subgoal.studio.domains import studio_domain
 from torchrl_subgoal.subgoals import SubgoalSeries
@@ -32,9 +32,15 @@ from torchrl_subgoal.transform import SubgoalPotentialTransform
 
 __all__ = ["METHODS", "Curve", "TryResult", "TrySettings", "try_pattern"]
 
-#: The shaped methods a "Try it" offers: HRS (the library's learned potential, the default), SRS (the
-#: progress prior, fixed) and NRS (the naive pulse).
-METHODS = {"HRS": paper_methods(baseline="none")["HRS"], "SRS": SRS, "NRS": paper_methods(baseline="none")["NRS"]}
+#: The shaped methods a "Try it" offers: HRS-D (the library's default potential: learned, and rising towards the
+#: next subgoal within each segment), HRS (learned, over the subgoals reached alone), SRS (the progress prior,
+#: fixed) and NRS (the naive pulse).
+METHODS = {
+    HRS_D.name: HRS_D,
+    "HRS": paper_methods(baseline="none")["HRS"],
+    "SRS": SRS,
+    "NRS": paper_methods(baseline="none")["NRS"],
+}
 Progress = Callable[[int], None]
 
 
@@ -111,7 +117,7 @@ class TryResult:
     potential_sem: list[float]
     settings: dict[str, Any] = field(default_factory=dict)
     seconds: float = 0.0
-    method: str = "HRS"
+    method: str = "HRS-D"
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict."""
@@ -123,7 +129,7 @@ def try_pattern(
     series: SubgoalSeries,
     settings: TrySettings,
     *,
-    method: str = "HRS",
+    method: str = "HRS-D",
     map: str | Path | None = None,
     progress: Progress | None = None,
 ) -> TryResult:
@@ -134,7 +140,7 @@ def try_pattern(
             ``"four_rooms"``, ``"pinball"``.
         series: the drawn pattern.
         settings: episodes, learners, seed, episode cap.
-        method: ``"HRS"`` (default), ``"SRS"`` or ``"NRS"`` (:data:`METHODS`).
+        method: ``"HRS-D"`` (default), ``"HRS"``, ``"SRS"`` or ``"NRS"`` (:data:`METHODS`).
         map: the PinBall map (``"simple"``, ``"hard"`` or a file); ignored by four-rooms.
         progress: called with the number of learner-episodes just finished
             (``2 * learners * episodes`` in all); it may raise to cancel.

@@ -34,6 +34,8 @@ def _misfit(pred: Predicate, size: int, one_hot: bool) -> str | None:
     return f"reads entry {beyond[0]}" if beyond else None
 
 
+#: the kinds of subgoal a distance is measured to (an interpolating potential's within-segment term)
+MEASURED = ("box", "circle", "cell")
 _NO_ENTRIES = np.zeros((0, 0), np.float64)  # the observation of subgoals that are all conditions
 _NO_MASK = torch.zeros(0, dtype=torch.bool)
 
@@ -105,6 +107,7 @@ class SubgoalTables:
         centre = torch.zeros(P, J, D)
         weight = torch.zeros(P, J, D)
         radius2 = torch.full((P, J), math.inf)
+        measured = torch.zeros(P, J, dtype=torch.bool)  # regions with a size to measure a distance in
         succ = torch.zeros(P, J + 1, J, dtype=torch.bool)
         slots: dict[Predicate, torch.Tensor] = {}  # condition -> [P, J] where a pattern uses it
         condition_of = np.full((P, J), -1, np.int64)  # the index of the condition at [p, j], -1: a region
@@ -129,6 +132,7 @@ class SubgoalTables:
                 lo[p, j], hi[p, j] = region.lo, region.hi
                 centre[p, j], weight[p, j] = region.centre, region.weight
                 radius2[p, j] = region.radius2
+                measured[p, j] = pred.kind in MEASURED
             for z in range(len(series) + 1):
                 for j in series.successors(z):
                     succ[p, z, j] = True
@@ -146,6 +150,7 @@ class SubgoalTables:
         self.lo, self.hi = lo[flat], hi[flat]
         self.centre, self.weight = centre[flat], weight[flat]
         self.radius2 = radius2[flat]
+        self.measured = measured[flat]  #: ``[B, J]``: the regions a distance is measured to (not ``state``)
         self.succ = succ[flat]
         self.uses_circle = bool(torch.isfinite(radius2).any())
         self._rows = torch.arange(flat.numel())

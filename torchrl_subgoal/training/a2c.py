@@ -15,7 +15,7 @@ A user's env needs an env factory ``make_env(num_envs) -> EnvBase`` (an env
 with batch size ``[num_envs]``; :func:`batched` builds one from a single-env
 factory) and, for shaping, a subgoal series::
 
-    shaping = Shaping(series, TabularPotential(series.num_abstract_states), {"observation_key": "observation"})
+    shaping = Shaping(series, TabularPotential.for_subgoals(series), {"observation_key": "observation"})
     trained = train_a2c(make_env, A2CConfig(total_frames=200_000), seeds=range(10), shaping=shaping)
     trained.curves[3].episode_length, trained.policy(3)
 """

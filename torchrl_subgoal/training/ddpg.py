@@ -13,7 +13,7 @@ each followed by a soft target update. With ``reshape_samples`` every replay
 sample is re-shaped with the potential as it is now
 (:class:`~torchrl_subgoal.training.SampleReshaper`)::
 
-    shaping = Shaping(series, TabularPotential(series.num_abstract_states))
+    shaping = Shaping(series, TabularPotential.for_subgoals(series))
     trained = train_ddpg(make_env, DDPGTrainConfig(total_frames=300_000), seeds=range(10), shaping=shaping)
 """
 

@@ -13,7 +13,7 @@ transitions), each learner its own loss mean, gradient clipping and Adam state.
 With ``reshape_samples`` every replay sample is re-shaped with the potential as it
 is now (:class:`~torchrl_subgoal.training.SampleReshaper`) before the loss reads it::
 
-    shaping = Shaping(series, TabularPotential(series.num_abstract_states))
+    shaping = Shaping(series, TabularPotential.for_subgoals(series))
     trained = train_dqn(make_env, DQNConfig.preset("mountain_car"), seeds=range(10), shaping=shaping)
 """
 

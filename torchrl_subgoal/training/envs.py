@@ -50,7 +50,7 @@ class Shaping:
         subgoals: a :class:`~torchrl_subgoal.SubgoalSeries` (or one per env) or a
             :class:`~torchrl_subgoal.StateAggregation`.
         potential: ``Φ``, shared by every env of the learner (e.g.
-            ``TabularPotential(series.num_abstract_states)``); trained unless it is
+            ``TabularPotential.for_subgoals(series)``, the default); trained unless it is
             a :class:`~torchrl_subgoal.NaivePotential` or frozen.
         options: further keyword arguments of
             :class:`~torchrl_subgoal.SubgoalPotentialTransform` (``observation_key``,
@@ -64,7 +64,7 @@ class Shaping:
     Examples:
         >>> from torchrl_subgoal import Cell, SubgoalSeries, TabularPotential
         >>> series = SubgoalSeries([Cell(3, 6), Cell(7, 9)])
-        >>> shaping = Shaping(series, TabularPotential(series.num_abstract_states), {"observation_key": "cell"})
+        >>> shaping = Shaping(series, TabularPotential.for_subgoals(series), {"observation_key": "cell"})
         >>> shaping.trained
         True
         >>> type(shaping.transform(shaping.potential, gamma=0.99, value_lr=None)).__name__

@@ -10,7 +10,7 @@ each gradient step takes every learner's minibatch at the same positions of its
 own frames, with its advantages standardised over its own minibatch, its own
 clipping and Adam state::
 
-    shaping = Shaping(series, TabularPotential(series.num_abstract_states))
+    shaping = Shaping(series, TabularPotential.for_subgoals(series))
     trained = train_ppo(make_env, PPOConfig(total_frames=500_000), seeds=range(10), shaping=shaping)
 """
 

@@ -16,6 +16,7 @@ from torchrl_subgoal.transform.setup import BatchSetup, Settings
 from torchrl_subgoal.transform.transitions import transition
 
 if NUMBA:  # without numba the transform never takes this path (setup.compiles)
+    from torchrl_subgoal._kernels.segments import add_segment_terms
     from torchrl_subgoal._kernels.shaping import (
         advance_and_shape,
         finite_inputs,
@@ -139,6 +140,13 @@ def compiled_step(
             outputs = (z_next.numpy().reshape(col), *outputs[1:])
         zn_col = outputs[0]
         shape_step(potential, setup.group, z_col, zn_col, *inputs, *outputs[1:], *extra)
+    if settings.interpolate:  # Φ(s, z): the within-segment term on each side of the step
+        tables = setup.abstraction
+        assert isinstance(tables, SubgoalTables) and step.obs_before is not None
+        before, after = _rows(step.obs_before, n, setup), _rows(step.obs, n, setup)
+        measured = tables.measured.numpy()
+        add_segment_terms(tables.kernel_state(), measured, potential, setup.group, z_col, outputs[0], before, after,
+                          ends, outputs[3])  # fmt: skip
     if reward is not env_reward:  # after another shaping transform: shape its reward, accumulate the env's
         shaped += reward - env_reward
     out: dict[str, Any] = {keys.index: z_next, keys.ret: rh_out, keys.steps: k_out, "reward": shaped}
@@ -166,6 +174,8 @@ def _rows(obs: torch.Tensor | None, n: int, setup: BatchSetup) -> np.ndarray:
     """The observation as the ``[n, D]`` rows the region search reads."""
     assert obs is not None
     regions = setup.regions
+    if regions is None and isinstance(setup.abstraction, SubgoalTables):  # regions beside conditions
+        regions = setup.abstraction.kernel_state()
     assert regions is not None
     d = regions.lo.shape[2]
     a = obs.numpy()

@@ -26,8 +26,8 @@ __all__ = ["closeness", "segment_term"]
 
 
 def closeness(tables: SubgoalTables, observation: torch.Tensor) -> torch.Tensor:
-    """``1 / (1 + d)`` of each row's observation to each of its regions, ``[B, J]`` (0 for a region that is
-    padding or a condition).
+    """``1 / (1 + d)`` of each row's observation to each of its regions, ``[B, J]`` (0 for padding, a
+    condition or a discrete ``state``, which have no distance).
 
     Examples:
         >>> from torchrl_subgoal import Box, Circle, SubgoalSeries
@@ -50,7 +50,7 @@ def closeness(tables: SubgoalTables, observation: torch.Tensor) -> torch.Tensor:
         to_centre = weighted.sum(-1).sqrt()
         scale = torch.where(radius > 0, radius, torch.ones_like(radius))
         circle = torch.where(torch.isfinite(radius), ((to_centre - radius).clamp(min=0.0) / scale), 0.0).square()
-    region = (lo <= hi).all(-1)  # padding and conditions have lo = +inf, hi = -inf
+    region = tables.measured & (lo <= hi).all(-1)  # padding and conditions have lo = +inf, hi = -inf
     return torch.where(region, 1.0 / (1.0 + (box + circle).sqrt()), torch.zeros_like(box)).to(torch.float32)
 
 

@@ -24,6 +24,7 @@ from torchrl_subgoal.subgoals import (
     SubgoalSeries,
     SubgoalTables,
 )
+from torchrl_subgoal.subgoals.tables import MEASURED
 from torchrl_subgoal.transform.keys import SubgoalKeys, write
 from torchrl_subgoal.transform.shaping import START_MODES, StartPotential
 from torchrl_subgoal.transform.transitions import empty_transition
@@ -195,8 +196,6 @@ def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss
     if isinstance(potential, TabularPotential):
         if potential.table.device.type != "cpu":
             return f"it reads the potential's table on the CPU, not {potential.table.device}"
-        if potential.interpolate:
-            return "an interpolating table (interpolate=True) shapes in torch"
     elif not isinstance(potential, NaivePotential):
         return f"it shapes with a TabularPotential or a NaivePotential, not {type(potential).__name__}"
     if update is not None and (type(update) is not SubgoalValueLoss or update.reduction != "sum"):
@@ -277,35 +276,30 @@ def settings(
     kept = kept_entries(keys, potential, subgoals, start)
     if isinstance(potential, TabularPotential) and potential.monotone:
         check_monotone(subgoals)
-    interpolate = isinstance(potential, TabularPotential) and potential.interpolate
-    if interpolate:
-        check_interpolate(subgoals)
+    interpolate = isinstance(potential, TabularPotential) and potential.interpolate and check_interpolate(subgoals)
     return Settings(keys, kept, float(gamma), value_gamma, zero_terminal, start, observation_key,
                     subgoals.reads_observation, keys.transitions is not None, tuple(potential.in_keys),
                     interpolate)  # fmt: skip
 
 
-def check_interpolate(subgoals: Subgoals) -> None:
-    """Refuse an interpolating table (``TabularPotential(interpolate=True)``) where a subgoal has no distance: an
-    aggregation, or a discrete ``state`` predicate (conditions add no term).
+def check_interpolate(subgoals: Subgoals) -> bool:
+    """Whether an interpolating table (``TabularPotential(interpolate=True)``) adds a within-segment term over
+    ``subgoals``: only towards regions with a size (box, circle, cell); a discrete ``state`` or a condition adds
+    none, so a series of them shapes as a plain table does. An aggregation, whose abstract states have no next
+    subgoal to measure a distance to, is refused.
 
     Examples:
-        >>> from torchrl_subgoal import State
-        >>> check_interpolate(Subgoals(SubgoalSeries([State(1)])))
+        >>> from torchrl_subgoal import Cell, State, StateAggregation
+        >>> [check_interpolate(Subgoals(SubgoalSeries([pred]))) for pred in (State(1), Cell(1, 2))]
+        [False, True]
+        >>> check_interpolate(Subgoals(StateAggregation(torch.tensor([0, 1]), num_states=2)))
         Traceback (most recent call last):
         ...
-        ValueError: TabularPotential(interpolate=True): subgoals[0] of pattern 'pattern' is a state, which has no ...
+        ValueError: TabularPotential(interpolate=True): the shaping needs subgoal series, not an aggregation
     """
     if subgoals.aggregation is not None:
         raise ValueError("TabularPotential(interpolate=True): the shaping needs subgoal series, not an aggregation")
-    for series in subgoals.patterns:
-        for j, pred in enumerate(series.predicates):
-            if pred.kind == "state":
-                label = series.names[j] if series.names else f"subgoals[{j}]"
-                raise ValueError(
-                    f"TabularPotential(interpolate=True): {label} of pattern {series.name!r} is a state, which "
-                    "has no distance; interpolate needs regions (box, circle, cell)"
-                )
+    return any(pred.kind in MEASURED for series in subgoals.patterns for pred in series.predicates)
 
 
 def check_monotone(subgoals: Subgoals) -> None:

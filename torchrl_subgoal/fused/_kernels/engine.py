@@ -6,6 +6,7 @@ import numba
 import numpy as np
 
 from torchrl_subgoal._kernels.regions import _in_region
+from torchrl_subgoal._kernels.segments import segment_closeness, segment_value
 from torchrl_subgoal._kernels.shaping import (
     NO_SHAPING,
     REGION_SHAPING,
@@ -48,9 +49,11 @@ def fused_run(env, shaping, learner, action, max_steps_run, records):
     """
     env_buffers = env_scratch(env)
     learner_buffers = learner_scratch(learner)
-    kind, regions, lookup, potential, learners = shaping  # unpacked once (see the note above shaping_start)
+    kind, regions, lookup, potential, learners, measured = shaping  # unpacked once (see the note above shaping_start)
     z, achieved, r_h, k, z_start = learners
     pattern, lo, hi, centre, weight, radius2, succ, offset = regions
+    interpolate = measured.shape[0] > 0  # Φ(s, z): the within-segment term (_kernels.segments)
+    near = np.zeros(lo.shape[1], np.float32)
     active, n_active = _active_learners(records.episode, records.steps.shape[1])
     t, ret, episode, steps_out, returns, success = records  # unpacked once (see the note above shaping_start)
     filed_total = 0
@@ -60,6 +63,9 @@ def fused_run(env, shaping, learner, action, max_steps_run, records):
         steps = max_steps_run
         for step in range(max_steps_run):
             o, zb = env_observe(env, b, env_buffers), z[b, 0]
+            if interpolate:  # the closeness at the step's start, before the env moves
+                seen = env_shaping_observation(env, o, env_buffers)
+                segment_closeness(pattern, lo, hi, centre, weight, radius2, succ, measured, b, zb, seen, near)
             o_next, reward, terminated, done = env_step(env, b, action[b], env_buffers)
             znb, shaped, rh_new, k_new = zb, reward, 0.0, 0
             if kind != NO_SHAPING:  # the transform's step
@@ -77,6 +83,13 @@ def fused_run(env, shaping, learner, action, max_steps_run, records):
                 shaped, rh_new, k_new = shaping_step(
                     potential, b, zb, znb, achieved[b, 0], r_h[b, 0], k[b, 0], z_start[b, 0], reward, done, terminated
                 )
+                if interpolate:  # as the transform's compiled step adds it (add_segment_terms)
+                    before = segment_value(potential.table, potential.ancestors, offset, b, b, zb, near)
+                    after = np.float32(0.0)
+                    if not (potential.zero_terminal and terminated):
+                        segment_closeness(pattern, lo, hi, centre, weight, radius2, succ, measured, b, znb, seen, near)
+                        after = segment_value(potential.table, potential.ancestors, offset, b, b, znb, near)
+                    shaped = np.float32(shaped + (potential.gamma * after - before))
             o_root, z_reset = o_next, 0
             if done:  # the env and the transform reset this learner
                 o_root = env_reset(env, b, env_buffers)

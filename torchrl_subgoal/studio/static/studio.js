@@ -868,7 +868,7 @@ function renderCurves(result) {
   el("text", { x: (L + W - R) / 2, y: H - 4, "text-anchor": "middle", class: "chart-label" }, svg, "episode");
   el("text", { x: 12, y: (T + H - B) / 2, "text-anchor": "middle", class: "chart-label",
     transform: `rotate(-90 12 ${(T + H - B) / 2})` }, svg, "steps per episode (log)");
-  const labels = { shaped: `with the subgoals (${result.method || "HRS"})`, baseline: "no shaping" };
+  const labels = { shaped: `with the subgoals (${result.method || "HRS-D"})`, baseline: "no shaping" };
   series.forEach((s, k) => {
     const band = s.hi.map((v, i) => `${X(i)},${Y(v)}`).concat(s.lo.map((v, i) => `${X(i)},${Y(v)}`).reverse());
     el("polygon", { points: band.join(" "), class: `band ${s.key}` }, svg);
@@ -894,7 +894,7 @@ function renderResult() {
   const r = entry.result;
   const s = r.settings;
   $("result-title").textContent =
-    `Try it: '${r.pattern}' (${r.method || "HRS"}) · ${s.learners} learner${s.learners > 1 ? "s" : ""} × ${s.episodes} episodes · ${r.seconds.toFixed(1)} s`;
+    `Try it: '${r.pattern}' (${r.method || "HRS-D"}) · ${s.learners} learner${s.learners > 1 ? "s" : ""} × ${s.episodes} episodes · ${r.seconds.toFixed(1)} s`;
   $("result-stale").hidden = entry.signature === signature(p);
   renderCurves(r);
   const n = r.shaped.mean.length;
