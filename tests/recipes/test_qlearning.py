@@ -30,7 +30,7 @@ def test_qlearning_recipe_four_rooms_every_method(tmp_path: Path, capsys: pytest
     assert qlearning.main(args) == 0
     assert "| 50 | HRS-mean |" in capsys.readouterr().out
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert set(summary["methods"]) == {"Q", "HRS", "HRS-mean", "NRS"}
+    assert set(summary["methods"]) == {"Q", "HRS-D", "HRS", "HRS-mean", "NRS"}  # the default methods
     assert summary["methods"]["HRS"]["learners"] == 10 and summary["n_episodes"] == 3
     config = json.loads((tmp_path / "config.json").read_text())
     stored = config.get("config", config)
