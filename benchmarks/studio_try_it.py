@@ -1,6 +1,6 @@
 """Wall time of the studio's "Try it" at its default and largest settings, for four-rooms and PinBall.
 
-One run of :func:`torchrl_subgoal.studio.training.try_pattern` (HRS and the
+One run of :func:`torchrl_subgoal.studio.training.try_pattern` (HRS-D, its default, and the
 unshaped learner, both on the fused engine, one torch thread) with a shipped
 participant's pattern: four-rooms participant 7, PinBall participant 1 on the
 simple map (pick-and-place has no "Try it"). The kernels are compiled (and cached) by a
