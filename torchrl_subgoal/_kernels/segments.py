@@ -39,18 +39,12 @@ def _closeness(o, lo, hi, centre, weight, radius2):
 @numba.njit(cache=True, nogil=True, inline="always")
 def segment_closeness(pattern, lo, hi, centre, weight, radius2, succ, measured, b, z, o, near):
     """``near[j]``: the closeness of learner ``b``'s observation ``o`` to each measured region ``j`` that counts
-    from ``z`` (0 for the others and for padding); the region arrays are a
-    :class:`~torchrl_subgoal.subgoals.RegionTables`' (per pattern), ``measured`` is ``[B, J]``."""
+    from ``z`` (0 for the others); the region arrays are a :class:`~torchrl_subgoal.subgoals.RegionTables`'
+    (per pattern), ``measured`` is ``[B, J]`` (never true for padding, a condition or a state)."""
     p = pattern[b] if pattern.shape[0] > 0 else 0
     for j in range(lo.shape[1]):
         near[j] = 0.0
-        if not (succ[p, z, j] and measured[b, j]):
-            continue
-        padding = False
-        for d in range(lo.shape[2]):
-            if not lo[p, j, d] <= hi[p, j, d]:
-                padding = True
-        if not padding:
+        if succ[p, z, j] and measured[b, j]:
             near[j] = _closeness(o, lo[p, j], hi[p, j], centre[p, j], weight[p, j], radius2[p, j])
 
 

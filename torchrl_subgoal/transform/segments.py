@@ -50,8 +50,8 @@ def closeness(tables: SubgoalTables, observation: torch.Tensor) -> torch.Tensor:
         to_centre = weighted.sum(-1).sqrt()
         scale = torch.where(radius > 0, radius, torch.ones_like(radius))
         circle = torch.where(torch.isfinite(radius), ((to_centre - radius).clamp(min=0.0) / scale), 0.0).square()
-    region = tables.measured & (lo <= hi).all(-1)  # padding and conditions have lo = +inf, hi = -inf
-    return torch.where(region, 1.0 / (1.0 + (box + circle).sqrt()), torch.zeros_like(box)).to(torch.float32)
+    # only measured regions: padding, conditions and states are never measured (their lo, hi are never read)
+    return torch.where(tables.measured, 1.0 / (1.0 + (box + circle).sqrt()), torch.zeros_like(box)).to(torch.float32)
 
 
 def segment_term(
