@@ -65,7 +65,14 @@ def test_the_core_imports_no_domain_module() -> None:
 
 
 def test_built_in_domains_load_on_first_use() -> None:
-    assert domains.names()[:5] == ["four_rooms", "four_rooms_step", "mountain_car", "pick_and_place", "pinball"]
+    assert domains.names()[:6] == [
+        "acrobot",
+        "four_rooms",
+        "four_rooms_step",
+        "mountain_car",
+        "pick_and_place",
+        "pinball",
+    ]
     assert domains.get("fetch") is domains.get("pick_and_place")  # what its recipe's results record
     assert domains.part("four_rooms", PaperResults).time_to_threshold[50]["SARSA"].mean == 51.8
     assert domains.get("pinball").make_env(3).batch_size == torch.Size([3])
@@ -77,7 +84,7 @@ def test_a_file_naming_an_unknown_domain_is_one_line(tmp_path: Path) -> None:
     with pytest.raises(
         SubgoalFileError,
         match=r"^\S*elsewhere.yaml: domain: unknown domain 'elsewhere'; "
-        r"known: four_rooms, four_rooms_step, mountain_car, pick_and_place, pinball",
+        r"known: acrobot, four_rooms, four_rooms_step, mountain_car, pick_and_place, pinball",
     ):
         load_patterns(path)
 

@@ -67,7 +67,7 @@ class UnknownDomainError(ValueError):
         >>> get("no_such_domain")  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        torchrl_subgoal.registry.UnknownDomainError: unknown domain 'no_such_domain'; known: four_rooms, ...
+        torchrl_subgoal.registry.UnknownDomainError: unknown domain 'no_such_domain'; known: acrobot, four_rooms, ...
     """
 
 
@@ -133,7 +133,7 @@ def names() -> list[str]:
 
     Examples:
         >>> names()[:4]
-        ['four_rooms', 'four_rooms_step', 'mountain_car', 'pick_and_place']
+        ['acrobot', 'four_rooms', 'four_rooms_step', 'mountain_car']
     """
     declared = list(_plugins())
     return [*declared, *(n for n in _REGISTRY if n not in declared)]
@@ -178,7 +178,7 @@ def having(kind: type) -> list[str]:
     Examples:
         >>> from torchrl_subgoal.training import LearnerDomain
         >>> having(LearnerDomain)
-        ['four_rooms', 'four_rooms_step', 'mountain_car', 'pinball', 'point_maze_medium', 'point_maze_umaze']
+        ['acrobot', 'four_rooms', 'four_rooms_step', 'mountain_car', 'pinball', 'point_maze_medium', 'point_maze_umaze']
     """
     return [n for n in names() if (domain := find(n)) is not None and domain.part(kind) is not None]
 
@@ -196,11 +196,11 @@ def part(name: str, kind: type[T]) -> T:
         >>> part("pick_and_place", LearnerDomain)  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        ValueError: domain 'pick_and_place' registered no LearnerDomain; the domains that did: four_rooms, ...
+        ValueError: domain 'pick_and_place' registered no LearnerDomain; the domains that did: acrobot, four_rooms, ...
         >>> part("cartpole", LearnerDomain)  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        ValueError: unknown domain 'cartpole'; the domains with a LearnerDomain: four_rooms, ...
+        ValueError: unknown domain 'cartpole'; the domains with a LearnerDomain: acrobot, four_rooms, ...
     """
     domain = find(name)
     found = domain.part(kind) if domain is not None else None

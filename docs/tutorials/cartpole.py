@@ -4,8 +4,8 @@ Takes gymnasium's CartPole-v1 as a user's own env (through TorchRL's ``GymWrappe
 writes three ordered subgoals for it as plain functions of the step (keep the pole
 up for 50 steps, then 100, then 200), trains the package's PPO building block
 (``torchrl_subgoal.training.train_ppo``: TorchRL's ``ClipPPOLoss``, ``GAE`` and a
-``Collector``) with and without the learned subgoal potential, and plots both
-learning curves against frames.
+``Collector``) without shaping, with the default learned subgoal potential and with
+its table shaped as learned, and plots the learning curves against frames.
 
     python docs/tutorials/cartpole.py                 # the budget of the docs' figure
     python docs/tutorials/cartpole.py --tiny          # seconds: what CI runs
@@ -71,10 +71,17 @@ def settings(frames: int) -> PPOConfig:
     return PPOConfig(num_envs=8, frames_per_batch=1024, minibatch_size=256, epochs=4, total_frames=frames)
 
 
-def train(shaped: bool, frames: int, seed: int) -> tuple[LearningCurve, list[float]]:
-    """One PPO learner, shaped by the subgoals' learned potential Φ(z) or not: its curve, and Φ(z) at the end."""
-    potential = TabularPotential(series.num_abstract_states)  # Φ(z), learned online as the learner collects
-    shaping = Shaping(series, potential) if shaped else None
+#: The arms compared: no shaping; the default potential; the same table shaped as it is learned.
+ARMS = ("unshaped", "default", "as learned")
+
+
+def train(arm: str, frames: int, seed: int) -> tuple[LearningCurve, list[float]]:
+    """One PPO learner of ``arm``: its curve, and the learned values V(z) at the end (empty when unshaped)."""
+    shaping = None
+    if arm != "unshaped":
+        # the default table starts at a progress prior, is learned online as the learner collects, and shapes each
+        # milestone with the largest value among it and those before it; "as learned" shapes with the table as it is
+        shaping = Shaping(series, TabularPotential.for_subgoals(series, monotone=arm == "default"))
     trained = train_ppo(make_env, settings(frames), shaping=shaping, seeds=[seed], episode_cap=500.0)
     learned = trained.potential()  # the learner's table at the end (None unshaped)
     return trained.curve, learned.table.flatten().tolist() if isinstance(learned, TabularPotential) else []
@@ -96,9 +103,7 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
 
     # --8<-- [start:compare]
-    results = {
-        arm: [train(arm == "shaped", args.frames, seed) for seed in range(args.seeds)] for arm in ("unshaped", "shaped")
-    }
+    results = {arm: [train(arm, args.frames, seed) for seed in range(args.seeds)] for arm in ARMS}
     curves = {arm: [curve for curve, _ in runs] for arm, runs in results.items()}
     lines = [
         f"CartPole-v1, PPO: {args.frames} frames x {args.seeds} learners per arm",
@@ -114,10 +119,11 @@ def main() -> None:
             ax.plot(frames, one, color=line.get_color(), alpha=0.25, linewidth=0.8)
         final = lengths[:, -1]
         lines.append(f"{arm:10s} {', '.join(f'{v:.0f}' for v in final):48s} {final.mean():.0f}")
-    table = np.mean([v for _, v in results["shaped"]], 0)
     names = ["start", *(series.names or ())]
-    values = ", ".join(f"V({n})={v:.1f}" for n, v in zip(names, table, strict=True))
-    lines.append(f"learned values of the shaped learners (mean): {values}")
+    for arm in ARMS[1:]:
+        table = np.mean([v for _, v in results[arm]], 0)
+        values = ", ".join(f"V({n})={v:.1f}" for n, v in zip(names, table, strict=True))
+        lines.append(f"learned values, {arm} (mean): {values}")
     ax.set(xlabel="frames", ylabel="mean episode length (= return)", title="CartPole-v1, PPO")
     ax.legend(loc="upper left")
     fig.tight_layout()

@@ -25,7 +25,8 @@ if __name__ == "__main__":
     torch.set_num_threads(1)
     # leave the start upwards (cell 24), go right past the middle, stand above the goal (cell 35)
     series = SubgoalSeries([State(24), past_halfway, State(35)])
-    shaping = Shaping(series, TabularPotential(series.num_abstract_states), {"observation_key": "observation"})
+    # the default potential: starts at a progress prior over the subgoals, learned online as the learner collects
+    shaping = Shaping(series, TabularPotential.for_subgoals(series), {"observation_key": "observation"})
     frames = 2_048 if os.environ.get("TUTORIAL_TINY") else 40_000
     config = A2CConfig(
         num_envs=8,

@@ -3,8 +3,9 @@
 Appends :class:`~torchrl_subgoal.SubgoalPotentialTransform` to gymnasium's
 CliffWalking (through TorchRL's ``GymEnv``: an env this package knows nothing
 about), writes its subgoals as a built-in predicate and two plain functions,
-trains A2C with a TorchRL ``Collector``, ``GAE`` and ``A2CLoss`` with and
-without the shaping, and plots both learning curves.
+trains A2C with a TorchRL ``Collector``, ``GAE`` and ``A2CLoss`` without shaping,
+with the default potential and with its table shaped as learned, and plots the
+learning curves.
 
     python docs/tutorials/shape_your_env.py                 # the budget of the docs' figure
     python docs/tutorials/shape_your_env.py --tiny          # seconds: what CI runs
@@ -140,15 +141,21 @@ def recent_returns(data: TensorDictBase, recent: list[float]) -> list[float]:
     return (recent + data["next", "episode_return"][done].flatten().tolist())[-32:]
 
 
+#: The arms compared: no shaping; the default potential; the same table shaped as it is learned.
+ARMS = ("unshaped", "default", "as learned")
+
+
 def train(
-    shaped: bool, frames: int, seed: int, num_envs: int = 16, frames_per_batch: int = 256
+    arm: str, frames: int, seed: int, num_envs: int = 16, frames_per_batch: int = 256
 ) -> tuple[np.ndarray, list[float]]:
-    """One A2C learner: ``[batches, 2]`` (frames so far, mean env return of recent episodes), and
-    the learned potential ``Φ(z)`` of each abstract state (empty when unshaped)."""
+    """One A2C learner of ``arm``: ``[batches, 2]`` (frames so far, mean env return of recent episodes),
+    and the learned potential ``Φ(z)`` of each abstract state (empty when unshaped)."""
     torch.manual_seed(seed)
     transform, potential = None, None
-    if shaped:
-        potential = TabularPotential(series.num_abstract_states)  # Φ(z): one table for the batch
+    if arm != "unshaped":
+        # Φ(z), one table for the batch: the default starts at a progress prior, is learned online, and shapes
+        # each z with the largest value among it and the z before it; "as learned" shapes with the table as it is
+        potential = TabularPotential.for_subgoals(series, monotone=arm == "default")
         transform = SubgoalPotentialTransform(  # reward ← r + γΦ(z') − Φ(z); r stays under "env_reward"
             series,
             potential,
@@ -182,7 +189,7 @@ def returns_axes(ax: Axes, title: str) -> None:
     ax.axhline(-13, color="grey", linestyle=":", label="optimal (-13)")
     ax.set_yscale("symlog", linthresh=10)
     ax.set(xlabel="frames", ylabel="return of recent episodes (env reward)", title=title)
-    ax.legend(loc="lower right")
+    ax.legend(loc="upper left")
 
 
 def save(fig: Figure, lines: list[str], stem: Path) -> None:
@@ -213,9 +220,7 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
 
     # --8<-- [start:compare]
-    results = {
-        arm: [train(arm == "shaped", args.frames, seed) for seed in range(args.seeds)] for arm in ("unshaped", "shaped")
-    }
+    results = {arm: [train(arm, args.frames, seed) for seed in range(args.seeds)] for arm in ARMS}
     curves = {arm: [curve for curve, _ in runs] for arm, runs in results.items()}
     lines = [
         f"CliffWalking-v1, A2C: {args.frames} frames x {args.seeds} learners per arm",
@@ -233,10 +238,9 @@ def main() -> None:
         to_50 = ", ".join("never" if math.isnan(f) else f"{f:.0f}" for f in (frames_to(r, -50) for r in runs))
         final = f"{mean[-1]:.1f}" if mean.size else "no episode ended"
         lines.append(f"{arm:10s} {to_50:44s} {final}")
-    phi = np.mean([p for _, p in results["shaped"]], 0)
-    lines.append(
-        "learned potential, mean of the shaped learners: " + ", ".join(f"Φ({z})={v:.1f}" for z, v in enumerate(phi))
-    )
+    for arm in ARMS[1:]:
+        phi = np.mean([p for _, p in results[arm]], 0)
+        lines.append(f"learned potential, {arm} (mean): " + ", ".join(f"Φ({z})={v:.1f}" for z, v in enumerate(phi)))
     returns_axes(ax, "CliffWalking-v1, A2C")
     # --8<-- [end:compare]
     save(fig, lines, args.out / "shape_your_env")

@@ -15,8 +15,20 @@ TUTORIALS = sorted((DOCS / "tutorials").glob("*.py"))
 #: what each script must print at any budget (its output file holds the same text)
 EXPECTED = {
     "adding_a_domain": [r"^HRS: mean steps per episode \d", r"^SARSA: mean steps per episode \d"],
-    "cartpole": [r"^unshaped +\d", r"^shaped +\d", r"^learned values of the shaped learners \(mean\): V\(start\)="],
-    "shape_your_env": [r"^unshaped ", r"^shaped ", r"learned potential, mean of the shaped learners: Φ\(0\)="],
+    "cartpole": [
+        r"^unshaped +\d",
+        r"^default +\d",
+        r"^as learned +\d",
+        r"^learned values, default \(mean\): V\(start\)=",
+        r"^learned values, as learned \(mean\): V\(start\)=",
+    ],
+    "shape_your_env": [
+        r"^unshaped ",
+        r"^default ",
+        r"^as learned ",
+        r"learned potential, default \(mean\): Φ\(0\)=",
+        r"learned potential, as learned \(mean\): Φ\(0\)=",
+    ],
     "quickstart": [r"^unshaped: \d+ episodes", r"^shaped: \d+ episodes"],
     "train_the_potential": [
         r"^first batch: 256 steps, \d+ SMDP transitions",

@@ -119,9 +119,9 @@ def test_continuous_learners_on_point_maze(tmp_path: Path, algo: str, batch: str
         (["--algo", "dqn", "--clip-epsilon", "0.1"], "--clip-epsilon: a setting of ppo, not of dqn"),
         (
             ["--domain", "pick_and_place"],
-            "--domain: domain 'pick_and_place' registered no LearnerDomain; the domains that did: four_rooms, ",
+            "--domain: domain 'pick_and_place' registered no LearnerDomain; the domains that did: acrobot, four_rooms,",
         ),
-        (["--domain", "chess"], "--domain: unknown domain 'chess'; choose from four_rooms, four_rooms_step, "),
+        (["--domain", "chess"], "--domain: unknown domain 'chess'; choose from acrobot, four_rooms, four_rooms_step, "),
         (
             ["--algo", "dqn", "--domain", "mountain_car", "--methods", "DQN,SARSA-RS"],
             "--methods: SARSA-RS needs an aggregation g(s), which mountain_car does not register",

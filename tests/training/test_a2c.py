@@ -180,6 +180,17 @@ def test_naive_potential_is_not_trained() -> None:
     assert len(curve.frames) == 2
 
 
+def test_without_an_entropy_bonus_the_losses_log_zero_entropy(tmp_path: Path) -> None:
+    """TorchRL's A2CLoss writes no entropy loss without an entropy bonus; a batch of learners still trains."""
+    config = A2CConfig(features="one_hot", hidden=(), total_frames=512, entropy_coeff=0.0)
+    loggers = [experiment_logger(tmp_path, f"A2C_{seed}") for seed in (0, 1)]
+    trained = train_a2c(four_rooms_env, config, seeds=[0, 1], loggers=loggers)
+    assert [len(curve.frames) for curve in trained.curves] == [2, 2]
+    for logged in tmp_path.rglob("loss_entropy.csv"):
+        assert [float(line.split(",")[-1]) for line in logged.read_text().split()] == [0.0, 0.0]
+    assert len(list(tmp_path.rglob("loss_entropy.csv"))) == 2
+
+
 @pytest.mark.parametrize("bad", [{"num_envs": 0}, {"frames_per_batch": 100}, {"env_workers": 3}, {"features": "cnn"}])
 def test_bad_settings(bad: dict) -> None:
     with pytest.raises(ValueError):
@@ -191,11 +202,13 @@ def test_a2c_domains_come_from_the_registry() -> None:
     assert domains.part("four_rooms", A2CDomain).name == "four_rooms"
     assert domains.part("pinball", A2CDomain).a2c.features == "fourier"
     with pytest.raises(
-        ValueError, match=r"^unknown domain 'chess'; the domains with a LearnerDomain: four_rooms, four_rooms_step, "
+        ValueError,
+        match=r"^unknown domain 'chess'; the domains with a LearnerDomain: acrobot, four_rooms, four_rooms_step, ",
     ):
         domains.part("chess", A2CDomain)
     with pytest.raises(
-        ValueError, match=r"^domain 'pick_and_place' registered no LearnerDomain; the domains that did: four_rooms, "
+        ValueError,
+        match=r"^domain 'pick_and_place' registered no LearnerDomain; the domains that did: acrobot, four_rooms, ",
     ):
         domains.part("pick_and_place", A2CDomain)
 

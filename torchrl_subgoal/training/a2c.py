@@ -108,6 +108,7 @@ class A2CUpdate:
         self.loss = A2CLoss(
             actor,
             critic,
+            entropy_bonus=config.entropy_coeff > 0,  # without one, TorchRL writes no "loss_entropy"
             entropy_coeff=config.entropy_coeff,
             critic_coeff=config.critic_coeff,
             loss_critic_type="l2",
@@ -122,7 +123,8 @@ class A2CUpdate:
         with torch.no_grad():
             self.advantage(label_learners(data, k))
         losses = self.loss(data)
-        means = {name: learner_means(losses[name], k) for name in self.NAMES}
+        none = torch.zeros(k, device=data.device)  # a loss TorchRL did not write (no entropy bonus)
+        means = {name: learner_means(losses.get(name, none), k) for name in self.NAMES}
         self.optimizer.zero_grad(set_to_none=True)
         torch.stack([m.sum() for m in means.values()]).sum().backward()
         if self.max_grad_norm:

@@ -879,7 +879,8 @@ function renderCurves(result) {
     el("text", { x: lx + 24, y: 14, class: "chart-label" }, svg, labels[s.key]);
   });
   if (window > 1) {
-    el("text", { x: W - R, y: 14, "text-anchor": "end", class: "chart-label" }, svg, `moving mean of ${window} episodes`);
+    // under the axis, right-aligned: the legend takes the top row
+    el("text", { x: W - R, y: H - 4, "text-anchor": "end", class: "chart-label" }, svg, `moving mean of ${window} episodes`);
   }
 }
 
