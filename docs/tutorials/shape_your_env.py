@@ -147,9 +147,10 @@ ARMS = ("unshaped", "default", "as learned")
 
 def train(
     arm: str, frames: int, seed: int, num_envs: int = 16, frames_per_batch: int = 256
-) -> tuple[np.ndarray, list[float]]:
+) -> tuple[np.ndarray, list[float], list[float]]:
     """One A2C learner of ``arm``: ``[batches, 2]`` (frames so far, mean env return of recent episodes),
-    and the learned potential ``Φ(z)`` of each abstract state (empty when unshaped)."""
+    and the learned potential ``Φ(z)`` of each abstract state after a sixth of the frames and at the end
+    (empty when unshaped)."""
     torch.manual_seed(seed)
     transform, potential = None, None
     if arm != "unshaped":
@@ -170,15 +171,17 @@ def train(
     )
     curve: list[tuple[int, float]] = []
     recent: list[float] = []
-    seen = 0
+    seen, early = 0, list[float]()
     for data in collector:
         update(data)
         recent = recent_returns(data, recent)
         seen += data.numel()
         curve.append((seen, float(np.mean(recent)) if recent else math.nan))
+        if potential is not None and not early and seen >= frames // 6:
+            early = potential.table.flatten().tolist()
     collector.shutdown()
     phi = potential.table.flatten().tolist() if potential is not None else []
-    return np.asarray(curve), phi
+    return np.asarray(curve), early, phi
 
 
 # --8<-- [end:train]
@@ -221,7 +224,7 @@ def main() -> None:
 
     # --8<-- [start:compare]
     results = {arm: [train(arm, args.frames, seed) for seed in range(args.seeds)] for arm in ARMS}
-    curves = {arm: [curve for curve, _ in runs] for arm, runs in results.items()}
+    curves = {arm: [curve for curve, _, _ in runs] for arm, runs in results.items()}
     lines = [
         f"CliffWalking-v1, A2C: {args.frames} frames x {args.seeds} learners per arm",
         "arm        frames to a return > -50 (per learner)      final return (mean of learners)",
@@ -239,8 +242,13 @@ def main() -> None:
         final = f"{mean[-1]:.1f}" if mean.size else "no episode ended"
         lines.append(f"{arm:10s} {to_50:44s} {final}")
     for arm in ARMS[1:]:
-        phi = np.mean([p for _, p in results[arm]], 0)
-        lines.append(f"learned potential, {arm} (mean): " + ", ".join(f"Φ({z})={v:.1f}" for z, v in enumerate(phi)))
+        for when, tables in (
+            (f"at {args.frames // 6} frames", [early for _, early, _ in results[arm]]),
+            ("at the end", [end for _, _, end in results[arm]]),
+        ):
+            phi = np.mean(tables, 0)
+            values = ", ".join(f"Φ({z})={v:.1f}" for z, v in enumerate(phi))
+            lines.append(f"learned potential, {arm}, {when} (mean): {values}")
     returns_axes(ax, "CliffWalking-v1, A2C")
     # --8<-- [end:compare]
     save(fig, lines, args.out / "shape_your_env")

@@ -26,8 +26,8 @@ EXPECTED = {
         r"^unshaped ",
         r"^default ",
         r"^as learned ",
-        r"learned potential, default \(mean\): Φ\(0\)=",
-        r"learned potential, as learned \(mean\): Φ\(0\)=",
+        r"learned potential, default, at \d+ frames \(mean\): Φ\(0\)=",
+        r"learned potential, as learned, at the end \(mean\): Φ\(0\)=",
     ],
     "quickstart": [r"^unshaped: \d+ episodes", r"^shaped: \d+ episodes"],
     "train_the_potential": [
