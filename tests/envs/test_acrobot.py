@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 import torch
-from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 
-from torchrl_subgoal import SubgoalPotentialTransform, TabularPotential
 from torchrl_subgoal.envs.acrobot import ENV_ID, MAX_EPISODE_STEPS, acrobot_subgoals, make_acrobot, tip_height
 from torchrl_subgoal.envs.gym_batch import require_gymnasium
+
+from .trajectory import subgoal_path
 
 
 def test_env_steps_with_a_step_cost_and_truncates_at_500() -> None:
@@ -41,21 +41,10 @@ def test_tip_height_is_gymnasiums_goal_test() -> None:
 
 def _z(angles: list[float]) -> list[int]:
     """z along hand-made observations with the first link at ``angles`` (degrees from hanging down), the
-    second in line with it, through the transform's forward."""
-    theta = torch.tensor(angles, dtype=torch.float32) * math.pi / 180
+    second in line with it, at rest."""
+    theta = torch.tensor(angles) * math.pi / 180
     zero = torch.zeros_like(theta)
-    obs = torch.stack([theta.cos(), theta.sin(), zero + 1, zero, zero, zero], -1)
-    n = len(angles) - 1
-    false = torch.zeros(1, n, 1, dtype=torch.bool)
-    transform = SubgoalPotentialTransform(acrobot_subgoals(), TabularPotential(3), gamma=0.99)
-    data = TensorDict(
-        {
-            "observation": obs[None, :-1],
-            "next": {"observation": obs[None, 1:], "reward": -torch.ones(1, n, 1), "done": false, "terminated": false},
-        },
-        [1, n],
-    )
-    return transform(data)["next", "subgoal_index"].flatten().tolist()
+    return subgoal_path(acrobot_subgoals(), torch.stack([theta.cos(), theta.sin(), zero + 1, zero, zero, zero], -1))
 
 
 def test_subgoals_on_hand_made_observations() -> None:

@@ -5,10 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 
-from torchrl_subgoal import SubgoalPotentialTransform, TabularPotential
 from torchrl_subgoal.envs.gym_batch import require_gymnasium
 from torchrl_subgoal.envs.mountain_car import (
     ENV_ID,
@@ -16,6 +14,8 @@ from torchrl_subgoal.envs.mountain_car import (
     make_mountain_car,
     mountain_car_subgoals,
 )
+
+from .trajectory import subgoal_path
 
 
 def test_env_steps_with_a_step_cost_and_truncates_at_200() -> None:
@@ -35,20 +35,8 @@ def test_env_steps_with_a_step_cost_and_truncates_at_200() -> None:
 
 
 def _z(points: list[tuple[float, float]]) -> list[int]:
-    """z along hand-made (position, velocity) observations, through the transform's forward."""
-    series = mountain_car_subgoals()
-    transform = SubgoalPotentialTransform(series, TabularPotential(3), gamma=0.98)
-    obs = torch.tensor(points, dtype=torch.float32)
-    n = len(points) - 1
-    false = torch.zeros(1, n, 1, dtype=torch.bool)
-    data = TensorDict(
-        {
-            "observation": obs[None, :-1],
-            "next": {"observation": obs[None, 1:], "reward": -torch.ones(1, n, 1), "done": false, "terminated": false},
-        },
-        [1, n],
-    )
-    return transform(data)["next", "subgoal_index"].flatten().tolist()
+    """z along hand-made (position, velocity) observations."""
+    return subgoal_path(mountain_car_subgoals(), torch.tensor(points))
 
 
 def test_subgoals_on_hand_made_observations() -> None:

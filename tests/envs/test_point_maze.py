@@ -7,7 +7,6 @@ import math
 
 import pytest
 import torch
-from tensordict import TensorDict
 from torchrl.envs import TransformedEnv
 
 pytest.importorskip("gymnasium_robotics")
@@ -23,6 +22,8 @@ from torchrl_subgoal.envs.point_maze import (
     point_maze_task,
     waypoint_patterns,
 )
+
+from .trajectory import subgoal_path
 
 
 def _goal(env) -> torch.Tensor:  # type: ignore[no-untyped-def]
@@ -67,20 +68,9 @@ def test_maze_maps_mark_the_route_and_bad_input_is_named() -> None:
 
 
 def _through(maze: str, points: list[tuple[float, float]]) -> list[int]:
-    """z along a hand-made trajectory of positions (the transform's forward on stored data)."""
+    """z along a hand-made trajectory of positions."""
     series = waypoint_patterns(maze)[ROUTES[maze][0].name]
-    transform = SubgoalPotentialTransform(series, TabularPotential(series.num_abstract_states), gamma=0.99)
-    obs = torch.tensor([[x, y, 0.0, 0.0] for x, y in points], dtype=torch.float32)
-    n = len(points) - 1
-    false = torch.zeros(1, n, 1, dtype=torch.bool)
-    data = TensorDict(
-        {
-            "observation": obs[None, :-1],
-            "next": {"observation": obs[None, 1:], "reward": torch.zeros(1, n, 1), "done": false, "terminated": false},
-        },
-        [1, n],
-    )
-    return transform(data)["next", "subgoal_index"].flatten().tolist()
+    return subgoal_path(series, torch.tensor([[x, y, 0.0, 0.0] for x, y in points]))
 
 
 @pytest.mark.parametrize("maze", ["umaze", "medium"])

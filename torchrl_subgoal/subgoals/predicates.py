@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import importlib
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -200,6 +200,21 @@ class Box(Predicate):
     def to_dict(self) -> dict[str, Any]:
         margin: float | list[float] = self.margin[0] if len(set(self.margin)) == 1 else list(self.margin)
         return {"box": {"centre": list(self.centre), "margin": margin, "dims": list(self.box_dims)}}
+
+    def outside(self, bounds: Sequence[tuple[float, float]], names: Sequence[str]) -> str | None:
+        """Why the box misses an observation whose entry ``d`` lies in ``bounds[d]`` (named ``names[d]``), or
+        ``None`` when it overlaps every entry it covers (its dims must index ``bounds``).
+
+        Examples:
+            >>> Box((2.0,), (0.5,), (1,)).outside([(-1.0, 1.0), (-1.0, 1.0)], ["x", "y"])
+            'y: the box [1.5, 2.5] lies outside [-1.0, 1.0]'
+        """
+        for dim, centre, margin in zip(self.box_dims, self.centre, self.margin, strict=True):
+            low, high = bounds[dim]
+            if centre + margin < low or centre - margin > high:
+                span = f"[{centre - margin:.3g}, {centre + margin:.3g}]"
+                return f"{names[dim]}: the box {span} lies outside [{low}, {high}]"
+        return None
 
 
 def _import_path(fn: Any) -> str | None:

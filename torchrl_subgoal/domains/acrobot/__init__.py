@@ -2,9 +2,8 @@
 
 Everything the package knows about Acrobot beyond the env itself, in one place;
 :mod:`torchrl_subgoal.domains` imports this module the first time ``"acrobot"`` is
-looked up. Needs ``gymnasium`` only when an env is made. The report map draws the
-subgoals as bands of the first link's angle over ``(cos θ₁, sin θ₁)``, the circle
-the joint moves on.
+looked up. Needs ``gymnasium`` only when an env is made. The report map draws each
+subgoal over ``cos θ₁`` as the arc of the circle the joint moves on that it admits.
 """
 
 from __future__ import annotations
@@ -40,11 +39,7 @@ def check_subgoal(predicate: Predicate) -> str | None:
         return f"Acrobot subgoals are boxes over the observation, not {predicate.kind}"
     if not set(predicate.box_dims) <= set(range(len(BOUNDS))):
         return f"an Acrobot box covers observation entries 0 to 5, not dims {list(predicate.box_dims)}"
-    for dim, centre, margin in zip(predicate.box_dims, predicate.centre, predicate.margin, strict=True):
-        low, high = BOUNDS[dim]
-        if centre + margin < low or centre - margin > high:
-            return f"{NAMES[dim]}: the box [{centre - margin:.3g}, {centre + margin:.3g}] lies outside [{low}, {high}]"
-    return None
+    return predicate.outside(BOUNDS, NAMES)
 
 
 def _draw_map(ax: Any, patterns: Mapping[str, Any], options: Mapping[str, Any]) -> None:
@@ -53,7 +48,8 @@ def _draw_map(ax: Any, patterns: Mapping[str, Any], options: Mapping[str, Any]) 
     import numpy as np
 
     angle = np.linspace(-math.pi, math.pi, 361)
-    ax.plot(np.sin(angle), -np.cos(angle), color="lightgrey", lw=1)
+    cos = np.cos(angle)
+    ax.plot(np.sin(angle), -cos, color="lightgrey", lw=1)
     ax.plot([0, 0], [0, -1], color="grey", lw=3)  # the first link hanging at rest
     ax.axhline(1.0, color="tab:red", ls="--")
     ax.annotate("goal", (-1.4, 1.05), color="tab:red", va="bottom", fontsize="small")
@@ -61,7 +57,6 @@ def _draw_map(ax: Any, patterns: Mapping[str, Any], options: Mapping[str, Any]) 
         if list(box.box_dims) != [0]:
             continue
         low, high = box.centre[0] - box.margin[0], box.centre[0] + box.margin[0]
-        cos = np.cos(angle)
         inside = (cos >= low) & (cos <= high)
         radius = 1.0 + 0.08 * (index + 1)
         ax.plot(

@@ -41,12 +41,7 @@ def check_subgoal(predicate: Predicate) -> str | None:
         return f"MountainCar subgoals are boxes over (position, velocity), not {predicate.kind}"
     if not set(predicate.box_dims) <= {0, 1}:
         return f"a MountainCar box covers position (0) and velocity (1), not dims {list(predicate.box_dims)}"
-    for dim, centre, margin in zip(predicate.box_dims, predicate.centre, predicate.margin, strict=True):
-        low, high = BOUNDS[dim]
-        if centre + margin < low or centre - margin > high:
-            name = ("position", "velocity")[dim]
-            return f"{name}: the box [{centre - margin:.3g}, {centre + margin:.3g}] lies outside [{low}, {high}]"
-    return None
+    return predicate.outside(BOUNDS, ("position", "velocity"))
 
 
 def _draw_map(ax: Any, patterns: Mapping[str, Any], options: Mapping[str, Any]) -> None:
