@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import pytest
 import torch
-from torchrl.envs import TransformedEnv
+from tensordict.nn import TensorDictModule
+from torchrl.envs import Compose, StepCounter, TransformedEnv
+from torchrl.objectives.value import GAE
 
 from tests.line_env import LineEnv
 from torchrl_subgoal import (
@@ -83,6 +85,38 @@ def test_an_interpolating_potential_shapes_by_hand() -> None:
     env_reward = data["next", "env_reward"].reshape(-1)
     shaping = torch.tensor(shaped) - env_reward
     assert float((shaping * 0.9 ** torch.arange(4)).sum()) == pytest.approx(-0.25)
+
+
+def test_an_actor_critic_shaped_gets_the_advantages_of_its_critic_offset_by_the_potential() -> None:
+    """GAE over the shaped rewards with a critic ``V`` is GAE over the env's rewards with the critic ``V + Φ``, at
+    every step, time-outs and the goal included: for A2C and PPO, potential-based shaping offsets the critic (where
+    it starts and what it can represent) and changes nothing else (docs/does_it_help.md)."""
+    env = TransformedEnv(
+        LineEnv(4, length=4, step_reward=-1.0, goal_reward=10.0), Compose(StepCounter(6), line_transform())
+    )
+    torch.manual_seed(0)
+    data = env.rollout(40, policy=lambda td: td.set("action", torch.randint(0, 2, td.batch_size)),
+                       break_when_any_done=False)  # fmt: skip
+    assert data["next", "terminated"].any() and data["next", "truncated"].any()
+    own = torch.randn(5, 2)  # the critic's V(x, z)
+
+    def potential(x: torch.Tensor, z: torch.Tensor) -> torch.Tensor:  # V = [0, 1]; the subgoal: cell 2, half-width 0.5
+        d = (1.5 - x.float()).maximum(x.float() - 2.5).clamp(min=0.0) / 0.5
+        return torch.where(z == 0, 1 / (1 + d), 1.0)
+
+    def critic(offset: bool) -> TensorDictModule:
+        def value(x: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+            z = z.squeeze(-1)
+            return (own[x, z] + (potential(x, z) if offset else 0.0)).unsqueeze(-1)
+
+        return TensorDictModule(value, in_keys=["observation", "subgoal_index"], out_keys=["state_value"])
+
+    shaped = GAE(gamma=0.9, lmbda=0.8, value_network=critic(False))(data.clone())["advantage"]
+    unshaped = data.clone()
+    unshaped["next", "reward"] = data["next", "env_reward"]
+    offset = GAE(gamma=0.9, lmbda=0.8, value_network=critic(True))(unshaped)["advantage"]
+    assert torch.allclose(shaped, offset, atol=1e-5)
+    assert not torch.allclose(shaped, GAE(gamma=0.9, lmbda=0.8, value_network=critic(False))(unshaped)["advantage"])
 
 
 def test_stored_steps_shape_as_the_env_did() -> None:

@@ -34,6 +34,16 @@ def test_time_outs_all_at_once_read_as_no_shorter_than_the_thresholds(learner: s
     assert window >= 200 and lowest > max(domain.thresholds)
 
 
+@pytest.mark.parametrize("learner", ["a2c", "ppo"])
+def test_the_actor_critics_learn_returns_of_order_one(learner: str) -> None:
+    """Adam moves each weight of the linear critic by about its learning rate per step, so the −1 step cost is
+    scaled by 1 − γ: the discounted returns lie in [−1, 0] (unscaled, a critic learning returns down to −87 got no
+    further than −15 in the budget)."""
+    config = domains.part("mountain_car", LearnerDomain).defaults[learner]
+    assert config.reward_scale / (1 - config.gamma) == pytest.approx(1.0)
+    assert (config.features, config.hidden) == ("fourier", ())
+
+
 @pytest.mark.parametrize(
     ("predicate", "message"),
     [

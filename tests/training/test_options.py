@@ -45,11 +45,12 @@ def _td(obs: torch.Tensor, z: int) -> TensorDict:
     return TensorDict({"observation": obs, "subgoal_index": torch.full((obs.shape[0], 1), z)}, [obs.shape[0]])
 
 
-@pytest.mark.parametrize(("features", "hidden"), [("fourier", ()), ("mlp", ()), ("mlp", (8,))])
+@pytest.mark.parametrize(("features", "hidden"), [("fourier", ()), ("mlp", ()), ("fourier", (8,)), ("mlp", (8,))])
 def test_a2c_and_ppo_networks_read_z_one_hot(features: str, hidden: tuple[int, ...]) -> None:
     """With subgoal_states, policy and value network read "subgoal_index": the same observation with
-    another z gives other outputs. Outside one-hot features with no hidden layer, z is concatenated to
-    the features: a linear learner adds one term per z (the form of V(s) − Φ(z))."""
+    another z gives other outputs. With hidden layers z is concatenated to the features; a linear network
+    reads their product, one linear function of the features per z, so that a shaped critic can learn
+    V(s) − Φ(s, z) of a potential that also varies within a segment, not only V(s) − Φ(z)."""
     env = Corridor(2)
     actor, critic = actor_critic(env, features=features, hidden=hidden, fourier_order=2, subgoal_states=3)
     assert list(actor.in_keys) == ["observation", "subgoal_index"] and critic.in_keys == [
@@ -58,14 +59,15 @@ def test_a2c_and_ppo_networks_read_z_one_hot(features: str, hidden: tuple[int, .
     ]
     first = next(m for m in critic.module.modules() if isinstance(m, torch.nn.Linear))
     n_features = 3 if features == "fourier" else 1  # Fourier order 2 over one entry: cos(0), cos(πx), cos(2πx)
-    assert first.in_features == n_features + 3
+    assert first.in_features == (n_features + 3 if hidden else n_features * 3)
     _randomise_heads(critic)
     obs = torch.tensor([[0.5], [0.5]])
     values = [critic(_td(obs, z))["state_value"][0].item() for z in range(3)]
     assert len(set(values)) == 3
-    if not hidden:  # V(s, z) = w·φ(s) + u_z + b: moving between z changes the value by u_z' − u_z only
-        weight = first.weight.detach()[0]
-        assert values[2] - values[1] == pytest.approx(float(weight[n_features + 2] - weight[n_features + 1]), abs=1e-6)
+    if not hidden:  # V(s, z) = w_z·φ(s) + b: each z its own weights (features entry i of z at i·3 + z)
+        weight, bias = first.weight.detach()[0], float(first.bias.detach()[0])
+        phi = critic.module[0].features(obs)[0]  # the features before the join
+        assert values[1] == pytest.approx(float(weight[1::3] @ phi) + bias, abs=1e-5)
 
 
 def test_one_hot_features_without_hidden_layers_read_a_table_over_s_and_z() -> None:

@@ -138,17 +138,24 @@ def trunk(
     activation: type[nn.Module] = nn.Tanh,
     subgoal_states: int = 0,
 ) -> tuple[nn.Module, int]:
-    """The input layers for an observation spec (with ``subgoal_states``, the one-hot ``z`` joined:
-    their product for one-hot features and no hidden layer, a table over ``(s, z)``; else concatenated),
-    then the hidden layers: a module over ``observation`` (or ``(observation, z)``) and its output size.
+    """The input layers for an observation spec (with ``subgoal_states``, the one-hot ``z`` joined: with no
+    hidden layer, their product, one linear function of the features per ``z`` (over one-hot features, a table
+    over ``(s, z)``); with hidden layers, concatenated), then the hidden layers: a module over ``observation``
+    (or ``(observation, z)``) and its output size.
+
+    A shaped critic learns ``V(s) − Φ(s, z)``. Concatenated, ``z`` adds one constant per abstract state to a
+    linear critic's output, which cancels a potential over ``z`` alone but not one that also varies within a
+    segment (an interpolating table); the product cancels both (docs/shaping_defaults.md).
 
     Examples:
         >>> body, size = trunk(Bounded(0.0, 1.0, shape=(2,)), "fourier", (16,), 1, subgoal_states=3)
         >>> size, body(torch.rand(5, 2), torch.zeros(5, 1, dtype=torch.long)).shape
         (16, torch.Size([5, 16]))
+        >>> trunk(Bounded(0.0, 1.0, shape=(2,)), "fourier", (), 1, subgoal_states=3)[1]  # 4 features per z
+        12
     """
     first, size = input_layer(spec, features, order)
-    product = not hidden and features == "one_hot"
+    product = not hidden
     if subgoal_states:
         size = SubgoalInput.size(size, subgoal_states, product=product)
     layers: list[nn.Module] = []

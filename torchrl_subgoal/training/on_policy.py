@@ -55,8 +55,8 @@ def actor_critic(
         hidden: hidden layer sizes (``tanh``).
         fourier_order: order of the Fourier basis.
         subgoal_states: if positive, both networks also read ``"subgoal_index"`` (``z``, one-hot
-            over this many abstract states): joined to the features as their product for one-hot
-            features with ``hidden=()`` (a table over ``(s, z)``), else concatenated.
+            over this many abstract states): joined to the features as their product with ``hidden=()``
+            (one linear function per ``z``; over one-hot features a table over ``(s, z)``), else concatenated.
         actor_sees_subgoal: ``False``: only the value network reads ``z``; the policy reads the observation.
 
     Examples:

@@ -28,7 +28,8 @@ class SubgoalInput(nn.Module):
     a shaped value ``V(s) − Φ(z)``), or takes their outer product
     (``product=True``: one copy of the features per ``z``, one weight set per
     abstract state, each trained only on the steps spent in it; over one-hot
-    states, a table over ``(s, z)``).
+    states, a table over ``(s, z)``; a linear critic can then also learn
+    ``V(s) − Φ(s, z)`` of a potential that varies within a segment).
 
     Args:
         num_states: abstract states ``z`` can take (``series.num_abstract_states``).
