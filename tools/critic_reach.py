@@ -19,25 +19,11 @@ import sys
 from collections.abc import Sequence
 
 import torch
+from torchrl.objectives.value.functional import reward2go
 
 from torchrl_subgoal import domains
 from torchrl_subgoal.training import LearnerDomain, train_a2c, train_ppo
 from torchrl_subgoal.training.stack import per_learner
-
-
-def discounted_returns(reward: torch.Tensor, done: torch.Tensor, gamma: float) -> torch.Tensor:
-    """The discounted return from every step to the end of its episode (or of the rollout), ``[B, T]``.
-
-    Examples:
-        >>> discounted_returns(torch.tensor([[1.0, 1.0, 1.0]]), torch.tensor([[False, True, False]]), 0.5)
-        tensor([[1.5000, 1.0000, 1.0000]])
-    """
-    out = torch.zeros_like(reward)
-    after = torch.zeros(reward.shape[0])
-    for t in reversed(range(reward.shape[1])):
-        after = reward[:, t] + gamma * after * (~done[:, t]).to(reward.dtype)
-        out[:, t] = after
-    return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -60,8 +46,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         with torch.no_grad():
             data = env.rollout(200, per_learner(trained.modules["actor"], k), break_when_any_done=False)
             values = per_learner(trained.modules["critic"], k)(data.clone())["state_value"].squeeze(-1)
-        reward = data["next", "reward"].squeeze(-1) * config.reward_scale
-        returns = discounted_returns(reward, data["next", "done"].squeeze(-1), config.gamma)
+        reward = data["next", "reward"] * config.reward_scale  # [envs, T, 1]
+        returns = reward2go(reward, data["next", "done"], config.gamma)  # TorchRL's: restarts at each episode end
         last = trained.curves[k].episode_length[-1]
         print(
             f"learner {k}: last recorded episode {last:.0f} steps; critic mean {values.mean():.2f} "

@@ -80,7 +80,7 @@ LEARNERS = LearnerDomain(
         # A linear policy and critic over order-3 Fourier features of (position, velocity) scaled to the observation's
         # bounds: an MLP over the raw observation (velocity within ±0.07) reached the flag with no method in 500,000
         # frames (docs/does_it_help.md). The rewards are scaled by 1 - γ, so returns lie in [-1, 0]: Adam moves each
-        # weight by about its learning rate per step, and a critic learning returns of -100 got no further than -15
+        # weight by about its learning rate per step, and a critic learning returns down to -87 got no further than -15
         # in the budget (rl-baselines3-zoo normalises these rewards). As in the zoo, A2C has no entropy bonus.
         "a2c": A2CConfig(
             num_envs=16,
