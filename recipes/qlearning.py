@@ -30,6 +30,7 @@ gives episodes to each threshold of steps per episode, the final steps and the t
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -128,6 +129,12 @@ class Config(RecipeConfig):
     agent_state: str = setting("s,z", "what the shaped learners' tables are over", choices=["s,z", "s"])
     expectile: float = setting(0.9, "HRS: τ of the potential's target (HRS-mean: 0.5)")
     bootstrap_truncated: bool = setting(False, "HRS: train V(z) on a time-out inside z (HRS-mean: true)")
+    prior_weight: float = setting(
+        0.0, "HRS, HRS-D: the table's start counts as this many transitions, handed over as V(z) learns (0: none)"
+    )
+    achievement_reward: float = setting(
+        0.0, "HRS, HRS-D: added to the potential's target per subgoal achieved, in the env's reward units (0: none)"
+    )
     zero_terminal_potential: bool = setting(True, "HRS, HRS-mean: Φ = 0 at the goal")
     start_potential: str = setting(
         "nonpositive", "HRS, HRS-mean: the level of Φ", choices=["value", "zero", "nonpositive"]
@@ -148,6 +155,9 @@ class Config(RecipeConfig):
         check(self.eta >= 0.0, "eta", f"must be >= 0, got {self.eta}")
         check(self.progress_scale >= 0.0, "progress_scale", f"must be >= 0, got {self.progress_scale}")
         check(0.0 < self.expectile < 1.0, "expectile", f"must lie strictly between 0 and 1, got {self.expectile}")
+        check(self.prior_weight >= 0.0, "prior_weight", f"must be >= 0 (transitions), got {self.prior_weight}")
+        finite = math.isfinite(self.achievement_reward)
+        check(finite, "achievement_reward", f"must be finite, got {self.achievement_reward}")
         if self.domain == "taxi":
             check_unused(
                 self, ["reward"], "applies to --domain four_rooms and sparse_rooms only (taxi's rewards are its own)"
@@ -253,7 +263,11 @@ def plan(cfg: Config) -> Plan:
     name = cfg.domain if cfg.domain == "taxi" else f"{cfg.domain}_{cfg.reward.replace('-', '_')}"
     config.update(
         domain=cfg.domain,
-        target={"expectile": cfg.expectile, "bootstrap_truncated": cfg.bootstrap_truncated},
+        target={
+            "expectile": cfg.expectile,
+            "bootstrap_truncated": cfg.bootstrap_truncated,
+            **{k: getattr(cfg, k) for k in ("prior_weight", "achievement_reward") if getattr(cfg, k)},
+        },
         **sweep_entries(cfg, subgoal_file, patterns),
         report={
             "metric": "steps",

@@ -8,7 +8,7 @@ from tensordict import TensorDict
 from torchrl.objectives.utils import ValueEstimators
 from torchrl.objectives.value import TD0Estimator
 
-from torchrl_subgoal import NeuralPotential, SubgoalValueLoss, TabularPotential
+from torchrl_subgoal import NeuralPotential, SubgoalValueLoss, TabularPotential, ValueUpdate
 
 #: the paper's target: the mean, time-outs bootstrapped
 PAPER = {"expectile": 0.5, "bootstrap_truncated": True}
@@ -282,3 +282,74 @@ def test_a_time_out_inside_z_trains_nothing_unless_bootstrapped() -> None:
     assert every.reshape(-1).tolist() == [-1.0, -1.0, -1.0]
     unknown = SubgoalValueLoss(v).make_value_estimator(gamma=0.9)(data.exclude("achieved"))["td_error"]
     assert unknown.reshape(-1).tolist() == [0.0, 0.0, -1.0]
+
+
+def one_transition(z: int, z_next: int, steps: int, reward: float, terminated: bool = False) -> TensorDict:
+    col = (1, 1)
+    return TensorDict(
+        {
+            "subgoal_index": torch.full(col, z),
+            "steps_to_next_obs": torch.full(col, steps),
+            "mask": torch.ones(col, dtype=torch.bool),
+            "next": {
+                "subgoal_index": torch.full(col, z_next),
+                "reward": torch.full(col, reward),
+                "terminated": torch.full(col, terminated),
+                "done": torch.full(col, terminated),
+            },
+        },
+        batch_size=[1],
+    )
+
+
+def test_an_achievement_reward_is_added_to_the_target_of_a_transition_that_reached_a_subgoal() -> None:
+    """``r_h + c γ^(k−1) + γ^k V(z')`` where ``z' ≠ z``; a transition that stayed in ``z`` gets nothing."""
+    v = TabularPotential(3)
+    with torch.no_grad():
+        v.table.copy_(torch.tensor([0.0, 0.5, 1.0]))
+    loss = SubgoalValueLoss(v, expectile=0.5, achievement_reward=0.2).make_value_estimator(gamma=0.9)
+    reached = loss(one_transition(0, 1, steps=3, reward=0.1))["td_error"].item()
+    assert reached == pytest.approx(0.1 + 0.2 * 0.9**2 + 0.9**3 * 0.5)
+    stayed = loss(one_transition(1, 1, steps=3, reward=0.1, terminated=True))["td_error"].item()
+    assert stayed == pytest.approx(0.1 - 0.5)
+    with pytest.raises(ValueError, match="achievement_reward must be finite"):
+        SubgoalValueLoss(v, achievement_reward=float("nan"))
+
+
+def test_counting_the_achievements_to_come_makes_the_value_fall_along_the_series() -> None:
+    """With ``c`` per subgoal and no reward, an episode that achieves both subgoals and times out teaches
+    ``V(z₀) ≈ c(γ^a + γ^(a+b))``, ``V(z₁) ≈ cγ^b``, ``V(z₂) = 0``: the count still to come is largest at the
+    start, so shaped with it each achievement is charged (why the candidate is not the default)."""
+    v = TabularPotential(3)
+    update = ValueUpdate(0.5, SubgoalValueLoss(v, achievement_reward=1.0).make_value_estimator(gamma=0.9))
+    for _ in range(60):
+        update.step(one_transition(0, 1, steps=4, reward=0.0))
+        update.step(one_transition(1, 2, steps=4, reward=0.0))
+    values = v.table.detach().tolist()
+    assert values[0] > values[1] > values[2] == 0.0
+    assert values[1] == pytest.approx(0.9**3, rel=1e-3)
+
+
+def test_a_prior_weight_averages_the_prior_counted_k_times_with_the_targets() -> None:
+    """``prior_weight=k``: the ``n``-th update of an entry steps by ``max(α_v, 1/(k + n))``, so with the mean
+    target ``V`` is ``(k · prior + Σ targets) / (k + n)`` until that falls to ``α_v``; the counts are kept
+    per entry."""
+    v = TabularPotential(3, init=[0.0, 0.6, 1.2])
+    update = ValueUpdate(0.01, SubgoalValueLoss(v, expectile=0.5).make_value_estimator(gamma=0.9), prior_weight=2.0)
+    targets = [0.0, 0.3, 0.9]
+    for t in targets:
+        update.step(one_transition(1, 1, steps=1, reward=t, terminated=True))
+    assert v.table[1].item() == pytest.approx((2 * 0.6 + sum(targets)) / (2 + len(targets)))
+    assert v.updates.tolist() == [0.0, 3.0, 0.0]
+    assert v.table[2].item() == pytest.approx(1.2)  # an entry without transitions keeps its prior
+    with pytest.raises(ValueError, match="prior_weight must be >= 0"):
+        ValueUpdate(0.1, prior_weight=-1.0)
+
+
+def test_a_prior_weight_given_without_a_loss_is_kept() -> None:
+    from torchrl_subgoal.transform.setup import online_update
+
+    update = online_update(ValueUpdate(0.1, prior_weight=3.0), TabularPotential(3), 0.9)
+    assert update is not None and update.prior_weight == 3.0 and update.loss is not None
+    with pytest.raises(ValueError, match="prior_weight counts a TabularPotential's updates, not NeuralPotential's"):
+        online_update(ValueUpdate(0.1, prior_weight=3.0), NeuralPotential(torch.nn.Linear(2, 1)), 0.9)

@@ -54,6 +54,20 @@ def test_shaping_transform_per_method(name: str, potential: type, learning: bool
     assert shaping_transform(paper_methods("SARSA")["SARSA"], torch.Size([4]), gamma=0.99, value_lr=0.25) is None
 
 
+def test_the_potential_update_candidates_reach_the_transforms_update() -> None:
+    t = shaping_transform(
+        HRS_D,
+        torch.Size([2]),
+        gamma=0.99,
+        value_lr=0.1,
+        patterns=[SubgoalSeries([Cell(3, 6), Cell(7, 9)])],
+        prior_weight=2.0,
+        achievement_reward=0.25,
+    )
+    assert t is not None and t.value_update is not None and t.value_update.loss is not None
+    assert t.value_update.prior_weight == 2.0 and t.value_update.loss.achievement_reward == 0.25
+
+
 def test_missing_pieces_are_errors() -> None:
     with pytest.raises(ValueError, match="needs subgoal patterns"):
         shaping_transform(paper_methods("SARSA")["HRS"], torch.Size([2]), gamma=0.9, value_lr=0.1)

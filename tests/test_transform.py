@@ -208,6 +208,35 @@ def test_compiled_and_torch_backends_agree() -> None:
         assert torch.allclose(compiled[key].float(), eager[key].float(), atol=1e-5), key
 
 
+@pytest.mark.parametrize("shared", [False, True])
+@pytest.mark.parametrize("option", [{"prior_weight": 3.0}, {"achievement_reward": 0.5}])
+def test_the_backends_agree_on_a_prior_weight_and_an_achievement_reward(option: dict, shared: bool) -> None:
+    """The candidates of the potential's update (a prior handed over by counts; a target that counts the
+    subgoals achieved) train the same tables, counts and rewards through the compiled step and through torch,
+    with a table per learner and with one table shared by the batch."""
+
+    def run(backend: str) -> tuple[TensorDict, TabularPotential]:
+        n = 8
+        v = TabularPotential.for_subgoals(HALLWAYS, batch_shape=() if shared else (n,), interpolate=False)
+        loss = SubgoalValueLoss(v, achievement_reward=option.get("achievement_reward", 0.0))
+        update = ValueUpdate(0.05, loss.make_value_estimator(gamma=0.99), prior_weight=option.get("prior_weight", 0.0))
+        t = SubgoalPotentialTransform(HALLWAYS, v, gamma=0.99, observation_key="cell", value_update=update)
+        env = TransformedEnv(FourRoomsEnv(n, max_steps=50), t.use_backend(backend))  # type: ignore[arg-type]
+        torch.manual_seed(2)
+        data = env.rollout(400, break_when_any_done=False)
+        assert t._online is not None and t._online.compiled == (backend == "compiled")
+        return data, v
+
+    (compiled, v_compiled), (eager, v_eager) = run("compiled"), run("torch")
+    assert torch.allclose(v_compiled.table.detach(), v_eager.table.detach(), atol=1e-5)
+    assert torch.equal(v_compiled.updates, v_eager.updates)
+    assert torch.allclose(compiled["next", "reward"], eager["next", "reward"], atol=1e-5)
+    if "prior_weight" in option:
+        assert v_compiled.updates.sum() > 0  # counted: the transitions that trained the table
+    else:
+        assert v_compiled.updates.sum() == 0  # counted only where a step size depends on it
+
+
 def test_compiled_backend_refuses_what_it_cannot_shape_in_one_line() -> None:
     t = SubgoalPotentialTransform(
         HALLWAYS, NeuralPotential(torch.nn.Linear(2, 1)), gamma=0.9, observation_key="cell"

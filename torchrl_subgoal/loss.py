@@ -3,6 +3,7 @@ transform's online update with it."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
@@ -14,7 +15,7 @@ from torchrl.objectives import LossModule
 from torchrl.objectives.utils import ValueEstimators, default_value_kwargs
 from torchrl.objectives.value import TD0Estimator, ValueEstimatorBase
 
-from torchrl_subgoal.potentials import check_value
+from torchrl_subgoal.potentials import TabularPotential, check_value
 
 __all__ = ["SubgoalValueLoss", "ValueUpdate"]
 
@@ -76,6 +77,13 @@ class SubgoalValueLoss(LossModule):
             Default ``False``: it is skipped, as a masked row. It is told by
             the transitions' ``"achieved"`` entry (``z' ≠ z``); without one,
             every truncated transition is skipped.
+        achievement_reward: added to the target of a transition that reached the
+            next subgoal (``z' ≠ z``), discounted as a reward of its last step, so
+            that ``V`` also counts the subgoals still to be achieved from ``z``
+            (default 0: the returns alone). The agent's shaped reward is unchanged
+            in form. An investigated candidate, not a default: the count to come is
+            largest before the first subgoal, so it makes ``V`` fall along the series
+            (docs/shaping_defaults.md).
         gamma: not accepted: ``γ_v`` goes through :meth:`make_value_estimator`
             (a ``TypeError`` says so).
 
@@ -133,6 +141,7 @@ class SubgoalValueLoss(LossModule):
         reduction: Reduction = "sum",
         expectile: float = 0.9,
         bootstrap_truncated: bool = False,
+        achievement_reward: float = 0.0,
         gamma: float | None = None,
     ) -> None:
         if gamma is not None:
@@ -154,6 +163,9 @@ class SubgoalValueLoss(LossModule):
         self.reduction = reduction
         self.expectile = float(expectile)
         self.bootstrap_truncated = bool(bootstrap_truncated)
+        if not math.isfinite(float(achievement_reward)):
+            raise ValueError(f"achievement_reward must be finite, got {achievement_reward}")
+        self.achievement_reward = float(achievement_reward)
         self._value_estimator: ValueEstimatorBase | None = None
         self._gamma: float | None = None
         self.set_keys(value=potential.out_keys[-1])
@@ -260,6 +272,8 @@ class SubgoalValueLoss(LossModule):
                 batch_size=batch,
             )
             target = self.value_estimator.value_estimate(estimate, next_value=next_value).to(value.dtype)
+            if self.achievement_reward:
+                target = target + self._achievement(tensordict).to(value.dtype)
         td_error = target - value
         real = self._trains(tensordict)
         if real is not None:  # selected, not multiplied: a masked row's NaN reaches neither the loss nor a gradient
@@ -270,6 +284,25 @@ class SubgoalValueLoss(LossModule):
         rows = tensordict if real is None else TensorDict({keys.mask: real}, batch_size=batch)
         loss = self._reduce_loss(losses, rows)
         return TensorDict({"loss_value": loss, "td_error": td_error.detach()}, batch_size=[])
+
+    def _achievement(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """``achievement_reward · γ_v^(k − 1)`` where a transition reached the next subgoal, else 0 (told by the
+        ``"achieved"`` entry, or without one by the potential's index entry changing)."""
+        keys = self.tensor_keys
+        achieved = tensordict.get(keys.achieved, None)
+        if achieved is None:
+            index = self.potential.in_keys[0]
+            achieved = tensordict.get(index) != tensordict.get(("next", index))
+        steps = tensordict.get(keys.steps_to_next_obs)
+        discount = torch.as_tensor(self.gamma, dtype=torch.float64) ** (steps.to(torch.float64) - 1)
+        return torch.where(achieved.bool(), self.achievement_reward * discount, torch.zeros_like(discount))
+
+    def trains(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """Which rows of ``tensordict`` train ``V`` (``[*B, 1]`` bool): the real transitions, less the time-outs
+        inside ``z`` unless ``bootstrap_truncated``."""
+        real = self._trains(tensordict)
+        shape = (*tensordict.batch_size, 1)
+        return torch.ones(shape, dtype=torch.bool) if real is None else real.reshape(shape)
 
     def _trains(self, tensordict: TensorDictBase) -> torch.Tensor | None:
         """Which rows train ``V``: the real transitions, less the time-outs inside ``z`` unless
@@ -302,6 +335,12 @@ class ValueUpdate:
             it to change the target). Defaults to ``reduction="sum"`` with ``γ_v`` the transform's
             ``gamma``: with a :class:`~torchrl_subgoal.TabularPotential` one step is then exactly
             ``V(z) ← V(z) + α_v δ``, which the compiled path applies in its kernel.
+        prior_weight: ``k`` > 0 hands a :class:`~torchrl_subgoal.TabularPotential`'s initial table (a
+            prior) over to the learned values as each entry gathers transitions: its ``n``-th update steps by
+            ``max(α_v, 1 / (k + n))``, so that with the mean target the entry is the average of the prior,
+            counted ``k`` times, and its targets until ``1 / (k + n)`` falls to ``α_v`` (the potential's
+            ``updates`` buffer keeps ``n``). 0 (the default): every step is ``α_v``. An investigated
+            candidate, not a default (docs/shaping_defaults.md).
 
     Examples:
         >>> from torchrl_subgoal import TabularPotential
@@ -313,10 +352,13 @@ class ValueUpdate:
 
     lr: float
     loss: SubgoalValueLoss | None = None
+    prior_weight: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.lr > 0:
             raise ValueError(f"ValueUpdate: lr must be positive, got {self.lr}")
+        if not (math.isfinite(self.prior_weight) and self.prior_weight >= 0):
+            raise ValueError(f"ValueUpdate: prior_weight must be >= 0 (transitions), got {self.prior_weight}")
         if self.loss is not None and not isinstance(self.loss, SubgoalValueLoss):
             raise TypeError(f"ValueUpdate: loss must be a SubgoalValueLoss, got {type(self.loss).__name__}")
 
@@ -343,6 +385,7 @@ class ValueUpdate:
         parameters = [p for p in self.loss.potential.parameters() if p.requires_grad]
         if not parameters:
             return
+        steps = self._counted_steps(transitions) if self.prior_weight > 0 else None
         with torch.enable_grad():
             for parameter in parameters:
                 parameter.grad = None
@@ -350,5 +393,27 @@ class ValueUpdate:
         with torch.no_grad():  # plain SGD: torch.optim.SGD's step without momentum, decay or state
             for parameter in parameters:
                 if parameter.grad is not None:
-                    parameter.add_(parameter.grad, alpha=-self.lr)
+                    if steps is not None and parameter is steps[0]:
+                        parameter.sub_(parameter.grad * steps[1])
+                    else:
+                        parameter.add_(parameter.grad, alpha=-self.lr)
                 parameter.grad = None
+
+    def _counted_steps(self, transitions: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
+        """With a ``prior_weight``: count this step's updates of each table entry (the gradient of the values of
+        the rows that train), then each entry's step size ``max(α_v, 1 / (k + n))``."""
+        assert self.loss is not None
+        potential = self.loss.potential
+        if not isinstance(potential, TabularPotential):
+            kind = type(potential).__name__
+            raise TypeError(f"ValueUpdate's prior_weight counts a TabularPotential's updates, not {kind}'s")
+        rows = self.loss.trains(transitions)
+        with torch.enable_grad():
+            value = self.loss._value(transitions)
+            hits = torch.where(rows, value, torch.zeros_like(value)).sum()
+            (counts,) = torch.autograd.grad(hits, potential.table, allow_unused=True)
+        with torch.no_grad():
+            if counts is not None:
+                potential.updates += counts.round()
+            step = (1.0 / (self.prior_weight + potential.updates)).clamp(min=self.lr)
+        return potential.table, step

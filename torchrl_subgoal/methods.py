@@ -204,7 +204,7 @@ def shaping_parts(
 
 
 #: the keyword arguments of :func:`shaping_transform` that configure the learned potential's loss
-TARGET_OPTIONS = ("expectile", "bootstrap_truncated")
+TARGET_OPTIONS = ("expectile", "bootstrap_truncated", "achievement_reward")
 
 
 def shaping_transform(
@@ -237,8 +237,9 @@ def shaping_transform(
         aggregation_key: what ``g`` reads.
         **conventions: ``zero_terminal_potential`` and ``start_potential`` (the transform's, see
             :class:`SubgoalPotentialTransform`), ``monotone_potential`` (:func:`shaping_parts`),
-            ``expectile`` and ``bootstrap_truncated`` (the learned potential's target, see
-            :class:`SubgoalValueLoss`); the library's defaults otherwise.
+            ``expectile``, ``bootstrap_truncated`` and ``achievement_reward`` (the learned potential's
+            target, see :class:`SubgoalValueLoss`), ``prior_weight`` (its online update, see
+            :class:`ValueUpdate`); the library's defaults otherwise.
 
     Examples:
         >>> import torch
@@ -258,7 +259,7 @@ def shaping_transform(
         eta=eta,
         observation_key=observation_key,
         aggregation_key=aggregation_key,
-        **{k: v for k, v in conventions.items() if k not in TARGET_OPTIONS},
+        **{k: v for k, v in conventions.items() if k not in (*TARGET_OPTIONS, "prior_weight")},
     )
     if parts is None:
         return None
@@ -266,5 +267,6 @@ def shaping_transform(
     update = None
     if value_lr is not None and isinstance(potential, TabularPotential):
         loss = SubgoalValueLoss(potential, **{k: v for k, v in conventions.items() if k in TARGET_OPTIONS})
-        update = ValueUpdate(value_lr, loss.make_value_estimator(gamma=gamma))
+        weight = float(conventions.get("prior_weight", 0.0))
+        update = ValueUpdate(value_lr, loss.make_value_estimator(gamma=gamma), prior_weight=weight)
     return SubgoalPotentialTransform(subgoals, potential, gamma=gamma, value_update=update, **options)

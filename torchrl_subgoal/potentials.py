@@ -221,6 +221,9 @@ class TabularPotential(Potential):
         if not torch.isfinite(table).all():
             raise ValueError(f"init must be finite, got {values.tolist()}")
         self.table = nn.Parameter(table)
+        #: how many online updates each entry has had, counted where the update's step size depends on it
+        #: (:class:`~torchrl_subgoal.ValueUpdate`'s ``prior_weight``); not saved with the module's state
+        self.register_buffer("updates", torch.zeros(shape), persistent=False)
 
     @classmethod
     def for_subgoals(

@@ -3,6 +3,7 @@ and the plan's stored configuration."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
@@ -134,6 +135,37 @@ def test_the_progress_prior_is_in_the_envs_reward_units(tmp_path, monkeypatch: p
     with pytest.raises(Made) as made:
         learners.run_learner_chunk(Chunk("HRS", 0, ((hrs.patterns[0], 0),), seed=1), plan.config, lambda done: None)
     assert made.value.args[0] == pytest.approx(2.0 * 0.01)
+
+
+def test_the_potential_update_candidates_reach_the_learners_shaping(tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """--prior-weight and --achievement-reward are stored (only when given, so that earlier results resume) and
+    reach each shaped learner's transform; the achievement reward in the env's units, scaled as the reward."""
+    from torchrl_subgoal.experiments import learners
+    from torchrl_subgoal.experiments.store import Chunk
+
+    class Made(Exception):
+        pass
+
+    def recording(make_envs, settings, *, shaping, **kwargs):
+        raise Made(shaping)
+
+    assert "prior_weight" not in learner_plan(recipe_config(results=str(tmp_path / "plain")), "a2c").config
+    cfg = recipe_config(
+        "dqn", "four_rooms_step", methods="DQN,HRS", prior_weight=3.0, achievement_reward=2.0, results=str(tmp_path)
+    )
+    plan = learner_plan(cfg, "dqn")
+    assert plan.config["prior_weight"] == 3.0 and plan.config["achievement_reward"] == 2.0
+    monkeypatch.setitem(learners.LEARNERS, "dqn", dataclasses.replace(learners.LEARNERS["dqn"], train=recording))
+    hrs = next(spec for spec in plan.specs if spec.name == "HRS")
+    with pytest.raises(Made) as made:
+        learners.run_learner_chunk(Chunk("HRS", 0, ((hrs.patterns[0], 0),), seed=1), plan.config, lambda done: None)
+    (shaping,) = made.value.args[0]
+    assert shaping.prior_weight == 3.0 and shaping.loss == {"achievement_reward": pytest.approx(2.0 * 0.01)}
+    transform = shaping.transform(shaping.potential, 0.99, 0.05)
+    assert transform.value_update.prior_weight == 3.0
+    assert transform.value_update.loss.achievement_reward == pytest.approx(0.02)
+    with pytest.raises(ConfigError, match="--prior-weight: must be a finite number >= 0"):
+        recipe_config(prior_weight=-1.0)
 
 
 def test_the_learner_sees_z_by_its_own_default_unless_told() -> None:

@@ -62,8 +62,27 @@ def test_qlearning_recipe_taxi_runs(tmp_path: Path) -> None:
     assert summary["methods"]["HRS"]["learners"] == 2
 
 
+def test_qlearning_recipe_stores_the_potential_update_candidates(tmp_path: Path) -> None:
+    """``--prior-weight`` and ``--achievement-reward`` go into the stored target (left out at 0, so that
+    results of earlier versions resume)."""
+    qlearning = recipe("qlearning")
+    args = ["--domain", "taxi", "--methods", "HRS-D", "--learnings", "1", "--episodes", "2", "--workers", "0"]
+    candidates = ["--prior-weight", "2", "--achievement-reward", "0.5"]
+    assert qlearning.main([*args, *candidates, "--results", str(tmp_path)]) == 0
+    stored = json.loads((tmp_path / "config.json").read_text())["config"]["target"]
+    assert stored == {"expectile": 0.9, "bootstrap_truncated": False, "prior_weight": 2.0, "achievement_reward": 0.5}
+
+
 @pytest.mark.parametrize(
-    ("flag", "value"), [("--expectile", "1.0"), ("--lr", "0"), ("--methods", "SARSA"), ("--epsilon", "1.5")]
+    ("flag", "value"),
+    [
+        ("--expectile", "1.0"),
+        ("--lr", "0"),
+        ("--methods", "SARSA"),
+        ("--epsilon", "1.5"),
+        ("--prior-weight", "-1"),
+        ("--achievement-reward", "nan"),
+    ],
 )
 def test_qlearning_bad_settings_name_the_flag(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], flag: str, value: str

@@ -48,26 +48,40 @@ def _expectile_weight(expectile, delta):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _td_step(potential, row, zb, znb, terminated, emit, r, discount):
-    """The TD error a closed transition trains ``V(z)`` of ``table[row]`` by (0 when it trains nothing:
-    no transition closed, no update, a naive potential, or a time-out inside ``z`` not bootstrapped)."""
-    table = potential.table
-    if (
+def _trains(potential, zb, znb, terminated, emit):
+    """Whether a step closes a transition that trains ``V(z)``: one closed, an update, a table, and not a
+    time-out inside ``z`` left out."""
+    return (
         emit
         and potential.value_lr > 0.0
-        and table.shape[0] > 0
+        and potential.table.shape[0] > 0
         and _learns_from(potential.bootstrap_truncated, zb, znb, terminated)
-    ):
-        return _td_error(table, row, zb, znb, terminated, r, discount, potential.value_gamma)
+    )
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _td_step(potential, row, zb, znb, terminated, emit, r, discount):
+    """The TD error a closed transition trains ``V(z)`` of ``table[row]`` by (0 when it trains nothing:
+    no transition closed, no update, a naive potential, or a time-out inside ``z`` not bootstrapped). An
+    ``achievement_reward`` is added to the target where the transition reached the next subgoal, discounted
+    as a reward of its last step."""
+    if _trains(potential, zb, znb, terminated, emit):
+        if potential.achievement_reward != 0.0 and znb != zb:
+            r += potential.achievement_reward * discount
+        return _td_error(potential.table, row, zb, znb, terminated, r, discount, potential.value_gamma)
     return 0.0
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _td_increment(potential, delta):
-    """The online TD update's step of ``V(z)``, ``α_v w δ`` (``w``: the expectile's weight): the one place
-    the kernels say how a potential changes (:meth:`torchrl_subgoal.ValueUpdate.step` is its torch
-    reference)."""
-    return potential.value_lr * _expectile_weight(potential.expectile, delta) * delta
+def _td_increment(potential, delta, updates):
+    """The online TD update's step of ``V(z)``, ``α w δ`` (``w``: the expectile's weight), where ``updates``
+    is the entry's count of updates, this one included: ``α = α_v``, or with a ``prior_weight`` ``k`` the
+    larger of ``α_v`` and ``1 / (k + updates)``. The one place the kernels say how a potential changes
+    (:meth:`torchrl_subgoal.ValueUpdate.step` is its torch reference)."""
+    lr = potential.value_lr
+    if potential.prior_weight > 0.0:
+        lr = max(lr, 1.0 / (potential.prior_weight + updates))
+    return lr * _expectile_weight(potential.expectile, delta) * delta
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -122,8 +136,12 @@ def _shape_learner(potential, row, zb, znb, achieved_prev, r_h, k, reward, done,
     emit, r, discount, kb = _smdp_accumulate(zb, znb, r_h, k, reward, done, potential.value_gamma)
     table = potential.table
     delta = _td_step(potential, row, zb, znb, terminated, emit, r, discount)
-    if delta != 0.0:
-        table[row, zb] += _td_increment(potential, delta)
+    if potential.prior_weight > 0.0:  # counts every update, also one whose TD error is 0
+        if _trains(potential, zb, znb, terminated, emit):
+            potential.updates[row, zb] += 1.0
+            table[row, zb] += _td_increment(potential, delta, potential.updates[row, zb])
+    elif delta != 0.0:
+        table[row, zb] += _td_increment(potential, delta, 0.0)
     shaped = _shaped_reward(
         table,
         potential.ancestors,
@@ -254,20 +272,28 @@ def _shape_shared(
     n = z.shape[0]
     table = potential.table
     delta = np.zeros(n)
+    counted = potential.prior_weight > 0.0
+    trains = np.zeros(n if counted else 0, np.bool_)
     for b in range(n):
         emit, r, discount, kb = _smdp_accumulate(
             z[b, 0], z_next[b, 0], r_h[b, 0], k[b, 0], reward[b, 0], done[b, 0], potential.value_gamma
         )
         delta[b] = _td_step(potential, b // group, z[b, 0], z_next[b, 0], terminated[b, 0], emit, r, discount)
+        if counted and _trains(potential, z[b, 0], z_next[b, 0], terminated[b, 0], emit):
+            trains[b] = True
+            potential.updates[b // group, z[b, 0]] += 1.0
         rh_out[b, 0] = 0.0 if emit else r
         k_out[b, 0] = 0 if emit else kb
         if emit_out.shape[0] > 0:
             rh_acc_out[b, 0] = r
             k_acc_out[b, 0] = kb
             emit_out[b, 0] = emit
-    for b in range(n):  # every TD error with the tables as they were, then every update
-        if delta[b] != 0.0:
-            table[b // group, z[b, 0]] += _td_increment(potential, delta[b])
+    for b in range(n):  # every TD error with the tables as they were, then every update (with every count)
+        if counted:
+            if trains[b]:
+                table[b // group, z[b, 0]] += _td_increment(potential, delta[b], potential.updates[b // group, z[b, 0]])
+        elif delta[b] != 0.0:
+            table[b // group, z[b, 0]] += _td_increment(potential, delta[b], 0.0)
     for b in range(n):
         reward_out[b, 0] = _shaped_reward(
             table,

@@ -167,6 +167,16 @@ class LearnerRecipeConfig(RecipeConfig):
         "a JSON file {pattern: [V(z0), V(z1), ...]}: HRS and RRS shape with these tables from the first step and "
         "do not train them (tools/learned_tables.py writes one from a run's logs)",
     )
+    prior_weight: float = setting(
+        0.0,
+        "HRS, HRS-D, RRS: the table's start counts as this many transitions, handed over to the learned values "
+        "as each z gathers them (the online update's steps max(value_lr, 1/(k + n))); 0: none",
+    )
+    achievement_reward: float = setting(
+        0.0,
+        "HRS, HRS-D, RRS: added to the potential's target per subgoal achieved, in the env's reward units "
+        "(the learner's --reward-scale applies to it); 0: none",
+    )
     seed_batch: int = setting(
         1,
         "learners of a method trained together as one batch in one process (one env batch, stacked "
@@ -200,6 +210,13 @@ class LearnerRecipeConfig(RecipeConfig):
             "progress_scale",
             f"must be a finite number >= 0, got {self.progress_scale}",
         )
+        check(
+            math.isfinite(self.prior_weight) and self.prior_weight >= 0,
+            "prior_weight",
+            f"must be a finite number >= 0 (transitions), got {self.prior_weight}",
+        )
+        finite = math.isfinite(self.achievement_reward)
+        check(finite, "achievement_reward", f"must be finite, got {self.achievement_reward}")
         check(
             self.progress_scale > 0 or "SRS" not in self.method_names,
             "progress_scale",
@@ -342,6 +359,7 @@ def learner_plan(cfg: LearnerRecipeConfig, algo: str, *, final_updates: int | No
         "start_potential": cfg.start_potential,
         "monotone_potential": cfg.monotone_potential,
         "progress_scale": cfg.progress_scale,
+        **{k: getattr(cfg, k) for k in ("prior_weight", "achievement_reward") if getattr(cfg, k)},
         **({"frozen_potential": frozen} if frozen else {}),
         "subgoal_file": subgoal_file,
         "patterns": pattern_config(patterns),
@@ -533,7 +551,12 @@ def run_learner_chunk(chunk: Chunk, config: Mapping[str, Any], progress: Callabl
             cast(Any, config.get("logger", "csv")),
             fresh=True,
         )
-        runs.append((make_env, Shaping(*parts) if parts is not None else None, seed, logger))
+        shaping = None
+        if parts is not None:
+            achievement = config.get("achievement_reward", 0.0) * settings.reward_scale
+            loss = {"achievement_reward": achievement} if achievement else {}
+            shaping = Shaping(*parts, loss=loss, prior_weight=config.get("prior_weight", 0.0))
+        runs.append((make_env, shaping, seed, logger))
     # the chunk's learners as one batch (one learner is a batch of one); each its own task where the
     # domain gives one per learner (the plan checked that the learners can share one env batch)
     trained = learner.train(

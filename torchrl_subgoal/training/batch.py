@@ -172,6 +172,8 @@ def batch_shaping(shapings: Sequence[Shaping | None], envs_per_learner: int) -> 
     options = given[0].options
     if any(s.options != options for s in given):
         raise ValueError("the learners of a batch must share the shaping transform's options")
+    if any((s.loss, s.prior_weight) != (given[0].loss, given[0].prior_weight) for s in given):
+        raise ValueError("the learners of a batch must share the potential's loss and update settings")
     subgoals: SubgoalSeries | list[SubgoalSeries] | StateAggregation
     if all(isinstance(s.subgoals, StateAggregation) for s in given):
         if any(s.subgoals is not given[0].subgoals for s in given):
@@ -182,7 +184,8 @@ def batch_shaping(shapings: Sequence[Shaping | None], envs_per_learner: int) -> 
         subgoals = per_env[0] if len(set(per_env)) == 1 else per_env
     else:
         raise ValueError("the learners of a batch must all follow subgoal series or all one aggregation")
-    return Shaping(subgoals, _batch_potential([s.potential for s in given], envs_per_learner), dict(options))
+    potential = _batch_potential([s.potential for s in given], envs_per_learner)
+    return Shaping(subgoals, potential, dict(options), dict(given[0].loss), given[0].prior_weight)
 
 
 def _per_env(subgoals: SubgoalSeries | Sequence[SubgoalSeries], envs: int) -> list[SubgoalSeries]:

@@ -33,6 +33,7 @@ from torchrl.envs import (
     TransformedEnv,
 )
 
+from torchrl_subgoal.loss import SubgoalValueLoss, ValueUpdate
 from torchrl_subgoal.subgoals import StateAggregation, SubgoalSeries
 from torchrl_subgoal.transform import SubgoalPotentialTransform
 
@@ -57,9 +58,10 @@ class Shaping:
             ``zero_terminal_potential``…), and ``"backend"`` for its
             :meth:`~torchrl_subgoal.SubgoalPotentialTransform.use_backend`; ``gamma`` and the online
             update's learning rate come from the learner's config.
-        loss: keyword arguments of :class:`~torchrl_subgoal.SubgoalValueLoss` where the potential is
-            trained per batch (``online_potential=False``; e.g. the paper's mean target,
-            ``{"expectile": 0.5, "bootstrap_truncated": True}``).
+        loss: keyword arguments of :class:`~torchrl_subgoal.SubgoalValueLoss`, for the transform's online
+            update and where the potential is trained per batch (``online_potential=False``); e.g. the
+            paper's mean target, ``{"expectile": 0.5, "bootstrap_truncated": True}``.
+        prior_weight: the online update's ``prior_weight`` (:class:`~torchrl_subgoal.ValueUpdate`; 0: none).
 
     Examples:
         >>> from torchrl_subgoal import Cell, SubgoalSeries, TabularPotential
@@ -75,6 +77,7 @@ class Shaping:
     potential: TensorDictModuleBase
     options: dict[str, Any] = field(default_factory=dict)
     loss: dict[str, Any] = field(default_factory=dict)
+    prior_weight: float = 0.0
 
     @property
     def trained(self) -> bool:
@@ -87,7 +90,11 @@ class Shaping:
         """The transform over ``potential`` (the process's view of the shared one)."""
         options = dict(self.options)
         backend = options.pop("backend", "auto")
-        transform = SubgoalPotentialTransform(self.subgoals, potential, gamma=gamma, value_update=value_lr, **options)
+        update: ValueUpdate | float | None = value_lr
+        if value_lr is not None and (self.loss or self.prior_weight):
+            loss = SubgoalValueLoss(potential, **{"reduction": "sum", **self.loss}).make_value_estimator(gamma=gamma)
+            update = ValueUpdate(value_lr, loss, prior_weight=self.prior_weight)
+        transform = SubgoalPotentialTransform(self.subgoals, potential, gamma=gamma, value_update=update, **options)
         return transform.use_backend(backend)
 
 

@@ -52,6 +52,8 @@ __all__ = [
 NO_TABLE = np.zeros((0, 1), dtype=np.float32)
 #: ``ancestors`` of a table shaped as it is (not monotone)
 NO_ANCESTORS = np.zeros((0, 0, 0), dtype=np.bool_)
+#: ``updates`` of a potential updated with its own step size alone (no ``prior_weight``)
+NO_UPDATES = np.zeros((0, 0), dtype=np.float32)
 
 
 class Settings(NamedTuple):
@@ -181,6 +183,9 @@ class PotentialKernelState(NamedTuple):
     bootstrap_truncated: bool = True  #: whether a time-out inside ``z`` trains ``V(z)``
     #: with a monotone table, ``[R, Z, Z]``: what comes before each ``z`` in each row's series; else empty
     ancestors: np.ndarray = NO_ANCESTORS
+    achievement_reward: float = 0.0  #: added to the target of a transition that reached the next subgoal
+    prior_weight: float = 0.0  #: ``k`` of the step size ``max(α_v, 1 / (k + n))`` (0: ``α_v``)
+    updates: np.ndarray = NO_UPDATES  #: ``[R, Z]`` float32 view of the table's update counts (with a prior weight)
 
 
 def compiled_potential(potential: TensorDictModuleBase, update: SubgoalValueLoss | None) -> str | None:
@@ -451,7 +456,12 @@ class BatchSetup:
         mode = START_MODES[settings.start]
         loss = update.loss if update is not None else None
         expectile, bootstrap = (0.5, True) if loss is None else (loss.expectile, loss.bootstrap_truncated)
+        achievement = 0.0 if loss is None else loss.achievement_reward
         ancestors = NO_ANCESTORS if self.ancestors is None else self.ancestors.numpy()
+        weight, updates = 0.0, NO_UPDATES
+        if update is not None and update.prior_weight > 0.0 and online and isinstance(potential, TabularPotential):
+            weight = update.prior_weight
+            updates = potential.updates.numpy().reshape(potential.tables, potential.num_states)
         self.kernel = tuple(
             PotentialKernelState(
                 table,
@@ -464,6 +474,9 @@ class BatchSetup:
                 expectile,
                 bootstrap,
                 ancestors,
+                achievement,
+                weight,
+                updates,
             )
             for lr in (0.0, update.lr if update else 0.0)
         )  # type: ignore[assignment]
@@ -539,8 +552,12 @@ def online_update(
     update = value_update if isinstance(value_update, ValueUpdate) else ValueUpdate(float(value_update))
     if not list(potential.parameters()):
         raise ValueError(f"value_update: {type(potential).__name__} has no parameters to train")
+    if update.prior_weight > 0.0 and not isinstance(potential, TabularPotential):
+        kind = type(potential).__name__
+        raise ValueError(f"value_update: prior_weight counts a TabularPotential's updates, not {kind}'s")
     if update.loss is None:
-        return ValueUpdate(update.lr, SubgoalValueLoss(potential, reduction="sum").make_value_estimator(gamma=gamma))
+        loss = SubgoalValueLoss(potential, reduction="sum").make_value_estimator(gamma=gamma)
+        return ValueUpdate(update.lr, loss, prior_weight=update.prior_weight)
     if update.loss.potential is not potential:
         raise ValueError("value_update: its loss trains another potential than the transform's")
     return update
