@@ -123,6 +123,20 @@ def test_a2c_with_envs_in_worker_processes(online: bool, workers: dict[str, int]
 
 
 @pytest.mark.parametrize("workers", [{"collector_workers": 1}, {"env_workers": 2, "num_envs": 4}])
+def test_a_prior_weights_counts_reach_the_main_process_from_worker_processes(workers: dict[str, int]) -> None:
+    """``Shaping(prior_weight=k)``: the workers' transforms count each entry's updates into the shared
+    potential's ``updates`` buffer (the step sizes they give are tested in tests/test_transform.py), so the
+    main process sees them; without a prior weight nothing is counted."""
+    for weight in (2.0, 0.0):
+        potential = TabularPotential(3)
+        shaping = Shaping(SubgoalSeries([State(1), State(3)]), potential, prior_weight=weight)
+        config = A2CConfig(features="one_hot", hidden=(), total_frames=1024, value_lr=0.01, **workers)
+        train_a2c(lambda n: LineEnv(n, length=4), config, shaping=shaping, seeds=[1], episode_cap=100)
+        assert bool((potential.updates > 0).all()) == (weight > 0)  # with a weight, every z closed transitions
+        assert bool((potential.table.detach() != 0).all())  # trained online in the workers, either way
+
+
+@pytest.mark.parametrize("workers", [{"collector_workers": 1}, {"env_workers": 2, "num_envs": 4}])
 def test_a_frozen_potential_stays_frozen_in_worker_processes(workers: dict[str, int]) -> None:
     """The set-up above, whose online update moves the shared table, with the table frozen: the workers'
     transforms shape with it and leave it as it was."""

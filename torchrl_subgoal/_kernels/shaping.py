@@ -73,15 +73,23 @@ def _td_step(potential, row, zb, znb, terminated, emit, r, discount):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _td_increment(potential, delta, updates):
-    """The online TD update's step of ``V(z)``, ``α w δ`` (``w``: the expectile's weight), where ``updates``
-    is the entry's count of updates, this one included: ``α = α_v``, or with a ``prior_weight`` ``k`` the
-    larger of ``α_v`` and ``1 / (k + updates)``. The one place the kernels say how a potential changes
-    (:meth:`torchrl_subgoal.ValueUpdate.step` is its torch reference)."""
+def _td_increment(potential, delta, row, z):
+    """The online TD update's step of ``V(z)`` of ``table[row]``, ``α w δ`` (``w``: the expectile's weight):
+    ``α = α_v``, or with a ``prior_weight`` ``k`` the larger of ``α_v`` and ``1 / (k + n)``, ``n`` the entry's
+    count of updates, this one included (:func:`_count`). The one place the kernels say how a potential
+    changes (:meth:`torchrl_subgoal.ValueUpdate.step` is its torch reference)."""
     lr = potential.value_lr
     if potential.prior_weight > 0.0:
-        lr = max(lr, 1.0 / (potential.prior_weight + updates))
+        lr = max(lr, 1.0 / (potential.prior_weight + potential.updates[row, z]))
     return lr * _expectile_weight(potential.expectile, delta) * delta
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _count(potential, row, zb, znb, terminated, emit):
+    """With a ``prior_weight``, count a transition that trains ``V(z)`` of ``table[row]`` (also one whose TD
+    error is 0: the step size depends on the transitions seen, not on what they changed)."""
+    if potential.prior_weight > 0.0 and _trains(potential, zb, znb, terminated, emit):
+        potential.updates[row, zb] += 1.0
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -136,12 +144,9 @@ def _shape_learner(potential, row, zb, znb, achieved_prev, r_h, k, reward, done,
     emit, r, discount, kb = _smdp_accumulate(zb, znb, r_h, k, reward, done, potential.value_gamma)
     table = potential.table
     delta = _td_step(potential, row, zb, znb, terminated, emit, r, discount)
-    if potential.prior_weight > 0.0:  # counts every update, also one whose TD error is 0
-        if _trains(potential, zb, znb, terminated, emit):
-            potential.updates[row, zb] += 1.0
-            table[row, zb] += _td_increment(potential, delta, potential.updates[row, zb])
-    elif delta != 0.0:
-        table[row, zb] += _td_increment(potential, delta, 0.0)
+    _count(potential, row, zb, znb, terminated, emit)
+    if delta != 0.0:
+        table[row, zb] += _td_increment(potential, delta, row, zb)
     shaped = _shaped_reward(
         table,
         potential.ancestors,
@@ -272,28 +277,21 @@ def _shape_shared(
     n = z.shape[0]
     table = potential.table
     delta = np.zeros(n)
-    counted = potential.prior_weight > 0.0
-    trains = np.zeros(n if counted else 0, np.bool_)
     for b in range(n):
         emit, r, discount, kb = _smdp_accumulate(
             z[b, 0], z_next[b, 0], r_h[b, 0], k[b, 0], reward[b, 0], done[b, 0], potential.value_gamma
         )
         delta[b] = _td_step(potential, b // group, z[b, 0], z_next[b, 0], terminated[b, 0], emit, r, discount)
-        if counted and _trains(potential, z[b, 0], z_next[b, 0], terminated[b, 0], emit):
-            trains[b] = True
-            potential.updates[b // group, z[b, 0]] += 1.0
+        _count(potential, b // group, z[b, 0], z_next[b, 0], terminated[b, 0], emit)
         rh_out[b, 0] = 0.0 if emit else r
         k_out[b, 0] = 0 if emit else kb
         if emit_out.shape[0] > 0:
             rh_acc_out[b, 0] = r
             k_acc_out[b, 0] = kb
             emit_out[b, 0] = emit
-    for b in range(n):  # every TD error with the tables as they were, then every update (with every count)
-        if counted:
-            if trains[b]:
-                table[b // group, z[b, 0]] += _td_increment(potential, delta[b], potential.updates[b // group, z[b, 0]])
-        elif delta[b] != 0.0:
-            table[b // group, z[b, 0]] += _td_increment(potential, delta[b], 0.0)
+    for b in range(n):  # every TD error and count with the tables as they were, then every update
+        if delta[b] != 0.0:
+            table[b // group, z[b, 0]] += _td_increment(potential, delta[b], b // group, z[b, 0])
     for b in range(n):
         reward_out[b, 0] = _shaped_reward(
             table,
