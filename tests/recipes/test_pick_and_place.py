@@ -16,11 +16,17 @@ from torchrl.data import Bounded
 from torchrl.envs import ParallelEnv, TransformedEnv
 
 from tests.recipes.test_recipes import recipe
-from torchrl_subgoal import NeuralPotential, SubgoalKeys, SubgoalPotentialTransform, SubgoalValueLoss
+from torchrl_subgoal import (
+    NeuralPotential,
+    SubgoalKeys,
+    SubgoalPotentialTransform,
+    SubgoalValueLoss,
+    TabularPotential,
+)
 from torchrl_subgoal.envs import fetch
 from torchrl_subgoal.experiments import load_frame
-from torchrl_subgoal.experiments.cli import parse_config
-from torchrl_subgoal.training import EnvFactory, batched, close_collector, shaped_env
+from torchrl_subgoal.experiments.cli import ConfigError, parse_config
+from torchrl_subgoal.training import DDPGTrainConfig, EnvFactory, batched, close_collector, shaped_env
 from torchrl_subgoal.training.ddpg_parts import DDPGAgent, DDPGConfig
 
 GAMMA = 0.98
@@ -303,3 +309,38 @@ def test_hrs_and_rrs_start_at_zero_potential_unless_told() -> None:
     chosen = pick_and_place.plan(parse_config(pick_and_place.Config, ["--start-potential", "nonpositive"])).config
     assert level("HRS", chosen) == "nonpositive"
     assert level("HRS", {**config, "shaping": {"start_potential": "value"}}) == "value"
+
+
+def test_the_librarys_potentials_are_tables_learned_online_with_the_librarys_target() -> None:
+    """HRS-D is the library's default (the progress prior, interpolating within segments, monotone, level
+    ``nonpositive``), learned online at the training blocks' step with the library's target; SRS is the
+    prior, fixed; SARSA-RS's table keeps the library's target too: only the neural potentials (HRS, RRS)
+    learn the paper's mean, a time-out bootstrapped."""
+    pick_and_place = recipe("pick_and_place")
+    series = fetch.human_patterns()["participants"]
+    cfg = parse_config(
+        pick_and_place.Config, ["--preset", "tiny", "--methods", "HRS-D,SRS,DDPG", "--progress-scale", "3"]
+    )
+    config = pick_and_place.plan(cfg).config
+    assert config["progress_scale"] == 3.0
+    shaping, trainer = pick_and_place.make_shaping("HRS-D", series, config, GAMMA)
+    assert trainer is None and isinstance(shaping.potential, TabularPotential)
+    assert shaping.potential.table.tolist() == pytest.approx([0.0, 1.0, 2.0])  # the prior, 3 / (2 + 1) a subgoal
+    assert shaping.potential.interpolate and shaping.potential.monotone
+    settings = pick_and_place.learner_config(config, "HRS-D", shaped=True, epochs=1)
+    assert settings.online_potential and settings.value_lr == DDPGTrainConfig.value_lr
+    transform = shaping.transform(shaping.potential, GAMMA, settings.value_lr)
+    assert transform.start_potential == "nonpositive" and transform.learning
+    assert transform.value_update.loss.expectile == SubgoalValueLoss(shaping.potential).expectile
+    assert not transform.value_update.loss.bootstrap_truncated
+    fixed, _ = pick_and_place.make_shaping("SRS", series, config, GAMMA)
+    assert not fixed.trained and fixed.potential.table.tolist() == pytest.approx([0.0, 1.0, 2.0])
+    table, _ = pick_and_place.make_shaping("SARSA-RS", None, config, GAMMA)
+    online = table.transform(table.potential, GAMMA, config["aggregation_lr"]).value_update
+    assert online.lr == config["aggregation_lr"] and not online.loss.bootstrap_truncated
+    neural, neural_trainer = pick_and_place.make_shaping("HRS", series, config, GAMMA)
+    assert neural_trainer is not None and neural.loss == pick_and_place.NEURAL_TARGET
+    # a run without HRS-D or SRS stores no progress_scale, so that its results resume as before
+    assert "progress_scale" not in pick_and_place.plan(parse_config(pick_and_place.Config, ["--preset", "tiny"])).config
+    with pytest.raises(ConfigError, match="--progress-scale: what reaching the goal is worth must be > 0"):
+        parse_config(pick_and_place.Config, ["--progress-scale", "0"])

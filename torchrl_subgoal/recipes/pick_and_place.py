@@ -7,7 +7,14 @@ Dynamic Trajectory Aggregation" (IJCNN 2021):
 * RRS      — the same with random boxes over the same components,
 * DDPG     — no shaping,
 * NRS      — naive subgoal shaping with a fixed potential η,
-* SARSA-RS — a learned table over a hand-given three-state aggregation.
+* SARSA-RS — a learned table over a hand-given three-state aggregation;
+
+and, beyond the paper, the library's potentials over the same boxes:
+
+* HRS-D    — the library's default (``TabularPotential.for_subgoals``): a table over ``z`` that starts
+  at the progress prior, rises within each segment as the next box comes nearer and is learned online
+  with the library's target,
+* SRS      — the progress prior, fixed.
 
 Each learning is one ``torchrl_subgoal.training.train_ddpg`` (its collector: a
 ``MultiSyncCollector`` of ``--collector-workers`` processes, each stepping its share of
@@ -78,7 +85,7 @@ from torchrl_subgoal.experiments.recipe import (
     pattern_sources,
     recipe_main,
 )
-from torchrl_subgoal.methods import paper_methods, shaping_parts
+from torchrl_subgoal.methods import Method, all_methods, shaping_parts
 from torchrl_subgoal.registry import load_patterns
 from torchrl_subgoal.training import (
     DDPGHooks,
@@ -90,7 +97,7 @@ from torchrl_subgoal.training import (
 )
 from torchrl_subgoal.training.ddpg_parts import DDPG_KEYS, DDPGAgent, DDPGConfig, mlp
 
-METHODS = paper_methods(baseline="DDPG")
+METHODS = all_methods(baseline="DDPG")
 #: The neural potential's target (the paper's): the mean of the SMDP returns, a time-out bootstrapped.
 NEURAL_TARGET = {"expectile": 0.5, "bootstrap_truncated": True}
 #: --clip-positive: which learners clip their critic's targets above at 0.
@@ -122,7 +129,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 @dataclass
 class Config(RecipeConfig):
-    """Pick and place reproduction: DDPG with HRS, RRS, NRS and SARSA-RS."""
+    """Pick and place reproduction: DDPG with HRS, RRS, NRS and SARSA-RS (and the library's HRS-D and SRS)."""
 
     preset: str = setting("paper", "schedule and network sizes", choices=sorted(PRESETS))
     epochs: int = setting(0, "epochs per learning (0: the preset's; paper: 200 of 2,500 steps)")
@@ -138,6 +145,12 @@ class Config(RecipeConfig):
     )
     value_lr: float = setting(1e-3, "Adam learning rate of the neural potential V(o; θ)")
     aggregation_lr: float = setting(0.1, "SGD learning rate of SARSA-RS's table")
+    progress_scale: float = setting(
+        1.0,
+        "HRS-D, SRS: their tables start at the subgoals' progress prior of this scale, what reaching "
+        "the goal is worth in the env's reward units (HRS-D's table then learns online at the training "
+        "blocks' value_lr)",
+    )
     eta: float = setting(0.1, "NRS potential η (the authors' released value)")
     start_potential: str = setting(
         "zero",
@@ -169,6 +182,7 @@ class Config(RecipeConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         check(self.value_lr > 0 and self.aggregation_lr > 0, "value_lr", "learning rates must be > 0")
+        check(self.progress_scale > 0, "progress_scale", "what reaching the goal is worth must be > 0")
         cycle_steps = PRESETS[self.preset]["cycle_steps"]
         self.num_envs = self.num_envs or cycle_steps // fetch.MAX_EPISODE_STEPS
         check(
@@ -196,7 +210,8 @@ def make_shaping(
     method_name: str, series: SubgoalSeries | None, config: Mapping[str, Any], gamma: float
 ) -> tuple[Shaping | None, PotentialTrainer | None]:
     """The method's shaping and, for a neural potential (HRS, RRS), its trainer (the paper's target: the mean,
-    a time-out bootstrapped; Adam at ``value_lr``)."""
+    a time-out bootstrapped; Adam at ``value_lr``). HRS-D's and SRS's tables are the library's, at
+    ``progress_scale`` (stored when one of them runs), with the library's level and target."""
     method = METHODS[method_name]
     parts = shaping_parts(
         method,
@@ -204,17 +219,30 @@ def make_shaping(
         patterns=[series] if series is not None else None,
         aggregation=fetch.three_state_aggregation(),
         eta=config["eta"],
+        progress_scale=config.get("progress_scale", 1.0),
     )
     if parts is None:
         return None, None
     subgoals, potential, options = parts
-    if method.shaping == "subgoals" and "start_potential" in config:  # HRS, RRS: --start-potential (--shaping wins)
+    neural = is_neural(method)
+    if neural and "start_potential" in config:  # HRS, RRS: --start-potential (--shaping wins)
         options = {**options, "start_potential": config["start_potential"]}
-    shaping = Shaping(subgoals, potential, {**options, **config["shaping"]}, loss=NEURAL_TARGET)
-    if method.shaping != "subgoals":  # NRS: fixed η; SARSA-RS: its table learns online in the transform
+    shaping = Shaping(subgoals, potential, {**options, **config["shaping"]}, loss=NEURAL_TARGET if neural else {})
+    if not neural:  # NRS: fixed η; SRS: the fixed prior; SARSA-RS, HRS-D: their tables learn online
         return shaping, None
     shaping.potential = NeuralPotential(mlp(fetch.OBSERVATION_SIZE, 1, config["ddpg"]["hidden"]))
     return shaping, PotentialTrainer.for_shaping(shaping, gamma, config["value_lr"], "adam")
+
+
+def is_neural(method: Method) -> bool:
+    """Whether ``method``'s potential is the paper's network over the observation where ``z`` began (HRS,
+    RRS), not a table over ``z`` (HRS-D's interpolating table, SRS's fixed one, SARSA-RS's aggregation).
+
+    Examples:
+        >>> [name for name, method in METHODS.items() if is_neural(method)]
+        ['HRS', 'RRS']
+    """
+    return method.shaping == "subgoals" and not method.interpolate
 
 
 def agent_config(config: Mapping[str, Any], shaped: bool) -> DDPGConfig:
@@ -241,7 +269,8 @@ def learner_config(config: Mapping[str, Any], method_name: str, shaped: bool, ep
     """A learning's settings for :func:`~torchrl_subgoal.training.train_ddpg`: ``epochs`` epochs of the
     authors' schedule, one collected batch per cycle (``cycle_steps`` frames), ``updates`` gradient steps
     after it and one soft target update; the DDPG settings of :func:`agent_config`; the neural potential
-    (HRS, RRS) trained per batch, SARSA-RS's table online.
+    (HRS, RRS) trained per batch, SARSA-RS's table online at ``aggregation_lr``, HRS-D's online at the
+    training blocks' ``value_lr``.
 
     Examples:
         >>> config = {"ddpg": dataclasses.asdict(DDPGConfig()), "cycles": 50, "cycle_steps": 300, "updates": 40,
@@ -255,7 +284,11 @@ def learner_config(config: Mapping[str, Any], method_name: str, shaped: bool, ep
     if ddpg.actor_lr != ddpg.critic_lr:
         raise ValueError(f"actor_lr ({ddpg.actor_lr}) and critic_lr ({ddpg.critic_lr}) differ: train_ddpg takes one lr")
     workers = config["collector_workers"]
-    aggregation = METHODS[method_name].shaping == "aggregation"
+    method = METHODS[method_name]
+    aggregation = method.shaping == "aggregation"
+    online = aggregation or method.interpolate  # SARSA-RS's and HRS-D's tables learn in the transform
+    # the neural potential's Adam (HRS, RRS), SARSA-RS's SGD, or the training blocks' online step (HRS-D)
+    value_lr = config["aggregation_lr"] if aggregation else DDPGTrainConfig.value_lr if online else config["value_lr"]
     return DDPGTrainConfig(
         num_envs=config["envs"] // max(workers, 1),
         env_workers=config["env_processes"],
@@ -277,8 +310,8 @@ def learner_config(config: Mapping[str, Any], method_name: str, shaped: bool, ep
         norm_clip=ddpg.norm_clip,
         clip_return=ddpg.clip_return,
         clip_positive=ddpg.clip_positive,
-        value_lr=config["aggregation_lr"] if aggregation else config["value_lr"],
-        online_potential=aggregation,
+        value_lr=value_lr,
+        online_potential=online,
         device=config["device"],
     )
 
@@ -500,6 +533,16 @@ def check_shaping_builds(specs: Sequence[MethodSpec], config: Mapping[str, Any])
             raise ConfigError(f"--shaping: {spec.name}: {' '.join(str(exc).split())}") from None
 
 
+def uses_progress_prior(names: Sequence[str]) -> bool:
+    """Whether one of the methods ``names`` starts its table at the progress prior (HRS-D, SRS).
+
+    Examples:
+        >>> uses_progress_prior(["HRS", "DDPG"]), uses_progress_prior(["DDPG", "HRS-D"])
+        (False, True)
+    """
+    return any(METHODS[n].shaping == "progress" or METHODS[n].interpolate for n in names if n in METHODS)
+
+
 def plan(cfg: Config) -> Plan:
     """The sweep of ``cfg``: one chunk per learning, the stored configuration, the report's threshold."""
     check_methods(METHODS, cfg.method_names)
@@ -529,6 +572,8 @@ def plan(cfg: Config) -> Plan:
                 "start_potential",
             )
         },
+        # stored only where a method reads it, so that results started before it existed resume
+        **({"progress_scale": cfg.progress_scale} if uses_progress_prior(cfg.method_names) else {}),
         "epochs": epochs,
         "ddpg": ddpg,
         "shaped_clip_positive": cfg.clip_positive == "all",
