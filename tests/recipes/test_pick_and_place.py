@@ -152,14 +152,14 @@ TINY = ["--preset", "tiny", "--learnings", "1", "--num-envs", "1", "--collector-
 
 def test_recipe_all_methods_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pick_and_place = recipe("pick_and_place")
-    args = [*TINY, "--epochs", "1", "--methods", "DDPG,HRS,RRS,NRS,SARSA-RS", "--results", str(tmp_path)]
+    args = [*TINY, "--epochs", "1", "--methods", "DDPG,HRS,RRS,NRS,SARSA-RS,HRS-D,SRS", "--results", str(tmp_path)]
     assert pick_and_place.main(args) == 0
     out = capsys.readouterr().out
     assert "| 0.6 | HRS |" in out and "| HRS | 0 (—) | 0 [0, 0] | 0.67 |" in out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["metric"] == "success" and summary["unit"] == "epoch"
     assert not summary["lower_is_better"]
-    assert set(summary["methods"]) == {"DDPG", "HRS", "RRS", "NRS", "SARSA-RS"}
+    assert set(summary["methods"]) == {"DDPG", "HRS", "RRS", "NRS", "SARSA-RS", "HRS-D", "SRS"}
     frame = load_frame(tmp_path)
     assert (frame["steps"] == 200).all() and frame["return"].between(-50.0, 0.0).all()
 

@@ -245,6 +245,17 @@ def is_neural(method: Method) -> bool:
     return method.shaping == "subgoals" and not method.interpolate
 
 
+def is_library_table(method: Method) -> bool:
+    """Whether ``method`` shapes with one of the library's tables over the subgoal series, which start at the
+    progress prior (HRS-D, learned online; SRS, fixed): the subgoal methods that are not neural here.
+
+    Examples:
+        >>> [name for name, method in METHODS.items() if is_library_table(method)]
+        ['SRS', 'HRS-D']
+    """
+    return method.shaping in ("subgoals", "progress") and not is_neural(method)
+
+
 def agent_config(config: Mapping[str, Any], shaped: bool) -> DDPGConfig:
     """The DDPG settings of a learner; ``shaped``: its reward carries ``F = γΦ(z') − Φ(z)``.
 
@@ -286,7 +297,7 @@ def learner_config(config: Mapping[str, Any], method_name: str, shaped: bool, ep
     workers = config["collector_workers"]
     method = METHODS[method_name]
     aggregation = method.shaping == "aggregation"
-    online = aggregation or method.interpolate  # SARSA-RS's and HRS-D's tables learn in the transform
+    online = aggregation or (is_library_table(method) and method.shaping == "subgoals")  # SARSA-RS, HRS-D
     # the neural potential's Adam (HRS, RRS), SARSA-RS's SGD, or the training blocks' online step (HRS-D)
     value_lr = config["aggregation_lr"] if aggregation else DDPGTrainConfig.value_lr if online else config["value_lr"]
     return DDPGTrainConfig(
@@ -533,16 +544,6 @@ def check_shaping_builds(specs: Sequence[MethodSpec], config: Mapping[str, Any])
             raise ConfigError(f"--shaping: {spec.name}: {' '.join(str(exc).split())}") from None
 
 
-def uses_progress_prior(names: Sequence[str]) -> bool:
-    """Whether one of the methods ``names`` starts its table at the progress prior (HRS-D, SRS).
-
-    Examples:
-        >>> uses_progress_prior(["HRS", "DDPG"]), uses_progress_prior(["DDPG", "HRS-D"])
-        (False, True)
-    """
-    return any(METHODS[n].shaping == "progress" or METHODS[n].interpolate for n in names if n in METHODS)
-
-
 def plan(cfg: Config) -> Plan:
     """The sweep of ``cfg``: one chunk per learning, the stored configuration, the report's threshold."""
     check_methods(METHODS, cfg.method_names)
@@ -573,7 +574,11 @@ def plan(cfg: Config) -> Plan:
             )
         },
         # stored only where a method reads it, so that results started before it existed resume
-        **({"progress_scale": cfg.progress_scale} if uses_progress_prior(cfg.method_names) else {}),
+        **(
+            {"progress_scale": cfg.progress_scale}
+            if any(is_library_table(METHODS[n]) for n in cfg.method_names)
+            else {}
+        ),
         "epochs": epochs,
         "ddpg": ddpg,
         "shaped_clip_positive": cfg.clip_positive == "all",
